@@ -1,0 +1,5 @@
+import sys
+
+from antarium.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""The virtual ant: a panoramic eye and mushroom-body navigation models in the closed loop."""

@@ -1,0 +1,1 @@
+"""Sub-commands of the `antarium` command line (see `antarium.cli.COMMANDS`)."""

@@ -1,0 +1,75 @@
+"""Locomotion sources: one interface, a registry of back-ends imported lazily (python-can style).
+
+Every source yields `BallSample`s: timestamped ball-rotation increments with sequence numbers.
+Ball axes are the dome frame's (+x forward for a fixed-tether ant, +y left, +z up); see `antarium.ball`
+for the motion of the ant standing on the top pole.
+
+    with open_source("scripted", speed=0.02, turn_rate=0.1, clock=clock) as src:
+        samples = src.read()
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from importlib import import_module
+from typing import Any
+
+
+@dataclass(frozen=True, slots=True)
+class BallSample:
+    """One locomotion sample.
+
+    t:        host time (s) on the loop's clock when the sample arrived
+    seq:      the source's sequence number (int); a gap means samples were lost
+    rotation: ball rotation increment (rad) about the dome-frame x, y, z axes since the previous sample
+    t_device: device timestamp (s) if the source has one, else None
+    quality:  0..1 (1 = good); e.g. derived from the slip residual of the sensor fit
+    """
+
+    t: float
+    seq: int
+    rotation: tuple[float, float, float]
+    t_device: float | None = None
+    quality: float = 1.0
+
+
+class LocomotionSource(ABC):
+    """A source of ball rotations. `read()` never blocks; it returns the samples since the last call."""
+
+    def start(self) -> None:  # noqa: B027 - sources without set-up need not override
+        """Open devices, threads or subscriptions."""
+
+    def stop(self) -> None:  # noqa: B027
+        """Release everything `start` took. Safe to call twice."""
+
+    @abstractmethod
+    def read(self) -> list[BallSample]:
+        """All samples that arrived since the previous call, oldest first (may be empty)."""
+
+    def status(self) -> dict[str, Any]:
+        """Counters and state for the server's status message (JSON-serialisable)."""
+        return {"connected": True}
+
+    def __enter__(self) -> LocomotionSource:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+#: back-end name -> "module:Class", imported only when opened.
+BACKENDS: dict[str, str] = {}
+
+
+def open_source(name: str, **kwargs: Any) -> LocomotionSource:
+    """Instantiate the locomotion back-end `name` with `kwargs` (not started)."""
+    try:
+        target = BACKENDS[name]
+    except KeyError:
+        raise ValueError(
+            f"unknown locomotion source {name!r}; allowed: {', '.join(sorted(BACKENDS)) or 'none'}"
+        ) from None
+    module_name, cls_name = target.split(":")
+    return getattr(import_module(module_name), cls_name)(**kwargs)

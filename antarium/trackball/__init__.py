@@ -1,0 +1,1 @@
+"""The trackball: ball kinematics, the USB device driver (pyusb), calibration and FicTrac input."""
