@@ -1,0 +1,195 @@
+"""The message bus (eclipse-zenoh): sessions from the `[bus]` config section, key names, stream structs.
+
+Every key of a rig starts with `antarium/<rig>/` (see `docs/bus.md` for every key and payload).
+Control traffic is JSON; high-rate streams are fixed little-endian structs starting with a version byte.
+
+Sessions are peers without a router, with multicast scouting off. The server *listens* on the `[bus]
+listen` endpoints (127.0.0.1 by default, so only this computer can reach it); clients (experiment
+scripts, a trackball driver, a simulated ant) *connect* to `[bus] connect`, or to the server's listen
+endpoints when that is empty, and listen nowhere themselves.
+
+    session = open_session(config["bus"], role="client")
+    session.declare_publisher(locomotion_key("rig1"), express=True).put(wire.encode(sample))
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import struct
+from pathlib import Path
+from typing import Any
+
+KEY_ROOT = "antarium"
+
+#: command names answered by the server's queryables (`antarium/<rig>/cmd/<name>`)
+COMMANDS = (
+    "load_scene",
+    "set_pose",
+    "reset_origin",
+    "rotate_scene",
+    "closed_loop",
+    "tether",
+    "gains",
+    "scene_edit",
+    "trial_start",
+    "trial_stop",
+    "sky",
+    "polarisers",
+    "status",
+)
+
+
+def check_rig_name(rig: str) -> str:
+    """A rig name is one key chunk: non-empty, without '/', wildcards or spaces."""
+    if not isinstance(rig, str) or not rig or any(c in rig for c in "/*?$# "):
+        raise ValueError(f"rig name must be a non-empty key chunk without '/', '*', '?', '$', '#', ' ', got {rig!r}")
+    return rig
+
+
+def rig_key(rig: str, *parts: str) -> str:
+    """`antarium/<rig>/<parts...>`."""
+    return "/".join((KEY_ROOT, check_rig_name(rig), *parts))
+
+
+def locomotion_key(rig: str) -> str:
+    """Where a trackball or a simulated ant publishes `antarium.locomotion.wire` structs (44 bytes each)."""
+    return rig_key(rig, "locomotion")
+
+
+def pose_key(rig: str) -> str:
+    """The server's pose stream (`POSE_STRUCT`), every frame or every `[loop] pose_every` frames."""
+    return rig_key(rig, "pose")
+
+
+def stats_key(rig: str) -> str:
+    """Frame statistics (`STATS_STRUCT`), every `[loop] stats_every` frames."""
+    return rig_key(rig, "stats")
+
+
+def status_key(rig: str) -> str:
+    """Status (JSON) once a second."""
+    return rig_key(rig, "status")
+
+
+def events_key(rig: str) -> str:
+    """Events (JSON): trial start/stop, link outage, locomotion lost/back, scene loaded, log errors."""
+    return rig_key(rig, "events")
+
+
+def command_key(rig: str, name: str) -> str:
+    """Queryable of one command (JSON request in the query payload, JSON reply or error reply)."""
+    if name not in COMMANDS:
+        raise ValueError(f"unknown command {name!r}; allowed: {', '.join(COMMANDS)}")
+    return rig_key(rig, "cmd", name)
+
+
+def alive_key(rig: str) -> str:
+    """The server's liveliness token."""
+    return rig_key(rig, "alive", "server")
+
+
+def session_config(bus: dict[str, Any], role: str = "server"):
+    """A `zenoh.Config` from a resolved `[bus]` section for `role` "server" (listens) or "client" (connects)."""
+    import zenoh
+
+    if role not in ("server", "client"):
+        raise ValueError(f"bus role must be 'server' or 'client', got {role!r}")
+    if bus.get("access_control"):
+        path = Path(bus["access_control"])
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise ValueError(f"[bus] access_control file {str(path)!r} cannot be read: {exc}") from None
+        try:
+            conf = zenoh.Config.from_json5("{access_control: " + text + "}")
+        except Exception as exc:  # zenoh raises its own ZError for bad JSON5 or unknown fields
+            raise ValueError(f"[bus] access_control file {str(path)!r} is not a valid zenoh ACL: {exc}") from None
+    else:
+        conf = zenoh.Config()
+    mode = bus.get("mode", "peer")
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(bool(bus.get("multicast_scouting", False))))
+    listen = list(bus.get("listen", ["tcp/127.0.0.1:7447"]))
+    connect = list(bus.get("connect", []))
+    if role == "server":
+        conf.insert_json5("listen/endpoints", json.dumps(listen))
+        conf.insert_json5("connect/endpoints", json.dumps(connect))
+    else:
+        conf.insert_json5("listen/endpoints", json.dumps([]))
+        conf.insert_json5("connect/endpoints", json.dumps(connect or listen))
+    return conf
+
+
+def open_session(bus: dict[str, Any] | None = None, role: str = "server"):
+    """Open a zenoh session from a `[bus]` section (defaults when None). See `session_config`."""
+    import zenoh
+
+    from antarium.config import DEFAULTS
+
+    section = dict(DEFAULTS["bus"])
+    section.update(bus or {})
+    try:
+        return zenoh.open(session_config(section, role))
+    except zenoh.ZError as exc:
+        raise RuntimeError(f"cannot open the zenoh session (role {role}, [bus] {section}): {exc}") from None
+
+
+def free_tcp_endpoint(host: str = "127.0.0.1") -> str:
+    """`tcp/<host>:<port>` with a port the OS reports free now (for tests and the embedded default)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return f"tcp/{host}:{s.getsockname()[1]}"
+
+
+# --- high-rate stream structs (little-endian, version byte first) -------------------------------------
+
+STREAM_VERSION = 1
+
+#: pose: version u8, flags u8 (bit 0 closed loop, bit 1 fixed tether), reserved u16, frame u32,
+#: t f64 (s, server clock), x y z f64 (m), heading f64 (rad), scene_rotation f64 (rad)
+POSE_STRUCT = struct.Struct("<BBHIdddddd")  # 56 bytes
+
+#: stats: version u8, reserved u8, reserved u16, frame u32, late_frames u32, reserved u32, t f64 (s),
+#: latency, render, sample, encode, send, pacing_error f64 (s; latency NaN when no new sample)
+STATS_STRUCT = struct.Struct("<BBHIIIddddddd")  # 80 bytes
+
+
+class StreamError(ValueError):
+    """A stream payload of the wrong size or version."""
+
+
+def encode_pose(frame: int, t: float, pose, scene_rotation: float, closed_loop: bool, fixed_tether: bool) -> bytes:
+    flags = (1 if closed_loop else 0) | (2 if fixed_tether else 0)
+    return POSE_STRUCT.pack(
+        STREAM_VERSION, flags, 0, frame & 0xFFFFFFFF, t, pose.x, pose.y, pose.z, pose.heading, scene_rotation
+    )
+
+
+def decode_pose(payload: bytes) -> dict[str, Any]:
+    """A pose payload as a dict: frame, t, x, y, z, heading, scene_rotation, closed_loop, fixed_tether."""
+    if len(payload) != POSE_STRUCT.size:
+        raise StreamError(f"pose payload must be {POSE_STRUCT.size} bytes, got {len(payload)}")
+    version, flags, _, frame, t, x, y, z, heading, rot = POSE_STRUCT.unpack(payload)
+    if version != STREAM_VERSION:
+        raise StreamError(f"pose payload version {version} not supported (allowed: {STREAM_VERSION})")
+    return {
+        "frame": frame, "t": t, "x": x, "y": y, "z": z, "heading": heading, "scene_rotation": rot,
+        "closed_loop": bool(flags & 1), "fixed_tether": bool(flags & 2),
+    }
+
+
+def encode_stats(frame: int, late_frames: int, t: float, latency: float, render: float, sample: float,
+                 encode: float, send: float, pacing_error: float) -> bytes:
+    return STATS_STRUCT.pack(STREAM_VERSION, 0, 0, frame & 0xFFFFFFFF, late_frames & 0xFFFFFFFF, 0,
+                             t, latency, render, sample, encode, send, pacing_error)
+
+
+def decode_stats(payload: bytes) -> dict[str, Any]:
+    if len(payload) != STATS_STRUCT.size:
+        raise StreamError(f"stats payload must be {STATS_STRUCT.size} bytes, got {len(payload)}")
+    version, _, _, frame, late, _, t, latency, render, sample, encode, send, pacing = STATS_STRUCT.unpack(payload)
+    if version != STREAM_VERSION:
+        raise StreamError(f"stats payload version {version} not supported (allowed: {STREAM_VERSION})")
+    return {"frame": frame, "late_frames": late, "t": t, "latency": latency, "render": render, "sample": sample,
+            "encode": encode, "send": send, "pacing_error": pacing}

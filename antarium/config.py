@@ -1,0 +1,152 @@
+"""The rig configuration: TOML, one section per part, unknown sections kept verbatim.
+
+The server owns `[rig]`, `[loop]`, `[locomotion]`, `[link]`, `[render]`, `[bus]` and `[log]`; their keys are
+checked here (unknown key, wrong type or out-of-range value -> `ConfigError` naming what is allowed).
+Every other section (`[trackball]`, `[ant]`, ...) is kept as it was written, for its owner to parse.
+With no file the embedded default rig is used: emulator on loopback, default habitat, scripted walker
+in closed loop. See `docs/rig.example.toml`.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+#: section -> key -> default value. The type of the default is the type a value must have
+#: (int is accepted where a float is expected).
+DEFAULTS: dict[str, dict[str, Any]] = {
+    "rig": {"name": "rig1"},
+    "loop": {
+        "rate_hz": 190.0,  # frames per second
+        "closed_loop": True,
+        "tether": "free_yaw",  # "free_yaw": ball gives translation only; "fixed": ball gives yaw too
+        "gain_translation": 1.0,
+        "gain_rotation": 1.0,
+        "start_x": 0.0,  # virtual origin, metres
+        "start_y": 0.0,
+        "eye_height": 0.01,  # metres above the ground
+        "start_heading_deg": 0.0,
+        "ball_radius": 0.05,  # metres
+        "stats_every": 19,  # publish frame statistics every N frames
+        "pose_every": 1,  # publish the pose every N frames
+    },
+    "locomotion": {"source": "scripted"},  # other keys are passed to the source as keyword arguments
+    "link": {
+        "interface": "udp",  # "udp" (distributor or `antarium emulate`) or "virtual" (in-process)
+        "host": "127.0.0.1",
+        "port": 0,  # 0 with spawn_emulator: an OS-chosen free port
+        "spawn_emulator": True,  # start `antarium emulate` as its own process on loopback
+    },
+    "render": {"scene": "default", "face_size": 64},
+    "bus": {
+        "enabled": True,
+        "mode": "peer",
+        "listen": ["tcp/127.0.0.1:7447"],
+        "connect": [],
+        "multicast_scouting": False,
+        "access_control": "",  # path of a JSON5 file holding a zenoh `access_control` object ("" = none)
+    },
+    "log": {
+        "dir": "trials",
+        "flush_s": 1.0,  # seconds between flushes to disk
+        "record": False,  # record from the start (otherwise only inside trials)
+    },
+}
+
+#: keys whose values are constrained beyond their type: key -> (allowed values or (lo, hi) range)
+_CHOICES = {
+    ("loop", "tether"): ("free_yaw", "fixed"),
+    ("link", "interface"): ("udp", "virtual"),
+    ("bus", "mode"): ("peer", "client", "router"),
+}
+_RANGES = {
+    ("loop", "rate_hz"): (1.0, 2000.0),
+    ("loop", "gain_translation"): (-100.0, 100.0),
+    ("loop", "gain_rotation"): (-100.0, 100.0),
+    ("loop", "ball_radius"): (1e-3, 1.0),
+    ("loop", "eye_height"): (0.0, 1000.0),
+    ("loop", "stats_every"): (1, 100000),
+    ("loop", "pose_every"): (1, 100000),
+    ("link", "port"): (0, 65535),
+    ("render", "face_size"): (8, 4096),
+    ("log", "flush_s"): (0.01, 1.0),
+}
+#: sections whose extra keys are allowed (passed on to a back-end)
+_OPEN_SECTIONS = {"locomotion"}
+
+
+class ConfigError(ValueError):
+    """A rig configuration that cannot be used; the message names the key and what is allowed."""
+
+
+def check_value(section: str, key: str, value: Any) -> Any:
+    """Validate one value of an owned section; returns it (ints widened to float where a float is expected)."""
+    default = DEFAULTS[section][key]
+    where = f"[{section}] {key}"
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where} must be true or false, got {value!r}")
+    elif isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"{where} must be a finite number, got {value!r}")
+        value = float(value)
+    elif isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where} must be an integer, got {value!r}")
+    elif isinstance(default, str):
+        if not isinstance(value, str):
+            raise ConfigError(f"{where} must be a string, got {value!r}")
+    elif isinstance(default, list):
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise ConfigError(f"{where} must be a list of strings, got {value!r}")
+    choices = _CHOICES.get((section, key))
+    if choices is not None and value not in choices:
+        raise ConfigError(f"{where} must be one of {', '.join(map(repr, choices))}, got {value!r}")
+    bounds = _RANGES.get((section, key))
+    if bounds is not None and not bounds[0] <= value <= bounds[1]:
+        raise ConfigError(f"{where} must be in [{bounds[0]}, {bounds[1]}], got {value!r}")
+    return value
+
+
+def resolve(raw: dict[str, Any]) -> dict[str, Any]:
+    """Defaults merged with `raw` (a parsed TOML document), owned sections checked, others kept verbatim."""
+    if not isinstance(raw, dict):
+        raise ConfigError(f"a rig config must be a table of sections, got {type(raw).__name__}")
+    resolved = copy.deepcopy(DEFAULTS)
+    for section, table in raw.items():
+        if section not in DEFAULTS:
+            resolved[section] = copy.deepcopy(table)
+            continue
+        if not isinstance(table, dict):
+            raise ConfigError(f"[{section}] must be a table, got {table!r}")
+        for key, value in table.items():
+            if key in DEFAULTS[section]:
+                resolved[section][key] = check_value(section, key, value)
+            elif section in _OPEN_SECTIONS:
+                resolved[section][key] = copy.deepcopy(value)
+            else:
+                raise ConfigError(
+                    f"unknown key {key!r} in [{section}]; allowed: {', '.join(sorted(DEFAULTS[section]))}"
+                )
+    name = resolved["rig"]["name"]
+    if not name or any(c in name for c in "/*?$# "):
+        raise ConfigError(f"[rig] name must be a non-empty key chunk without '/', wildcards or spaces, got {name!r}")
+    return resolved
+
+
+def load_config(path: str | Path | None = None) -> dict[str, Any]:
+    """The resolved rig config from a TOML file, or the embedded default when `path` is None."""
+    if path is None:
+        return resolve({})
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            raw = tomllib.load(f)
+    except FileNotFoundError:
+        raise ConfigError(f"rig config {str(path)!r} not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"rig config {str(path)!r} is not valid TOML: {exc}") from None
+    return resolve(raw)

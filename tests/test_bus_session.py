@@ -1,0 +1,64 @@
+"""The bus helpers: key names, sessions from the [bus] section over loopback, stream structs."""
+
+import json
+import time
+
+import pytest
+
+from antarium import bus
+from antarium.locomotion import BallSample, wire
+from antarium.pose import Pose
+
+
+def test_keys_share_the_rig_prefix():
+    assert bus.locomotion_key("rig1") == "antarium/rig1/locomotion"
+    assert bus.command_key("rig1", "set_pose") == "antarium/rig1/cmd/set_pose"
+    assert bus.alive_key("r") == "antarium/r/alive/server"
+    with pytest.raises(ValueError, match="unknown command 'fly'"):
+        bus.command_key("rig1", "fly")
+    with pytest.raises(ValueError, match="rig name"):
+        bus.rig_key("a/b")
+
+
+def test_client_config_listens_nowhere_and_connects_to_server_endpoint():
+    section = {"listen": ["tcp/127.0.0.1:9"], "connect": []}
+    conf = bus.session_config(section, role="client")
+    assert json.loads(conf.get_json("listen/endpoints")) == []
+    assert json.loads(conf.get_json("connect/endpoints")) == ["tcp/127.0.0.1:9"]
+    assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
+    server = bus.session_config(section, role="server")
+    assert json.loads(server.get_json("listen/endpoints")) == ["tcp/127.0.0.1:9"]
+    assert json.loads(server.get_json("mode")) == "peer"
+
+
+def test_locomotion_sample_travels_from_client_to_server():
+    import zenoh
+
+    section = {"listen": [bus.free_tcp_endpoint()]}
+    with bus.open_session(section, "server") as server, bus.open_session(section, "client") as client:
+        sub = server.declare_subscriber(bus.locomotion_key("t1"), zenoh.handlers.RingChannel(16))
+        pub = client.declare_publisher(bus.locomotion_key("t1"), express=True)
+        sample = BallSample(0.0, 7, (0.1, -0.2, 0.3), 12.5, 0.9)
+        received = None
+        deadline = time.monotonic() + 5.0
+        while received is None and time.monotonic() < deadline:
+            pub.put(wire.encode(sample))
+            time.sleep(0.02)
+            received = sub.try_recv()
+        assert received is not None
+        got = wire.decode(received.payload.to_bytes(), t=1.0)
+        assert got.seq == 7 and got.rotation == (0.1, -0.2, 0.3) and got.t_device == 12.5
+
+
+def test_pose_and_stats_structs_round_trip():
+    payload = bus.encode_pose(5, 1.5, Pose(1.0, 2.0, 0.01, 0.5), 1.25, True, False)
+    assert len(payload) == 56
+    d = bus.decode_pose(payload)
+    assert (d["frame"], d["x"], d["heading"], d["scene_rotation"], d["closed_loop"], d["fixed_tether"]) == (
+        5, 1.0, 0.5, 1.25, True, False)
+    s = bus.decode_stats(bus.encode_stats(3, 1, 2.0, 0.001, 0.002, 0.0, 0.0005, 0.0003, 1e-5))
+    assert s["late_frames"] == 1 and s["render"] == 0.002
+    with pytest.raises(bus.StreamError, match="56 bytes"):
+        bus.decode_pose(payload[:-1])
+    with pytest.raises(bus.StreamError, match="version 9"):
+        bus.decode_pose(bytes([9]) + payload[1:])
