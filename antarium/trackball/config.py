@@ -1,0 +1,196 @@
+"""The `[trackball]` section of the rig config: device ids, sensor placement, counts per mm and signs.
+
+    [trackball]
+    vendor_id = 0x1209          # USB ids of the trackball (pid.codes test ids by default)
+    product_id = 0x0001
+    ball_radius = 0.05          # metres
+    sample_rate_hz = 1000       # reports per second asked of the device (1..1000)
+    resolution_cpi = 1200       # sensor resolution asked of the device (counts per inch, 100..12000)
+    slip_floor_mm = 0.1         # see `BallSolver`: keeps the slip ratio finite when the ball is still
+
+    [[trackball.sensors]]       # one table per sensor, in the order of the device's report
+    azimuth_deg = 0.0
+    elevation_deg = 0.0
+    roll_deg = 0.0
+    counts_per_mm = [47.24, 47.24]   # sensor x, sensor y (written by `antarium trackball calibrate`)
+    signs = [1, 1]                   # +1 or -1 per sensor axis (mounting)
+
+A missing key takes its default; an unknown key or a bad value raises `TrackballConfigError` naming it.
+`write_section` replaces `[trackball]` in a rig file and keeps every other section's values.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from antarium.trackball.kinematics import BallSolver, SensorPlacement
+from antarium.trackball.protocol import N_SENSORS
+
+DEFAULT_CPI = 1200
+
+
+class TrackballConfigError(ValueError):
+    """A `[trackball]` section that cannot be used; the message names the key and what is allowed."""
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """One sensor: placement (degrees at this edge), calibration of its x and y counts."""
+
+    azimuth_deg: float
+    elevation_deg: float = 0.0
+    roll_deg: float = 0.0
+    counts_per_mm: tuple[float, float] = (DEFAULT_CPI / 25.4, DEFAULT_CPI / 25.4)
+    signs: tuple[int, int] = (1, 1)
+
+    def placement(self) -> SensorPlacement:
+        return SensorPlacement(
+            math.radians(self.azimuth_deg), math.radians(self.elevation_deg), math.radians(self.roll_deg)
+        )
+
+
+@dataclass(frozen=True)
+class TrackballConfig:
+    vendor_id: int = 0x1209
+    product_id: int = 0x0001
+    ball_radius: float = 0.05
+    sample_rate_hz: int = 1000
+    resolution_cpi: int = DEFAULT_CPI
+    slip_floor_mm: float = 0.1
+    sensors: tuple[SensorConfig, ...] = field(
+        default_factory=lambda: (SensorConfig(0.0), SensorConfig(90.0))
+    )
+
+    def solver(self) -> BallSolver:
+        return BallSolver(tuple(s.placement() for s in self.sensors), self.ball_radius, self.slip_floor_mm * 1e-3)
+
+    def metres_per_count(self) -> list[float]:
+        """Signed metres per count of each sensor axis, in report order (x0, y0, x1, y1)."""
+        return [sign * 1e-3 / cpmm for s in self.sensors for cpmm, sign in zip(s.counts_per_mm, s.signs, strict=True)]
+
+
+_TOP_KEYS = {
+    "vendor_id": (int, 0, 0xFFFF),
+    "product_id": (int, 0, 0xFFFF),
+    "ball_radius": (float, 1e-3, 1.0),
+    "sample_rate_hz": (int, 1, 1000),
+    "resolution_cpi": (int, 100, 12000),
+    "slip_floor_mm": (float, 1e-6, 100.0),
+}
+_SENSOR_KEYS = {"azimuth_deg", "elevation_deg", "roll_deg", "counts_per_mm", "signs"}
+
+
+def _number(where: str, value: Any, kind: type, lo: float, hi: float) -> Any:
+    ok_type = (int,) if kind is int else (int, float)
+    if isinstance(value, bool) or not isinstance(value, ok_type) or not math.isfinite(value):
+        raise TrackballConfigError(f"{where} must be {'an integer' if kind is int else 'a finite number'}, "
+                                   f"got {value!r}")
+    if not lo <= value <= hi:
+        raise TrackballConfigError(f"{where} must be in [{lo}, {hi}], got {value!r}")
+    return kind(value)
+
+
+def _sensor(i: int, table: Any) -> SensorConfig:
+    where = f"[[trackball.sensors]] #{i}"
+    if not isinstance(table, dict):
+        raise TrackballConfigError(f"{where} must be a table, got {table!r}")
+    unknown = set(table) - _SENSOR_KEYS
+    if unknown:
+        raise TrackballConfigError(f"unknown key(s) {sorted(unknown)} in {where}; allowed: {sorted(_SENSOR_KEYS)}")
+    if "azimuth_deg" not in table:
+        raise TrackballConfigError(f"{where} needs azimuth_deg (degrees, 0 = front, 90 = left)")
+    angles = {k: _number(f"{where} {k}", table.get(k, 0.0), float, -360.0, 360.0)
+              for k in ("azimuth_deg", "elevation_deg", "roll_deg")}
+    cpmm = table.get("counts_per_mm", SensorConfig.counts_per_mm)
+    if not isinstance(cpmm, (list, tuple)) or len(cpmm) != 2:
+        raise TrackballConfigError(f"{where} counts_per_mm must be two numbers [x, y], got {cpmm!r}")
+    cpmm = tuple(_number(f"{where} counts_per_mm", v, float, 1e-3, 1e5) for v in cpmm)
+    signs = table.get("signs", SensorConfig.signs)
+    if not isinstance(signs, (list, tuple)) or len(signs) != 2 or any(s not in (1, -1) or isinstance(s, bool)
+                                                                    for s in signs):
+        raise TrackballConfigError(f"{where} signs must be two of +1 / -1 [x, y], got {signs!r}")
+    return SensorConfig(counts_per_mm=cpmm, signs=tuple(int(s) for s in signs), **angles)
+
+
+def parse_section(section: dict[str, Any] | None) -> TrackballConfig:
+    """A `TrackballConfig` from a parsed `[trackball]` table (None or {} = all defaults)."""
+    section = section or {}
+    if not isinstance(section, dict):
+        raise TrackballConfigError(f"[trackball] must be a table, got {section!r}")
+    unknown = set(section) - set(_TOP_KEYS) - {"sensors"}
+    if unknown:
+        raise TrackballConfigError(
+            f"unknown key(s) {sorted(unknown)} in [trackball]; allowed: {sorted([*_TOP_KEYS, 'sensors'])}"
+        )
+    values = {k: _number(f"[trackball] {k}", section[k], kind, lo, hi)
+              for k, (kind, lo, hi) in _TOP_KEYS.items() if k in section}
+    if "sensors" in section:
+        sensors = section["sensors"]
+        if not isinstance(sensors, list) or len(sensors) != N_SENSORS:
+            raise TrackballConfigError(
+                f"[trackball] sensors must be {N_SENSORS} [[trackball.sensors]] tables (one per sensor of the "
+                f"report), got {sensors!r}"
+            )
+        values["sensors"] = tuple(_sensor(i, t) for i, t in enumerate(sensors))
+    config = TrackballConfig(**values)
+    try:
+        config.solver()
+    except ValueError as exc:
+        raise TrackballConfigError(f"[trackball] sensors: {exc}") from None
+    return config
+
+
+def to_section(config: TrackballConfig) -> dict[str, Any]:
+    """The TOML table of `config` (inverse of `parse_section`)."""
+    return {
+        "vendor_id": config.vendor_id,
+        "product_id": config.product_id,
+        "ball_radius": config.ball_radius,
+        "sample_rate_hz": config.sample_rate_hz,
+        "resolution_cpi": config.resolution_cpi,
+        "slip_floor_mm": config.slip_floor_mm,
+        "sensors": [
+            {"azimuth_deg": s.azimuth_deg, "elevation_deg": s.elevation_deg, "roll_deg": s.roll_deg,
+             "counts_per_mm": [round(v, 6) for v in s.counts_per_mm], "signs": list(s.signs)}
+            for s in config.sensors
+        ],
+    }
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        with path.open("rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"rig config {str(path)!r} not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise TrackballConfigError(f"rig config {str(path)!r} is not valid TOML: {exc}") from None
+
+
+def load(source: str | Path | dict[str, Any] | TrackballConfig | None) -> TrackballConfig:
+    """A `TrackballConfig` from a rig file path, a `[trackball]` table, a config, or None (defaults)."""
+    if source is None or isinstance(source, TrackballConfig):
+        return source or TrackballConfig()
+    if isinstance(source, dict):
+        return parse_section(source)
+    return parse_section(_read_toml(Path(source)).get("trackball"))
+
+
+def write_section(path: str | Path, config: TrackballConfig) -> None:
+    """Replace `[trackball]` in the rig file `path` (created if missing); other sections keep their values.
+
+    The file is rewritten atomically (TOML comments are not kept: tomli-w writes values only).
+    """
+    import tomli_w
+
+    path = Path(path)
+    doc = _read_toml(path) if path.exists() else {}
+    doc["trackball"] = to_section(config)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(tomli_w.dumps(doc).encode())
+    os.replace(tmp, path)

@@ -1,0 +1,259 @@
+"""The USB trackball driver (pyusb): a `LocomotionSource` reading the device of `docs/trackball_usb.md`.
+
+    with open_source("usb", trackball="rig.toml") as ball:      # or trackball={...section...}
+        samples = ball.read()
+
+A reader thread finds the device by vendor/product id, claims its interface, sets rate and resolution,
+sends START and reads reports. Each report is decoded, checked for a sequence gap, converted from counts
+to ball rotation (least squares over the four sensor axes, `BallSolver`) and queued for `read()`; the
+optional `on_sample(sample)` callback publishes it (e.g. on the bus). Short or garbage reports are counted
+and dropped. When the device goes away (ENODEV, or a silent endpoint whose probe fails) `status()`
+says `connected: False` at once and `on_event` gets a "locomotion_lost" event; the thread keeps looking
+for the device every `retry_s` and resumes on its own ("locomotion_back").
+
+`backend` is a pyusb backend (None = libusb); `emulate=True` builds an `EmulatedTrackball` instead.
+"""
+
+from __future__ import annotations
+
+import array
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from antarium.clock import Clock, MonotonicClock
+from antarium.locomotion import BallSample, LocomotionSource
+from antarium.trackball import config as tbconfig
+from antarium.trackball import protocol as P
+
+Event = dict[str, Any]
+LATENCY_WINDOW = 1 << 16  # reports kept for the arrival -> publication latency statistics
+
+
+class UsbTrackball(LocomotionSource):
+    def __init__(
+        self,
+        trackball: str | Path | dict[str, Any] | tbconfig.TrackballConfig | None = None,
+        backend: Any = None,
+        emulate: bool = False,
+        clock: Clock | None = None,
+        on_sample: Callable[[BallSample], None] | None = None,
+        on_event: Callable[[Event], None] | None = None,
+        read_timeout_ms: int = 20,
+        retry_s: float = 0.02,
+        max_queue: int = 100_000,
+    ) -> None:
+        self.config = tbconfig.load(trackball)
+        if emulate and backend is None:
+            from antarium.trackball.emulator import EmulatedTrackball
+
+            backend = EmulatedTrackball(truth=self.config)
+        self.backend = backend
+        self.clock = clock or MonotonicClock()
+        self.on_sample = on_sample
+        self.on_event = on_event
+        self.read_timeout_ms = int(read_timeout_ms)
+        self.retry_s = float(retry_s)
+        self._solver = self.config.solver()
+        self._metres_per_count = self.config.metres_per_count()
+        self._queue: deque[BallSample] = deque(maxlen=max_queue)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._connected = False
+        self._latency = np.zeros(LATENCY_WINDOW)
+        self._raw = [0] * (2 * P.N_SENSORS)
+        self.counters = dict.fromkeys(
+            ("reports", "gaps", "lost_reports", "seq_resets", "short_reports", "bad_reports", "overflows",
+             "unplugs", "connects", "dropped_samples"), 0)
+        self._prev_seq: int | None = None
+        self._last_report = 0.0
+        self.last_error = ""
+
+    # --- LocomotionSource ---------------------------------------------------------------------
+    def start(self) -> None:
+        if self._thread is not None:
+            return
+        if self.backend is None:
+            import usb.backend.libusb1
+
+            self.backend = usb.backend.libusb1.get_backend()
+            if self.backend is None:
+                raise RuntimeError("no libusb-1.0 found for the USB trackball; install libusb-1.0 "
+                                   "(apt-get install libusb-1.0-0) or use the emulated device (emulate=True)")
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="usb-trackball", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
+    def read(self) -> list[BallSample]:
+        with self._lock:
+            samples = list(self._queue)
+            self._queue.clear()
+        return samples
+
+    def status(self) -> dict[str, Any]:
+        age = time.monotonic() - self._last_report if self._last_report else None
+        return {"connected": self._connected, "source": "usb",
+                "device": f"{self.config.vendor_id:04x}:{self.config.product_id:04x}",
+                "rate_hz": self.config.sample_rate_hz, "last_report_age_s": age,
+                "last_error": self.last_error, **self.counters}
+
+    # --- statistics ---------------------------------------------------------------------------
+    def raw_counts(self) -> list[int]:
+        """Sum of raw counts per sensor axis (x0, y0, x1, y1) since start or `reset_raw_counts`."""
+        return list(self._raw)
+
+    def reset_raw_counts(self) -> None:
+        self._raw = [0] * (2 * P.N_SENSORS)
+
+    def latencies(self) -> np.ndarray:
+        """Seconds from each report's arrival (read returned) to its publication, latest up to 65536."""
+        n = min(self.counters["reports"], LATENCY_WINDOW)
+        return self._latency[:n].copy()
+
+    # --- the reader thread --------------------------------------------------------------------
+    def _emit(self, kind: str, **fields: Any) -> None:
+        if self.on_event is not None:
+            self.on_event({"event": kind, "source": "usb", "t": self.clock.now(), **fields})
+
+    def _connect(self):
+        import usb.core
+        import usb.util
+
+        dev = usb.core.find(backend=self.backend, idVendor=self.config.vendor_id, idProduct=self.config.product_id)
+        if dev is None:
+            return None
+        try:
+            dev.set_configuration()
+            usb.util.claim_interface(dev, 0)
+            info = P.decode_info(dev.ctrl_transfer(P.REQUEST_TYPE_IN, P.REQ_GET_INFO, 0, 0, P.INFO.size))
+            if info.protocol_version != P.PROTOCOL_VERSION or info.n_sensors != P.N_SENSORS:
+                raise P.ReportError(
+                    f"device {dev.idVendor:04x}:{dev.idProduct:04x} speaks protocol {info.protocol_version} with "
+                    f"{info.n_sensors} sensors; this driver needs protocol {P.PROTOCOL_VERSION}, {P.N_SENSORS} sensors"
+                )
+            dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_SET_RATE, self.config.sample_rate_hz, 0)
+            dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_SET_RESOLUTION, self.config.resolution_cpi, 0)
+            dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_START, 0, 0)
+        except (usb.core.USBError, P.ReportError) as exc:
+            self.last_error = str(exc)
+            usb.util.dispose_resources(dev)
+            return None
+        return dev
+
+    def _run(self) -> None:
+        import usb.util
+
+        while not self._stop.is_set():
+            try:
+                dev = self._connect()
+            except Exception as exc:  # a broken backend must not kill the thread silently
+                self.last_error = f"{type(exc).__name__}: {exc}"
+                dev = None
+            if dev is None:
+                self._stop.wait(self.retry_s)
+                continue
+            self._prev_seq = None
+            self._last_report = time.monotonic()
+            self._connected = True
+            self.counters["connects"] += 1
+            self._emit("locomotion_back" if self.counters["connects"] > 1 else "locomotion_connected",
+                       device=f"{dev.idVendor:04x}:{dev.idProduct:04x}")
+            reason = self._read_loop(dev)
+            if reason is not None:
+                self._connected = False
+                self.counters["unplugs"] += 1
+                self.last_error = reason
+                self._emit("locomotion_lost", reason=reason)
+            else:  # stopped: leave the device idle
+                try:
+                    dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_STOP, 0, 0)
+                except usb.core.USBError:
+                    pass
+                self._connected = False
+            usb.util.dispose_resources(dev)
+
+    def _read_loop(self, dev) -> str | None:
+        """Read reports until stopped (None) or the device is gone (the reason)."""
+        import usb.core
+
+        buf = array.array("B", bytes(64))
+        view = memoryview(buf)
+        silence_s = max(0.05, 10.0 / self.config.sample_rate_hz)
+        perf = time.perf_counter
+        while not self._stop.is_set():
+            try:
+                n = dev.read(P.ENDPOINT_IN, buf, self.read_timeout_ms)
+            except usb.core.USBTimeoutError:
+                if time.monotonic() - self._last_report > silence_s:
+                    reason = self._probe(dev)
+                    if reason is not None:
+                        return reason
+                continue
+            except usb.core.USBError as exc:  # ENODEV when unplugged; any other transfer error: reconnect
+                return f"USB error: {exc}"
+            self._handle(view[:n], perf())
+        return None
+
+    def _probe(self, dev) -> str | None:
+        """The endpoint is silent: ask the device (GET_INFO); restart it if it stopped. A reason if it is gone."""
+        import usb.core
+
+        try:
+            info = P.decode_info(dev.ctrl_transfer(P.REQUEST_TYPE_IN, P.REQ_GET_INFO, 0, 0, P.INFO.size, 100))
+            if not info.running:
+                dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_START, 0, 0)
+                self._prev_seq = None
+        except (usb.core.USBError, P.ReportError) as exc:
+            return f"device silent and not answering: {exc}"
+        self._last_report = time.monotonic()  # probe again only after another silent period
+        return None
+
+    def _handle(self, data: memoryview, t_arrival: float) -> None:
+        counters = self.counters
+        try:
+            report = P.decode_report(data)
+        except P.ShortReportError:
+            counters["short_reports"] += 1
+            return
+        except P.BadReportError:
+            counters["bad_reports"] += 1
+            return
+        gap = P.seq_gap(self._prev_seq, report.seq)
+        if gap >= 1 << 31:  # a sequence that went backwards: the device restarted
+            counters["seq_resets"] += 1
+        elif gap:
+            counters["gaps"] += 1
+            counters["lost_reports"] += gap
+        self._prev_seq = report.seq
+        if report.overflow[0] or report.overflow[1]:
+            counters["overflows"] += 1
+        raw = self._raw
+        c = report.counts
+        raw[0] += c[0]
+        raw[1] += c[1]
+        raw[2] += c[2]
+        raw[3] += c[3]
+        k = self._metres_per_count
+        rotation, quality = self._solver.solve_one([c[0] * k[0], c[1] * k[1], c[2] * k[2], c[3] * k[3]])
+        sample = BallSample(self.clock.now(), report.seq, rotation, report.t_us * 1e-6, quality)
+        with self._lock:
+            if len(self._queue) == self._queue.maxlen:
+                counters["dropped_samples"] += 1
+            self._queue.append(sample)
+        if self.on_sample is not None:
+            self.on_sample(sample)
+        self._latency[counters["reports"] % LATENCY_WINDOW] = time.perf_counter() - t_arrival
+        counters["reports"] += 1
+        self._last_report = time.monotonic()

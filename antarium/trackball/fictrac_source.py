@@ -1,0 +1,254 @@
+"""FicTrac as a `LocomotionSource`: its live socket stream (UDP or TCP) and replay of its `.dat` logs.
+
+    open_source("fictrac", transport="udp", host="127.0.0.1", port=5000)   # we receive FicTrac's datagrams
+    open_source("fictrac", transport="tcp", host="127.0.0.1", port=5000)   # we connect to FicTrac's socket
+    open_source("fictrac-replay", path="run.dat", speed=1.0, clock=clock)
+
+Malformed lines are counted (`status()["malformed"]`) and skipped; a jump of FicTrac's frame counter is
+counted as a gap, a step back as a reset (FicTrac restarted tracking). The live source calls itself
+connected while frames arrive at least every `timeout_s`.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+from antarium.clock import Clock, MonotonicClock
+from antarium.locomotion import BallSample, LocomotionSource
+from antarium.trackball.fictrac import FicTracFrame, FicTracParseError, parse_line, to_sample
+
+TRANSPORTS = ("udp", "tcp")
+MAX_LINE = 4096  # bytes; a longer line without newline is garbage
+
+
+class _Counters:
+    """Line statistics shared by the live and replay sources."""
+
+    def __init__(self) -> None:
+        self.counts = dict.fromkeys(("lines", "frames", "malformed", "gaps", "lost_frames", "resets"), 0)
+        self._prev: int | None = None
+        self.last_error = ""
+
+    def parse(self, line: bytes | str) -> FicTracFrame | None:
+        self.counts["lines"] += 1
+        try:
+            frame = parse_line(line)
+        except FicTracParseError as exc:
+            self.counts["malformed"] += 1
+            self.last_error = str(exc)
+            return None
+        if self._prev is not None:
+            step = frame.frame - self._prev
+            if step > 1:
+                self.counts["gaps"] += 1
+                self.counts["lost_frames"] += step - 1
+            elif step < 1:
+                self.counts["resets"] += 1
+        self._prev = frame.frame
+        self.counts["frames"] += 1
+        return frame
+
+
+class FicTracSource(LocomotionSource):
+    """FicTrac's live stream on loopback or the lab network."""
+
+    def __init__(
+        self,
+        transport: str = "udp",
+        host: str = "127.0.0.1",
+        port: int = 5000,
+        clock: Clock | None = None,
+        max_match_error: float | None = None,
+        timeout_s: float = 1.0,
+        retry_s: float = 0.2,
+        max_queue: int = 100_000,
+    ) -> None:
+        if transport not in TRANSPORTS:
+            raise ValueError(f"FicTrac transport must be one of {', '.join(TRANSPORTS)}, got {transport!r}")
+        if not isinstance(port, int) or not 0 <= port <= 65535:
+            raise ValueError(f"FicTrac port must be an integer 0..65535, got {port!r}")
+        self.transport, self.host, self.port = transport, host, port
+        self.clock = clock or MonotonicClock()
+        self.max_match_error = max_match_error
+        self.timeout_s, self.retry_s = timeout_s, retry_s
+        self._stats = _Counters()
+        self._queue: deque[BallSample] = deque(maxlen=max_queue)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._sock: socket.socket | None = None
+        self._last_frame: float | None = None
+        self._tcp_connected = False
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """The bound UDP address (port resolved when 0 was asked) or the TCP peer."""
+        if self.transport == "udp" and self._sock is not None:
+            return self._sock.getsockname()[:2]
+        return (self.host, self.port)
+
+    def start(self) -> None:
+        if self._thread is not None:
+            return
+        if self.transport == "udp":
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                sock.bind((self.host, self.port))
+            except OSError as exc:
+                sock.close()
+                raise RuntimeError(f"cannot listen for FicTrac on udp {self.host}:{self.port}: {exc}") from None
+            sock.settimeout(0.05)
+            self._sock = sock
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=f"fictrac-{self.transport}", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def read(self) -> list[BallSample]:
+        with self._lock:
+            samples = list(self._queue)
+            self._queue.clear()
+        return samples
+
+    def status(self) -> dict[str, Any]:
+        now = self.clock.now()
+        fresh = self._last_frame is not None and now - self._last_frame <= self.timeout_s
+        connected = fresh and (self.transport == "udp" or self._tcp_connected)
+        return {"connected": connected, "source": f"fictrac-{self.transport}", "address": list(self.address),
+                "last_error": self._stats.last_error, **self._stats.counts}
+
+    def _line(self, line: bytes) -> None:
+        frame = self._stats.parse(line)
+        if frame is None:
+            return
+        t = self.clock.now()
+        sample = to_sample(frame, t, self.max_match_error)
+        with self._lock:
+            self._queue.append(sample)
+        self._last_frame = t
+
+    def _run(self) -> None:
+        if self.transport == "udp":
+            self._run_udp()
+        else:
+            self._run_tcp()
+
+    def _run_udp(self) -> None:
+        sock = self._sock
+        while not self._stop.is_set():
+            try:
+                data = sock.recv(65536)
+            except TimeoutError:
+                continue
+            except OSError as exc:
+                self._stats.last_error = f"udp receive failed: {exc}"
+                continue
+            for line in data.splitlines():
+                if line.strip():
+                    self._line(line)
+
+    def _run_tcp(self) -> None:
+        while not self._stop.is_set():
+            try:
+                sock = socket.create_connection((self.host, self.port), timeout=self.retry_s)
+            except OSError as exc:
+                self._stats.last_error = f"cannot connect to FicTrac at tcp {self.host}:{self.port}: {exc}"
+                self._stop.wait(self.retry_s)
+                continue
+            sock.settimeout(0.05)
+            self._tcp_connected = True
+            pending = b""
+            with sock:
+                while not self._stop.is_set():
+                    try:
+                        data = sock.recv(65536)
+                    except TimeoutError:
+                        continue
+                    except OSError as exc:
+                        self._stats.last_error = f"FicTrac connection lost: {exc}"
+                        break
+                    if not data:
+                        self._stats.last_error = "FicTrac closed the connection"
+                        break
+                    *lines, pending = (pending + data).split(b"\n")
+                    for line in lines:
+                        if line.strip():
+                            self._line(line)
+                    if len(pending) > MAX_LINE:
+                        self._stats.counts["lines"] += 1
+                        self._stats.counts["malformed"] += 1
+                        self._stats.last_error = f"FicTrac line longer than {MAX_LINE} bytes"
+                        pending = b""
+            self._tcp_connected = False
+
+
+class FicTracReplay(LocomotionSource):
+    """A FicTrac `.dat` log played back on `clock`, paced by its timestamps (field 22) divided by `speed`."""
+
+    def __init__(
+        self, path: str | Path, clock: Clock | None = None, speed: float = 1.0, max_match_error: float | None = None
+    ) -> None:
+        if not speed > 0:
+            raise ValueError(f"replay speed must be > 0 (1 = real time), got {speed!r}")
+        self.path = Path(path)
+        self.clock = clock or MonotonicClock()
+        self.speed = float(speed)
+        self.max_match_error = max_match_error
+        self._stats = _Counters()
+        self._frames: list[tuple[float, FicTracFrame]] = []
+        self._next = 0
+        self._t0: float | None = None
+
+    def start(self) -> None:
+        if self._t0 is not None:
+            return
+        try:
+            lines = self.path.read_bytes().splitlines()
+        except FileNotFoundError:
+            raise FileNotFoundError(f"FicTrac log {str(self.path)!r} not found") from None
+        first = None
+        latest = 0.0
+        for line in lines:
+            if not line.strip():
+                continue
+            frame = self._stats.parse(line)
+            if frame is None:
+                continue
+            if first is None:
+                first = frame.timestamp_ms
+            latest = max(latest, (frame.timestamp_ms - first) * 1e-3 / self.speed)  # never backwards
+            self._frames.append((latest, frame))
+        self._t0 = self.clock.now()
+
+    def read(self) -> list[BallSample]:
+        if self._t0 is None:
+            return []
+        elapsed = self.clock.now() - self._t0
+        out = []
+        frames = self._frames
+        while self._next < len(frames) and frames[self._next][0] <= elapsed:
+            offset, frame = frames[self._next]
+            out.append(to_sample(frame, self._t0 + offset, self.max_match_error))
+            self._next += 1
+        return out
+
+    @property
+    def finished(self) -> bool:
+        return self._t0 is not None and self._next >= len(self._frames)
+
+    def status(self) -> dict[str, Any]:
+        return {"connected": self._t0 is not None, "source": "fictrac-replay",
+                "path": str(self.path), "finished": self.finished, "replayed": self._next,
+                "last_error": self._stats.last_error, **self._stats.counts}
