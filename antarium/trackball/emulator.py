@@ -77,6 +77,22 @@ def walk(speed: float = 0.03, turn_rate: float = 0.5, radius: float = 0.05, peri
     return motion
 
 
+class Turns:
+    """Motion for calibration: `schedule` whole turns about an axis in a device-time window; still otherwise."""
+
+    def __init__(self) -> None:
+        self._start, self._end, self._omega = 0.0, 0.0, np.zeros(3)
+
+    def schedule(self, start: float, axis: tuple[float, float, float], turns: float, duration: float) -> float:
+        """Turn `turns` times about unit `axis` from device time `start` (s) for `duration` s; returns the end."""
+        self._omega = np.asarray(axis, dtype=float) * 2 * np.pi * turns / duration
+        self._start, self._end = start, start + duration
+        return self._end
+
+    def __call__(self, t: float) -> np.ndarray:
+        return self._omega if self._start <= t < self._end else np.zeros(3)
+
+
 def _no_device() -> usb.core.USBError:
     return usb.core.USBError("No such device (it may have been disconnected)", LIBUSB_ERROR_NO_DEVICE, errno.ENODEV)
 
@@ -165,6 +181,11 @@ class EmulatedTrackball(usb.backend.IBackend):
                 self._reset_device()
                 self._describe()
                 self._cond.notify_all()
+
+    def device_time(self) -> float:
+        """Device time (s since START) at the end of the latest report."""
+        with self._cond:
+            return self._t_dev
 
     @property
     def plugged(self) -> bool:

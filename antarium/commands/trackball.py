@@ -1,0 +1,233 @@
+"""`antarium trackball`: run a locomotion input (USB trackball or FicTrac) and publish it, or calibrate the ball.
+
+    antarium trackball --config rig.toml                 # USB trackball -> bus (locomotion + events)
+    antarium trackball --emulate --seconds 10            # the emulated device, for demos
+    antarium trackball --source fictrac --port 5000      # FicTrac's UDP stream -> bus
+    antarium trackball calibrate --config rig.toml       # guided: whole turns about z, x, y; writes [trackball]
+
+Samples go to `antarium/<rig>/locomotion` (44-byte `antarium.locomotion.wire` structs), device events
+(locomotion_connected / locomotion_lost / locomotion_back, JSON) to `antarium/<rig>/events`, and the
+source's status (JSON) once a second to `antarium/<rig>/trackball/status`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from typing import Any
+
+HELP = "run the USB trackball or FicTrac input and publish it on the bus; `calibrate` the ball's sensors"
+
+#: how the emulated "lens" of `calibrate --emulate` differs from the config: factors on counts per mm
+#: (x0, y0, x1, y1) and a flipped y1 sign, so that the demo has something to find
+EMULATED_CPMM_FACTORS = (1.06, 0.94, 1.03, 0.91)
+EMULATED_SIGN_FLIP = (1, 1, 1, -1)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("action", nargs="?", default="run", choices=("run", "calibrate"),
+                        help="run (default): publish samples; calibrate: guided calibration")
+    parser.add_argument("--config", default=None, help="rig config TOML ([trackball], [bus], [rig] sections)")
+    parser.add_argument("--source", default="usb", choices=("usb", "fictrac", "fictrac-replay"),
+                        help="locomotion input (default usb)")
+    parser.add_argument("--emulate", action="store_true", help="use the emulated USB trackball (no hardware)")
+    parser.add_argument("--seconds", type=float, default=None, help="stop after this long (default: until Ctrl-C)")
+    parser.add_argument("--no-bus", action="store_true", help="do not publish; print status only")
+    parser.add_argument("--unplug-at", type=float, default=None,
+                        help="emulated device: pull the cable after this many seconds (demo of unplug handling)")
+    parser.add_argument("--replug-after", type=float, default=0.5, help="emulated device: replug after (s)")
+    parser.add_argument("--transport", default="udp", choices=("udp", "tcp"), help="FicTrac transport")
+    parser.add_argument("--host", default="127.0.0.1", help="FicTrac: UDP address to bind / TCP host to connect")
+    parser.add_argument("--port", type=int, default=5000, help="FicTrac socket port")
+    parser.add_argument("--path", default=None, help="FicTrac .dat log for --source fictrac-replay")
+    parser.add_argument("--axes", default="z,x,y", help="calibrate: rotation axes, in order (default z,x,y)")
+    parser.add_argument("--turns", type=float, default=3.0, help="calibrate: whole turns per axis (default 3)")
+    parser.add_argument("--dry-run", action="store_true", help="calibrate: print the result, do not write it")
+
+
+def _rig(config_path: str | None) -> dict[str, Any]:
+    from antarium.config import load_config
+
+    return load_config(config_path)
+
+
+def _open_source(args: argparse.Namespace, on_sample=None, on_event=None):
+    from antarium.locomotion import open_source
+
+    if args.source == "usb":
+        from antarium.trackball import config as tbconfig
+
+        trackball = tbconfig.load(args.config)
+        backend = None
+        if args.emulate:
+            from antarium.trackball.emulator import EmulatedTrackball, walk
+
+            backend = EmulatedTrackball(motion=walk(radius=trackball.ball_radius), truth=trackball,
+                                        replug_after_s=args.replug_after)
+        return open_source("usb", trackball=trackball, backend=backend, on_sample=on_sample, on_event=on_event)
+    if args.emulate:
+        raise ValueError("--emulate applies to --source usb only")
+    if args.source == "fictrac":
+        return open_source("fictrac", transport=args.transport, host=args.host, port=args.port)
+    if args.path is None:
+        raise ValueError("--source fictrac-replay needs --path FILE.dat")
+    return open_source("fictrac-replay", path=args.path)
+
+
+class _Publisher:
+    """Samples, events and status of one source on the bus (or nowhere with `session=None`)."""
+
+    def __init__(self, session, rig: str) -> None:
+        from antarium import bus
+
+        self.session = session
+        self.sample_pub = session.declare_publisher(bus.locomotion_key(rig), express=True) if session else None
+        self.events_key = bus.events_key(rig)
+        self.status_key = bus.rig_key(rig, "trackball", "status")
+
+    def sample(self, sample) -> None:
+        if self.sample_pub is not None:
+            from antarium.locomotion import wire
+
+            self.sample_pub.put(wire.encode(sample))
+
+    def event(self, event: dict[str, Any]) -> None:
+        print(f"trackball event: {json.dumps(event)}", flush=True)
+        if self.session is not None:
+            self.session.put(self.events_key, json.dumps(event))
+
+    def status(self, status: dict[str, Any]) -> None:
+        if self.session is not None:
+            self.session.put(self.status_key, json.dumps(status))
+
+
+def _run(args: argparse.Namespace) -> int:
+    rig = _rig(args.config)
+    session = None
+    if not args.no_bus and rig["bus"]["enabled"]:
+        from antarium.bus import open_session
+
+        session = open_session(rig["bus"], role="client")
+    publisher = _Publisher(session, rig["rig"]["name"])
+    try:
+        source = _open_source(args, on_sample=publisher.sample, on_event=publisher.event)
+        pushes = args.source != "usb"  # the USB driver publishes from its reader thread
+        t0 = time.monotonic()
+        next_status = t0
+        unplug_at = args.unplug_at
+        with source:
+            while args.seconds is None or time.monotonic() - t0 < args.seconds:
+                samples = source.read()
+                if pushes:
+                    for sample in samples:
+                        publisher.sample(sample)
+                now = time.monotonic()
+                if unplug_at is not None and now - t0 >= unplug_at and args.emulate:
+                    source.backend.unplug()
+                    unplug_at = None
+                if now >= next_status:
+                    status = source.status()
+                    publisher.status(status)
+                    print("trackball status: " + json.dumps(status), flush=True)
+                    next_status += 1.0
+                time.sleep(0.002)
+            final = source.status()
+        print("trackball final: " + json.dumps(final), flush=True)
+    finally:
+        if session is not None:
+            session.close()
+    return 0
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    from antarium.trackball import calibration
+    from antarium.trackball import config as tbconfig
+    from antarium.trackball.driver import UsbTrackball
+
+    if args.config is None:
+        raise ValueError("calibrate needs --config RIG.toml (the file its results are written to)")
+    axes = [a.strip() for a in args.axes.split(",") if a.strip()]
+    bad = [a for a in axes if a not in calibration.AXES]
+    if bad or not axes:
+        raise ValueError(f"--axes must list some of {', '.join(calibration.AXES)}, got {args.axes!r}")
+    if not args.turns > 0:
+        raise ValueError(f"--turns must be > 0, got {args.turns}")
+    from pathlib import Path
+
+    config = tbconfig.load(args.config) if Path(args.config).exists() else tbconfig.TrackballConfig()
+    backend = emulated_backend(config) if args.emulate else None
+    driver = UsbTrackball(trackball=config, backend=backend)
+    with driver:
+        wait_connected(driver, 5.0)
+        steps = [calibration.Step(axis, args.turns, tuple(turn(driver, axis, args.turns, backend)))
+                 for axis in axes]
+    result = calibration.calibrate(config, steps)
+    print(f"{'axis':6}{'old counts/mm':>15}{'new counts/mm':>15}{'sign':>6}{'spread':>9}")
+    spread = result.spread()
+    for i, (old, new) in enumerate(zip(config.sensors, result.config.sensors, strict=True)):
+        for j, a in enumerate("xy"):
+            name = f"{a}{i}"
+            print(f"{name:6}{old.counts_per_mm[j]:15.3f}{new.counts_per_mm[j]:15.3f}{new.signs[j]:6d}"
+                  f"{spread[name]:9.2%}")
+    if args.dry_run:
+        print("dry run: rig config not changed")
+    else:
+        tbconfig.write_section(args.config, result.config)
+        print(f"wrote [trackball] to {args.config}")
+    return 0
+
+
+def emulated_backend(config, realtime: bool = True):
+    """An emulated trackball whose lens differs from `config` (see EMULATED_CPMM_FACTORS), turned on request."""
+    from dataclasses import replace
+
+    from antarium.trackball.emulator import EmulatedTrackball, Turns
+
+    sensors = []
+    for i, s in enumerate(config.sensors):
+        f = EMULATED_CPMM_FACTORS[2 * i: 2 * i + 2]
+        g = EMULATED_SIGN_FLIP[2 * i: 2 * i + 2]
+        sensors.append(replace(s, counts_per_mm=(s.counts_per_mm[0] * f[0], s.counts_per_mm[1] * f[1]),
+                               signs=(s.signs[0] * g[0], s.signs[1] * g[1])))
+    return EmulatedTrackball(motion=Turns(), truth=replace(config, sensors=tuple(sensors)), realtime=realtime)
+
+
+def wait_connected(driver, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not driver.status()["connected"]:
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"trackball {driver.status()['device']} not found within {timeout_s} s "
+                               f"({driver.last_error or 'no such device'})")
+        time.sleep(0.01)
+
+
+def turn(driver, axis: str, turns: float, backend=None, seconds_per_turn: float = 1.0) -> list[int]:
+    """One calibration step: the operator (or the emulated ball) turns `turns` times about `axis`; raw counts."""
+    driver.reset_raw_counts()
+    if backend is None:
+        print(f"Mark the ball. Turn it {turns:g} whole turns about the dome's {axis} axis "
+              f"(right-hand rule, {'+z up' if axis == 'z' else '+x forward, +y left'}), "
+              f"then press Enter.", flush=True)
+        sys.stdin.readline()
+    else:
+        from antarium.trackball import calibration
+
+        period = 1.0 / driver.config.sample_rate_hz
+        start = (math.floor(backend.device_time() / period) + 20) * period
+        duration = round(turns * seconds_per_turn / period) * period
+        end = backend.motion.schedule(start, calibration.AXES[axis], turns, duration)
+        deadline = time.monotonic() + 10 * duration + 5.0
+        while backend.device_time() < end + 20 * period:
+            if time.monotonic() > deadline:
+                raise RuntimeError("the emulated trackball stopped sending reports during calibration")
+            time.sleep(0.005)
+    return driver.raw_counts()
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.action == "calibrate":
+        return _calibrate(args)
+    return _run(args)
