@@ -60,7 +60,9 @@ class LocomotionSource(ABC):
 
 
 #: back-end name -> "module:Class", imported only when opened.
-BACKENDS: dict[str, str] = {}
+BACKENDS: dict[str, str] = {
+    "ant": "antarium.ant.locomotion:AntLocomotion",
+}
 
 
 def open_source(name: str, **kwargs: Any) -> LocomotionSource:

@@ -1,0 +1,111 @@
+"""Route-following metrics as the field reports them.
+
+- Gattaux et al. 2025: lateral error d (distance to the nearest point of the learned route) and angular error
+  theta_e (heading minus the route's heading there), as median +- MAD; the memory metric PI_error (eq. 11-12);
+  the stopping distance to the nest.
+- Ardin et al. 2016: errors per route -- each time the agent is more than 20 cm from the route it counts one
+  error and is put back on the route (done by the closed-loop runner; see `off_route`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from antarium.ant.routes import Route
+
+ARDIN_ERROR_DISTANCE_M = 0.20
+
+
+def wrap(angle):
+    """Angles wrapped to [-pi, pi)."""
+    return np.remainder(np.asarray(angle, np.float64) + math.pi, math.tau) - math.pi
+
+
+def median_mad(values) -> tuple[float, float]:
+    """(median, median absolute deviation) of finite values; (nan, nan) when there are none."""
+    v = np.asarray(values, np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return math.nan, math.nan
+    med = float(np.median(v))
+    return med, float(np.median(np.abs(v - med)))
+
+
+def route_errors(route: Route, xy, heading) -> tuple[np.ndarray, np.ndarray]:
+    """Lateral error |d| (m) and angular error |theta_e| (rad) of positions (m, 2) and headings (m,) rad."""
+    _, d, route_heading = route.project(xy)
+    return np.abs(d), np.abs(wrap(np.asarray(heading, np.float64) - route_heading))
+
+
+def off_route(route: Route, xy, limit: float = ARDIN_ERROR_DISTANCE_M) -> np.ndarray:
+    """True where a position (m, 2) is farther than `limit` metres from the route (Ardin's error)."""
+    _, d, _ = route.project(xy)
+    return np.abs(d) > limit
+
+
+def arrived(route: Route, xy, radius: float) -> bool:
+    """Whether any position (m, 2) came within `radius` metres of the route's end."""
+    xy = np.atleast_2d(np.asarray(xy, np.float64))
+    return bool(np.any(np.hypot(*(xy - route.end).T) <= radius))
+
+
+def stopping_distance(route: Route, xy_stop) -> float:
+    """Distance (m) from where the ant stopped to the nest (the route's first point)."""
+    return float(np.hypot(*(np.asarray(xy_stop, np.float64) - route.start)))
+
+
+def pi_error(lambda_diff, theta_e) -> np.ndarray:
+    """Antcar's PI_error (eq. 11-12): the cumulative mean of steering errors over test images.
+
+    lambda_diff: (m,) lambda_L - lambda_R of each test image; theta_e: (m,) its heading error (rad, CCW > 0).
+    With lambda = 1 for novel views (eq. 7), a view turned to the left of the route (theta_e > 0) is familiar to
+    the left MBON, so the steering is right when lambda_diff < 0: e_i = 1 if sign(lambda_diff) != sign(-theta_e).
+    Images with theta_e == 0 must be left out by the caller (the paper drops |theta_e| < 1 deg).
+    Returns (m,) float64, PI_error(i) = mean(e_0..e_i).
+    """
+    lambda_diff = np.asarray(lambda_diff, np.float64)
+    theta_e = np.asarray(theta_e, np.float64)
+    if lambda_diff.shape != theta_e.shape:
+        raise ValueError(f"lambda_diff {lambda_diff.shape} and theta_e {theta_e.shape} must have the same shape")
+    e = (np.sign(lambda_diff) != np.sign(-theta_e)).astype(np.float64)
+    return np.cumsum(e) / np.arange(1, e.size + 1)
+
+
+def memory_pi_error(model, views, half_range_deg: float = 45.0, step_deg: float = 1.0) -> float:
+    """PI_error over learned views rotated by +-`half_range_deg` in `step_deg` steps (|theta| < 1 deg left out)."""
+    angles = np.radians(np.arange(-half_range_deg, half_range_deg + 1e-9, step_deg))
+    angles = angles[np.abs(angles) >= math.radians(1.0) - 1e-12]
+    diffs, thetas = [], []
+    for view in views:
+        diffs.append(model.lambda_diff(view.pns(angles)))
+        thetas.append(angles)
+    if not diffs:
+        raise ValueError("PI_error needs at least one view")
+    return float(pi_error(np.concatenate(diffs), np.concatenate(thetas))[-1])
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """The numbers of one closed-loop run on one route."""
+
+    lateral_median: float
+    lateral_mad: float
+    angular_median_deg: float
+    angular_mad_deg: float
+    arrived: bool
+    errors: int
+    decisions: int
+    distance: float
+    stop_distance: float
+
+    @classmethod
+    def of(cls, route: Route, xy, heading, arrived_: bool, errors: int, stop_distance: float = math.nan):
+        xy = np.atleast_2d(np.asarray(xy, np.float64))
+        lat, ang = route_errors(route, xy, heading)
+        lm, lmad = median_mad(lat)
+        am, amad = median_mad(np.degrees(ang))
+        dist = float(np.hypot(*np.diff(xy, axis=0).T).sum()) if len(xy) > 1 else 0.0
+        return cls(lm, lmad, am, amad, bool(arrived_), int(errors), int(len(xy)), dist, float(stop_distance))

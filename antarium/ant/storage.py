@@ -1,0 +1,119 @@
+"""Model files: a versioned `.npz` with bit-packed KC -> MBON synapses (or stored views for perfect memory).
+
+| key              | dtype, shape          | meaning                                                        |
+|------------------|-----------------------|----------------------------------------------------------------|
+| format           | str                   | "antarium-ant-model"                                           |
+| version          | int                   | FORMAT_VERSION                                                 |
+| kind             | str                   | antcar, ardin or perfect_memory                                |
+| params           | str (JSON)            | the model's parameters (the KC wiring is rebuilt from `seed`)  |
+| eye              | str (JSON)            | the `EyeParams` the model learned with                         |
+| n_pn             | int                   | projection neurons                                             |
+| mbon_<name>      | uint8 (ceil(n_kc/8),) | bit-packed synapses of MBON <name> (1 = undepressed)           |
+| n_kc_<name>      | int                   | KCs of MBON <name>                                             |
+| views            | float16 (n, n_pn)     | perfect memory's stored views                                  |
+| learned_views    | int                   | views learned                                                  |
+| route            | float64 (n, 2)        | the learned route, metres (optional)                           |
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, fields
+from pathlib import Path
+
+import numpy as np
+
+from antarium.ant.eye import EyeParams
+from antarium.ant.models import MODELS, PerfectMemoryModel
+from antarium.ant.mushroom_body import MBON
+
+FORMAT = "antarium-ant-model"
+FORMAT_VERSION = 1
+
+
+class ModelFileError(ValueError):
+    """A model file that is not a valid antarium ant model of a readable version and shape."""
+
+
+def save_model(path: str | os.PathLike, model, eye_params: EyeParams, route: np.ndarray | None = None) -> Path:
+    """Write `model` to `path` (.npz); the file is written beside and renamed, so a crash loses nothing."""
+    path = Path(path)
+    arrays: dict[str, np.ndarray] = {
+        "format": np.array(FORMAT), "version": np.array(FORMAT_VERSION), "kind": np.array(model.kind),
+        "params": np.array(json.dumps(asdict(model.params))), "eye": np.array(json.dumps(asdict(eye_params))),
+        "n_pn": np.array(model.n_pn), "learned_views": np.array(model.learned_views),
+    }
+    if isinstance(model, PerfectMemoryModel):
+        arrays["views"] = model.views.astype(np.float16)
+    else:
+        for name, mbon in model.mbons.items():
+            arrays[f"mbon_{name}"] = mbon.packed()
+            arrays[f"n_kc_{name}"] = np.array(mbon.n_kc)
+    if route is not None:
+        arrays["route"] = np.asarray(route, np.float64)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+    os.replace(tmp, path)
+    return path
+
+
+def load_model(path: str | os.PathLike):
+    """(model, eye_params, route or None) from a file written by `save_model`; ModelFileError if invalid."""
+    path = Path(path)
+    try:
+        data = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise
+    except (OSError, ValueError) as exc:
+        raise ModelFileError(f"{path}: not an antarium ant model file ({exc})") from None
+    with data:
+        if "format" not in data.files or str(data["format"]) != FORMAT:
+            raise ModelFileError(f"{path}: not an antarium ant model file (no format tag {FORMAT!r})")
+        version = int(data["version"])
+        if version != FORMAT_VERSION:
+            raise ModelFileError(f"{path}: model file version {version} cannot be read; allowed: {FORMAT_VERSION}")
+        kind = str(data["kind"])
+        if kind not in MODELS:
+            raise ModelFileError(f"{path}: model kind {kind!r} not known; allowed: {', '.join(MODELS)}")
+        cls, params_cls = MODELS[kind]
+        raw = json.loads(str(data["params"]))
+        known = {f.name for f in fields(params_cls)}
+        if set(raw) != known:
+            raise ModelFileError(f"{path}: {kind} parameters {sorted(raw)} do not match {sorted(known)}")
+        params = params_cls(**raw)
+        eye_params = EyeParams(**json.loads(str(data["eye"])))
+        n_pn = int(data["n_pn"])
+        if n_pn != eye_params.n_pn:
+            raise ModelFileError(f"{path}: n_pn {n_pn} does not match the eye's {eye_params.n_pn} PNs")
+        if cls is PerfectMemoryModel:
+            views = data["views"]
+            if views.ndim != 2 or views.shape[1] != n_pn:
+                raise ModelFileError(f"{path}: stored views must have shape (n, {n_pn}), got {views.shape}")
+            model = cls(n_pn, params, views.astype(np.float32))
+        else:
+            model = cls(n_pn, params)
+            mbons = {}
+            for name, mbon in model.mbons.items():
+                key = f"mbon_{name}"
+                if key not in data.files:
+                    raise ModelFileError(f"{path}: MBON {name!r} missing")
+                n_kc = int(data[f"n_kc_{name}"])
+                if n_kc != mbon.n_kc:
+                    raise ModelFileError(f"{path}: MBON {name!r} has {n_kc} KCs, parameters say {mbon.n_kc}")
+                try:
+                    mbons[name] = MBON.from_packed(data[key], n_kc)
+                except ValueError as exc:
+                    raise ModelFileError(f"{path}: {exc}") from None
+            model.mbons = mbons
+            model.learned_views = int(data["learned_views"])
+        route = data["route"] if "route" in data.files else None
+    return model, eye_params, route
+
+
+def mbon_bytes(model) -> dict[str, int]:
+    """Bytes of memory per MBON (bit-packed), or of the stored views for perfect memory ({'views': bytes})."""
+    if isinstance(model, PerfectMemoryModel):
+        return {"views": int(model.views.astype(np.float16).nbytes)}
+    return {name: int(mbon.packed().nbytes) for name, mbon in model.mbons.items()}

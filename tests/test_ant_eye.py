@@ -1,0 +1,86 @@
+"""The ant's eye: LED frames in, 800 Sobel-filtered projection neurons out, rotation in silico."""
+
+import math
+
+import numpy as np
+import pytest
+
+from antarium.ant.eye import Eye, EyeParams, sobel_magnitude
+from antarium.geometry import load_dome
+
+
+@pytest.fixture(scope="module")
+def dome():
+    return load_dome()
+
+
+@pytest.fixture(scope="module")
+def eye(dome):
+    return Eye.from_dome(dome)
+
+
+def bar_frame(dome, azimuth, column=0, width=0.17, top=0.52):
+    """An LED frame with a bright vertical bar at `azimuth` (rad, +-width) below `top` (rad) in LED column `column`."""
+    frame = np.zeros((dome.directions.shape[0], 2), np.uint16)
+    delta = np.remainder(dome.azimuth - azimuth + math.pi, math.tau) - math.pi
+    on = (np.abs(delta) < width) & (dome.elevation < top) & ~dome.is_uv
+    frame[on, column] = 40000
+    return frame
+
+
+def test_eye_has_800_projection_neurons_at_about_7_degrees(eye):
+    p = eye.params
+    assert p.n_pn == 800
+    assert 360 / p.cols == pytest.approx(7.2)
+    assert np.degrees(np.diff(eye.elevations)) == pytest.approx(np.full(p.rows - 1, 7.0))
+
+
+def test_a_bar_appears_where_it_is_and_moves_with_the_ants_yaw(dome, eye):
+    frame = bar_frame(dome, math.radians(90))
+    row = 6  # about 7 deg above the horizon
+    pano = eye.look(frame).rotated_panoramas(0.0)[0]
+    assert np.argmax(pano[row]) in (12, 13)           # 90 deg / 7.2 deg = 12.5 columns to the left
+    facing = eye.look(frame, yaw=math.radians(90)).rotated_panoramas(0.0)[0]
+    assert np.argmax(facing[row]) in (0, 49)           # the ant faces the bar
+
+
+def test_in_silico_rotation_matches_a_rotated_scene(dome, eye):
+    # Turning the ant by +a (CCW) in silico must look like the scene turned by -a on the dome's LEDs.
+    a = math.radians(37.0)
+    turned = eye.look(bar_frame(dome, math.radians(60))).pns([a])[0]
+    scene_turned = eye.look(bar_frame(dome, math.radians(60) - a)).pns([0.0])[0]
+    assert np.corrcoef(turned, scene_turned)[0, 1] > 0.97
+
+
+def test_channels_read_their_own_leds(dome):
+    green, blue = (Eye.from_dome(dome, EyeParams(channel=c)) for c in ("green", "blue"))
+    frame = bar_frame(dome, 0.0, column=1)  # blue only
+    assert np.abs(green.look(frame).pns()).max() == 0.0
+    assert np.abs(blue.look(frame).pns()).max() > 0.0
+    uv = Eye.from_dome(dome, EyeParams(channel="uv"))
+    assert uv.channel_pixels.size == 495
+
+
+def test_the_eye_reads_what_the_centre_sees_through_the_photometric_gain():
+    dirs = np.array([[1.0, 0, 0], [0, 1.0, 0], [-1.0, 0, 0], [0, -1.0, 0]])
+    eye = Eye(dirs, gain=np.array([1.0, 0.5, 1.0, 1.0]), params=EyeParams(neighbours=1))
+    frame = np.full((4, 2), 1000, np.uint16)
+    i = eye.intensities(frame)
+    assert i[1] == pytest.approx(2 * i[0])
+
+
+def test_sobel_is_zero_on_a_uniform_panorama_and_wraps_in_azimuth():
+    assert np.all(sobel_magnitude(np.full((4, 16, 50), 3.0, np.float32)) == 0.0)
+    step = np.zeros((16, 50), np.float32)
+    step[:, :25] = 1.0
+    edges = sobel_magnitude(step)
+    assert edges[8, 49] > 0 and edges[8, 0] > 0 and edges[8, 24] > 0 and edges[8, 12] == 0
+
+
+def test_bad_input_is_refused_with_a_clear_error(eye):
+    with pytest.raises(ValueError, match=r"shape \(20350, 2\)"):
+        eye.look(np.zeros((100, 2), np.uint16))
+    with pytest.raises(ValueError, match="allowed: green, blue, uv"):
+        EyeParams(channel="red")
+    with pytest.raises(ValueError, match="finite"):
+        eye.look(np.zeros((20350, 2), np.uint16), yaw=math.nan)

@@ -1,0 +1,68 @@
+"""Model files: versioned, bit-packed, and refused with a clear error when wrong."""
+
+import json
+
+import numpy as np
+import pytest
+
+from antarium.ant.eye import EyeParams, View
+from antarium.ant.models import make_model
+from antarium.ant.storage import FORMAT_VERSION, ModelFileError, load_model, mbon_bytes, save_model
+
+N_PN = 800
+
+
+def view(seed: int) -> View:
+    rng = np.random.default_rng(seed)
+    return View(rng.random((16, 300), dtype=np.float32), 6, 50)
+
+
+@pytest.mark.parametrize("kind", ["antcar", "ardin", "perfect_memory"])
+def test_models_round_trip_through_a_file(tmp_path, kind):
+    model = make_model(kind, N_PN, **({"seed": 5} if kind != "perfect_memory" else {}))
+    for s in range(3):
+        model.learn(view(s))
+    path = save_model(tmp_path / "m.npz", model, EyeParams(), route=np.array([[0, 0], [1.0, 0.5]]))
+    loaded, eye_params, route = load_model(path)
+    assert loaded.kind == kind and eye_params == EyeParams() and loaded.learned_views == 3
+    np.testing.assert_array_equal(route, [[0, 0], [1.0, 0.5]])
+    probe = view(1)
+    assert loaded.decide(probe).turn == model.decide(probe).turn
+
+
+def test_route_mbons_take_1875_bytes_whatever_the_route_length():
+    short, long_ = make_model("antcar", N_PN), make_model("antcar", N_PN)
+    short.learn(view(0))
+    for s in range(40):
+        long_.learn(view(s))
+    assert mbon_bytes(short) == mbon_bytes(long_) == {"left": 1875, "right": 1875, "nest": 625, "feeder": 625}
+
+
+def _rewrite(path, **changes):
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays.update(changes)
+    np.savez(path, **arrays)
+
+
+def test_wrong_version_shape_or_kind_is_refused(tmp_path):
+    model = make_model("antcar", N_PN)
+    path = save_model(tmp_path / "m.npz", model, EyeParams())
+    _rewrite(path, version=np.array(FORMAT_VERSION + 1))
+    with pytest.raises(ModelFileError, match=f"version {FORMAT_VERSION + 1} cannot be read; allowed: 1"):
+        load_model(path)
+    path = save_model(tmp_path / "m.npz", model, EyeParams())
+    _rewrite(path, mbon_left=np.zeros(100, np.uint8))
+    with pytest.raises(ModelFileError, match=r"must be \(1875,\) uint8"):
+        load_model(path)
+    path = save_model(tmp_path / "m.npz", model, EyeParams())
+    params = json.loads(str(np.load(path)["params"]))
+    params["n_kc"] = 1000
+    _rewrite(path, params=np.array(json.dumps(params)))
+    with pytest.raises(ModelFileError, match="has 15000 KCs, parameters say 1000"):
+        load_model(path)
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(ModelFileError, match="not an antarium ant model"):
+        load_model(tmp_path / "junk.npz")
+    with pytest.raises(FileNotFoundError):
+        load_model(tmp_path / "missing.npz")
