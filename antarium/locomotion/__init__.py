@@ -61,6 +61,12 @@ class LocomotionSource(ABC):
 
 #: back-end name -> "module:Class", imported only when opened.
 BACKENDS: dict[str, str] = {
+    "scripted": "antarium.locomotion.scripted:ScriptedSource",
+    "replay": "antarium.locomotion.replay:ReplaySource",
+    "bus": "antarium.locomotion.bus:BusSource",
+    "usb": "antarium.trackball.driver:UsbTrackball",
+    "fictrac": "antarium.trackball.fictrac_source:FicTracSource",
+    "fictrac-replay": "antarium.trackball.fictrac_source:FicTracReplay",
     "ant": "antarium.ant.locomotion:AntLocomotion",
 }
 

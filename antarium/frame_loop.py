@@ -1,0 +1,364 @@
+"""The frame loop: paced frames on an injected clock, closed or open loop, per-frame measurements.
+
+Each `step()`: run the commands queued by other threads, wait for the frame's slot, take the newest
+locomotion samples, update the virtual pose (closed loop), render the LED frame, send it (and the latch)
+over the link, measure, log and publish. A frame whose sending ends after its slot (`t_target + period`)
+is counted late; slots that have passed meanwhile are skipped, never queued, so lag cannot accumulate.
+
+Everything is injected: `clock` (`antarium.clock`), `source` (`antarium.locomotion`), `renderer`
+(`antarium.renderers.Renderer`, or None for pose-only runs), `link` (`antarium.firmware_proto` link, or
+None), `log` (`antarium.trial_log.TrialLog`, or None). With a `SimulatedClock` the same code runs faster
+than real time (tests, the virtual ant):
+
+    loop = FrameLoop(clock=SimulatedClock(), source=src, renderer=r, link=open_link("virtual"))
+    loop.step()                      # one frame
+    loop.run(until=10.0)             # frames until the clock reads 10 s
+
+Pose conventions (SI, radians): `pose.heading` is the world azimuth of the dome's +x axis. Tether
+"free_yaw": the ant turns on its pin, the ball gives translation in the dome frame, the heading changes only
+by command. Tether "fixed": the ball gives yaw too, the heading turns with the ant (the scene rotates).
+Rotating the scene by +a (counter-clockwise, as the ant sees it) turns the heading by -a.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import math
+import queue
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from antarium.ball import BALL_RADIUS_M, pole_motion
+from antarium.clock import Clock
+from antarium.locomotion import LocomotionSource
+from antarium.pose import Pose
+
+TETHERS = ("free_yaw", "fixed")
+#: how many recent frames the statistics (percentiles, frame rate) cover
+STATS_WINDOW = 2048
+#: check the locomotion source's and link's health every this many frames
+HEALTH_EVERY = 10
+#: the link is reported down when its telemetry is older than this (s)
+LINK_TIMEOUT_S = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class FrameRecord:
+    """What happened in one frame (times in seconds on the loop's clock; NaN when not measured)."""
+
+    frame: int
+    t_target: float
+    t_start: float
+    t_sent: float
+    pose: Pose
+    scene_rotation: float
+    closed_loop: bool
+    fixed_tether: bool
+    sample_seq: int  # newest locomotion sequence number used, -1 when none arrived this frame
+    latency: float  # newest sample's arrival -> last datagram sent; NaN when no sample arrived
+    render: float
+    sample: float
+    convert: float
+    encode: float
+    send: float
+    pacing_error: float  # t_start - t_target
+    late: bool
+    skipped: int  # frame slots skipped after this frame because it overran
+    locomotion_connected: bool
+    link_ok: bool
+
+    def log_row(self) -> tuple:
+        p = self.pose
+        return (self.frame, self.t_target, self.t_start, self.t_sent, p.x, p.y, p.z, p.heading, self.scene_rotation,
+                int(self.closed_loop), int(self.fixed_tether), self.sample_seq, self.latency, self.render,
+                self.sample, self.convert, self.encode, self.send, self.pacing_error, int(self.late), self.skipped,
+                int(self.locomotion_connected), int(self.link_ok))
+
+
+def _check_gain(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or not -100.0 <= value <= 100.0:
+        raise ValueError(f"{name} must be a finite number in [-100, 100], got {value!r}")
+    return float(value)
+
+
+class FrameLoop:
+    """Paced frames; see the module docstring. Control methods run in the loop's thread (or through
+    `call_soon` from others); they validate first and leave the state unchanged on a ValueError."""
+
+    def __init__(self, *, clock: Clock, source: LocomotionSource | None, renderer=None, link=None,
+                 rate_hz: float = 190.0, closed_loop: bool = True, tether: str = "free_yaw",
+                 gain_translation: float = 1.0, gain_rotation: float = 1.0, origin: Pose | None = None,
+                 ball_radius: float = BALL_RADIUS_M, log=None,
+                 on_frame: Callable[[FrameRecord], None] | None = None,
+                 on_event: Callable[[float, str, dict], None] | None = None) -> None:
+        if not isinstance(rate_hz, (int, float)) or not 1.0 <= rate_hz <= 2000.0:
+            raise ValueError(f"rate_hz must be in [1, 2000] frames/s, got {rate_hz!r}")
+        if tether not in TETHERS:
+            raise ValueError(f"tether must be one of {TETHERS}, got {tether!r}")
+        self.clock, self.source, self.renderer, self.link = clock, source, renderer, link
+        self.period = 1.0 / float(rate_hz)
+        self.rate_hz = float(rate_hz)
+        self.closed_loop = bool(closed_loop)
+        self.tether = tether
+        self.gain_translation = _check_gain("gain_translation", gain_translation)
+        self.gain_rotation = _check_gain("gain_rotation", gain_rotation)
+        self.origin = origin or Pose()
+        self.pose = self.origin
+        self.scene_rotation = 0.0
+        self.ball_radius = float(ball_radius)
+        self.log = log
+        self.on_frame = on_frame
+        self.on_event = on_event
+        self.frame = 0
+        self.late_frames = 0
+        self.skipped_frames = 0
+        self.samples_used = 0
+        self.locomotion_connected = True
+        self.link_ok = True
+        self.link_outages = 0
+        self.link_errors = 0
+        self.last_link_error = ""
+        self._next_t: float | None = None
+        self._frame_buf = None
+        self._pending: queue.SimpleQueue = queue.SimpleQueue()
+        self._stop = threading.Event()
+        self._loop_thread: threading.Thread | None = None
+        self._stats = np.full((STATS_WINDOW, 8), np.nan)  # t_start, latency, render, sample, convert, encode, send,
+        # pacing error
+        self._polarisers_dirty = renderer is not None
+
+    # -- events and commands ---------------------------------------------------------------------------
+    def event(self, kind: str, **data: Any) -> None:
+        """Record an event in the log and hand it to `on_event` (the server publishes it)."""
+        t = self.clock.now()
+        if self.log is not None:
+            self.log.add_event(t, kind, data)
+        if self.on_event is not None:
+            self.on_event(t, kind, data)
+
+    def call_soon(self, fn: Callable, *args: Any, **kwargs: Any) -> concurrent.futures.Future:
+        """Run `fn(*args, **kwargs)` in the loop's thread before the next frame; thread-safe."""
+        future: concurrent.futures.Future = concurrent.futures.Future()
+        self._pending.put((future, fn, args, kwargs))
+        return future
+
+    def _run_pending(self) -> None:
+        while True:
+            try:
+                future, fn, args, kwargs = self._pending.get_nowait()
+            except queue.Empty:
+                return
+            if not future.set_running_or_notify_cancel():
+                continue
+            try:
+                future.set_result(fn(*args, **kwargs))
+            except BaseException as exc:  # handed to the caller, who replies with the error
+                future.set_exception(exc)
+
+    # -- control (loop thread) -------------------------------------------------------------------------
+    def set_pose(self, pose: Pose) -> None:
+        """Virtual displacement: put the eye at `pose` now (heading = world azimuth of the dome's +x)."""
+        if not isinstance(pose, Pose):
+            raise ValueError(f"set_pose needs an antarium.pose.Pose, got {type(pose).__name__}")
+        self.pose = pose
+        self.event("pose_set", x=pose.x, y=pose.y, z=pose.z, heading=pose.heading)
+
+    def reset_origin(self, origin: Pose | None = None) -> None:
+        """Put the eye back at the virtual origin (or make `origin` the new origin and go there)."""
+        if origin is not None and not isinstance(origin, Pose):
+            raise ValueError(f"reset_origin needs an antarium.pose.Pose or None, got {type(origin).__name__}")
+        self.origin = origin or self.origin
+        self.pose = self.origin
+        self.scene_rotation = 0.0
+        o = self.origin
+        self.event("origin_reset", x=o.x, y=o.y, z=o.z, heading=o.heading)
+
+    def rotate_scene(self, angle: float) -> None:
+        """Rotate the scene instantly by `angle` rad, counter-clockwise as seen from above."""
+        if isinstance(angle, bool) or not isinstance(angle, (int, float)) or not math.isfinite(angle):
+            raise ValueError(f"scene rotation must be a finite angle in radians, got {angle!r}")
+        self.scene_rotation = math.remainder(self.scene_rotation + angle, math.tau)
+        self.pose = self.pose.moved(dheading=-angle)
+        self.event("scene_rotated", angle=float(angle), total=self.scene_rotation)
+
+    def set_closed_loop(self, on: bool) -> None:
+        if not isinstance(on, bool):
+            raise ValueError(f"closed_loop must be true or false, got {on!r}")
+        self.closed_loop = on
+        self.event("closed_loop", on=on)
+
+    def set_tether(self, tether: str) -> None:
+        if tether not in TETHERS:
+            raise ValueError(f"tether must be one of {TETHERS}, got {tether!r}")
+        self.tether = tether
+        self.event("tether", tether=tether)
+
+    def set_gains(self, translation: float | None = None, rotation: float | None = None) -> None:
+        t = self.gain_translation if translation is None else _check_gain("gain translation", translation)
+        r = self.gain_rotation if rotation is None else _check_gain("gain rotation", rotation)
+        self.gain_translation, self.gain_rotation = t, r
+        self.event("gains", translation=t, rotation=r)
+
+    def renderer_changed(self) -> None:
+        """Call after changing the renderer's scene or sky: the polariser angles are sent with the next frame."""
+        self._polarisers_dirty = True
+
+    # -- the frame -------------------------------------------------------------------------------------
+    def _integrate(self, samples) -> None:
+        x, y, heading = self.pose.x, self.pose.y, self.pose.heading
+        gt, gr, fixed = self.gain_translation, self.gain_rotation, self.tether == "fixed"
+        for s in samples:
+            dx, dy, dyaw = pole_motion(s.rotation, self.ball_radius)
+            if fixed:
+                heading += gr * dyaw
+            c, sn = math.cos(heading), math.sin(heading)
+            x += gt * (c * dx - sn * dy)
+            y += gt * (sn * dx + c * dy)
+        self.pose = Pose(x, y, self.pose.z, math.remainder(heading, math.tau))
+
+    def _check_health(self) -> None:
+        if self.source is not None:
+            connected = bool(self.source.status().get("connected", True))
+            if connected != self.locomotion_connected:
+                self.locomotion_connected = connected
+                self.event("locomotion_back" if connected else "locomotion_lost", status=self.source.status())
+        if self.link is not None:
+            ok = self.link_errors == 0 and self._telemetry_fresh()
+            if ok != self.link_ok:
+                self.link_ok = ok
+                if not ok:
+                    self.link_outages += 1
+                self.event("link_back" if ok else "link_outage", error=self.last_link_error)
+            self.link_errors = 0
+
+    def _telemetry_fresh(self) -> bool:
+        telemetry = self.link.telemetry() or {}
+        age = telemetry.get("age_s")
+        return age is None or age <= LINK_TIMEOUT_S
+
+    def step(self) -> FrameRecord:
+        """Run one frame (waiting for its slot on the clock) and return what happened."""
+        self._run_pending()
+        clock = self.clock
+        if self._next_t is None:
+            self._next_t = clock.now()
+        t_target = self._next_t
+        clock.sleep_until(t_target)
+        t_start = clock.now()
+        if self.frame % HEALTH_EVERY == 0:
+            self._check_health()
+        samples = self.source.read() if self.source is not None else []
+        newest = samples[-1] if samples else None
+        if samples:
+            self.samples_used += len(samples)
+            if self.log is not None:
+                self.log.add_samples(samples)
+            if self.closed_loop and self.locomotion_connected:
+                self._integrate(samples)
+        pose = self.pose
+        render = sample = convert = encode = send = math.nan
+        if self.renderer is not None:
+            self._frame_buf = self.renderer.render(pose, out=self._frame_buf)
+            timings = getattr(self.renderer, "last_timings", None) or {}
+            render = timings.get("render", math.nan)
+            sample = timings.get("sample", math.nan)
+            convert = timings.get("convert", math.nan)
+        if self.link is not None and self._frame_buf is not None:
+            t0 = clock.now()
+            try:
+                if self._polarisers_dirty and hasattr(self.renderer, "polariser_angles"):
+                    self.link.send_polarisers(self.renderer.polariser_angles())
+                    self._polarisers_dirty = False
+                self.link.send_frame(self._frame_buf)
+            except OSError as exc:
+                self.link_errors += 1
+                self.last_link_error = f"{type(exc).__name__}: {exc}"
+            t1 = clock.now()
+            link_timings = getattr(self.link, "last_timings", None) or {}
+            encode = link_timings.get("encode", math.nan)
+            send = link_timings.get("send", t1 - t0)
+        t_sent = clock.now()
+        latency = t_sent - newest.t if newest is not None else math.nan
+        slot_end = t_target + self.period
+        late = t_sent > slot_end
+        skipped = 0
+        next_t = slot_end
+        now = clock.now()
+        if now > next_t:
+            skipped = int((now - next_t) // self.period) + 1
+            next_t += skipped * self.period
+        self._next_t = next_t
+        if late:
+            self.late_frames += 1
+        self.skipped_frames += skipped
+        rec = FrameRecord(self.frame, t_target, t_start, t_sent, pose, self.scene_rotation, self.closed_loop,
+                          self.tether == "fixed", newest.seq if newest is not None else -1, latency, render, sample,
+                          convert, encode, send, t_start - t_target, late, skipped, self.locomotion_connected,
+                          self.link_ok)
+        self._stats[self.frame % STATS_WINDOW] = (t_start, latency, render, sample, convert, encode, send,
+                                                  t_start - t_target)
+        self.frame += 1
+        if self.log is not None:
+            self.log.add_frame(rec.log_row())
+        if late:
+            self.event("late_frame", frame=rec.frame, overrun=t_sent - slot_end, skipped=skipped)
+        if self.on_frame is not None:
+            self.on_frame(rec)
+        return rec
+
+    def run(self, until: float | None = None, frames: int | None = None) -> int:
+        """Run frames until the clock reads `until` (s), `frames` frames were run, or `stop()`; returns the count."""
+        n = 0
+        self._stop.clear()
+        while not self._stop.is_set():
+            if frames is not None and n >= frames:
+                break
+            if until is not None and (self._next_t if self._next_t is not None else self.clock.now()) >= until:
+                break
+            self.step()
+            n += 1
+        self._run_pending()
+        return n
+
+    def stop(self) -> None:
+        """Make `run` return after the current frame (thread-safe)."""
+        self._stop.set()
+
+    def start_thread(self, name: str = "frame-loop") -> threading.Thread:
+        """Run the loop in a thread of its own until `stop()`."""
+        self._loop_thread = threading.Thread(target=self.run, name=name, daemon=True)
+        self._loop_thread.start()
+        return self._loop_thread
+
+    def join(self, timeout: float | None = None) -> None:
+        if self._loop_thread is not None:
+            self._loop_thread.join(timeout)
+
+    # -- statistics ------------------------------------------------------------------------------------
+    def stats(self) -> dict[str, Any]:
+        """Frame rate, late frames and latency/stage percentiles (s) over the last frames (JSON-serialisable)."""
+        n = min(self.frame, STATS_WINDOW)
+        window = self._stats[:n] if self.frame <= STATS_WINDOW else self._stats
+        out: dict[str, Any] = {"frames": self.frame, "late_frames": self.late_frames,
+                               "skipped_frames": self.skipped_frames, "target_rate_hz": self.rate_hz,
+                               "frame_rate_hz": None, "locomotion_connected": self.locomotion_connected,
+                               "link_ok": self.link_ok, "link_outages": self.link_outages}
+        if n >= 2:
+            t = window[:, 0]
+            span = float(np.nanmax(t) - np.nanmin(t))
+            out["frame_rate_hz"] = (n - 1) / span if span > 0 else None
+        for col, name in enumerate(("latency", "render", "sample", "convert", "encode", "send", "pacing_error"),
+                                   start=1):
+            values = window[:, col]
+            values = values[np.isfinite(values)]
+            if len(values):
+                p50, p99 = np.percentile(values, [50, 99])
+                out[name] = {"p50": float(p50), "p99": float(p99), "max": float(values.max())}
+            else:
+                out[name] = None
+        return out

@@ -1,0 +1,83 @@
+"""Locomotion from the bus: subscribes to `antarium/<rig>/locomotion` (44-byte `antarium.locomotion.wire`
+structs), so a trackball driver on another computer or a simulated ant can drive the loop.
+
+Each sample is stamped with this process's clock when it arrives (clocks of different computers are never
+compared). Malformed payloads are counted and dropped. `connected` is False when no sample arrived for
+`timeout_s` seconds after one did (publisher gone), so the loop holds the pose until samples come back.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from typing import Any
+
+from antarium.clock import Clock, MonotonicClock
+from antarium.locomotion import BallSample, LocomotionSource, wire
+
+
+class BusSource(LocomotionSource):
+    """rig: the rig name; bus: a `[bus]` section (client role: connects to the server's endpoints)
+    or session: an open zenoh session to share (not closed by `stop`)."""
+
+    def __init__(self, rig: str = "rig1", bus: dict | None = None, session=None, timeout_s: float = 0.5,
+                 max_pending: int = 100000, clock: Clock | None = None) -> None:
+        from antarium.bus import check_rig_name
+
+        self.rig = check_rig_name(rig)
+        self.bus_section = bus
+        self.clock = clock or MonotonicClock()
+        self.timeout_s = float(timeout_s)
+        self._session = session
+        self._own_session = session is None
+        self._pending: deque[BallSample] = deque(maxlen=max_pending)
+        self._lock = threading.Lock()
+        self._sub = None
+        self.received = 0
+        self.malformed = 0
+        self.last_error = ""
+        self._last_t: float | None = None
+
+    def start(self) -> None:
+        from antarium.bus import locomotion_key, open_session
+
+        if self._sub is not None:
+            return
+        if self._session is None:
+            self._session = open_session(self.bus_section, role="client")
+        self._sub = self._session.declare_subscriber(locomotion_key(self.rig), self._on_sample)
+
+    def _on_sample(self, sample) -> None:  # zenoh thread: keep it short
+        t = self.clock.now()
+        try:
+            decoded = wire.decode(sample.payload.to_bytes(), t)
+        except wire.LocomotionWireError as exc:
+            with self._lock:
+                self.malformed += 1
+                self.last_error = str(exc)
+            return
+        with self._lock:
+            self._pending.append(decoded)
+            self.received += 1
+            self._last_t = t
+
+    def read(self) -> list[BallSample]:
+        with self._lock:
+            out = list(self._pending)
+            self._pending.clear()
+        return out
+
+    def status(self) -> dict[str, Any]:
+        with self._lock:
+            last = self._last_t
+            connected = last is None or self.clock.now() - last <= self.timeout_s
+            return {"connected": connected, "received": self.received, "malformed": self.malformed,
+                    "last_error": self.last_error}
+
+    def stop(self) -> None:
+        if self._sub is not None:
+            self._sub.undeclare()
+            self._sub = None
+        if self._own_session and self._session is not None:
+            self._session.close()
+            self._session = None

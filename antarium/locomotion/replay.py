@@ -1,0 +1,105 @@
+"""Replay ball rotations from an earlier trial log (HDF5, table `locomotion`) or a CSV file.
+
+A CSV file has a header row naming at least `t, rx, ry, rz` (seconds; radians about the dome axes),
+optionally `seq`, `t_device`, `quality`. Samples come out at their recorded time offsets on the injected
+clock (the first sample at `start()` + its offset from the first recorded time), with their recorded
+sequence numbers, so a replayed trial drives the loop exactly as the original did.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from antarium.clock import Clock, MonotonicClock
+from antarium.locomotion import BallSample, LocomotionSource
+
+
+def load_samples(path: str | Path) -> np.ndarray:
+    """The recorded samples as a structured array with fields t, seq, rx, ry, rz, t_device, quality."""
+    from antarium.trial_log import SAMPLE_DTYPE, open_log
+
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"replay file {str(path)!r} does not exist")
+    if path.suffix.lower() in (".h5", ".hdf5"):
+        with open_log(path) as f:
+            if "locomotion" not in f:
+                raise ValueError(f"{str(path)!r} has no 'locomotion' table; is it an antarium trial log?")
+            data = f["locomotion"][:]
+        return data.astype(SAMPLE_DTYPE)
+    if path.suffix.lower() != ".csv":
+        raise ValueError(f"replay file {str(path)!r} must be .h5/.hdf5 (trial log) or .csv")
+    with path.open(newline="") as f:
+        reader = csv.DictReader(f)
+        missing = {"t", "rx", "ry", "rz"} - set(reader.fieldnames or ())
+        if missing:
+            raise ValueError(f"replay CSV {str(path)!r} lacks columns {sorted(missing)}; needs t, rx, ry, rz")
+        rows = []
+        for i, row in enumerate(reader):
+            try:
+                rows.append((float(row["t"]), int(row.get("seq") or i), float(row["rx"]), float(row["ry"]),
+                             float(row["rz"]), float(row.get("t_device") or "nan"), float(row.get("quality") or 1.0)))
+            except ValueError as exc:
+                raise ValueError(f"replay CSV {str(path)!r} line {i + 2}: {exc}") from None
+    return np.array(rows, dtype=SAMPLE_DTYPE)
+
+
+class ReplaySource(LocomotionSource):
+    """Play back recorded samples (`path`: trial log or CSV) at `speed` times the recorded pace."""
+
+    def __init__(self, path: str, speed: float = 1.0, loop: bool = False, clock: Clock | None = None) -> None:
+        if not isinstance(speed, (int, float)) or not 0 < speed <= 1000:
+            raise ValueError(f"replay speed must be in (0, 1000], got {speed!r}")
+        self.data = load_samples(path)
+        if len(self.data) == 0:
+            raise ValueError(f"replay file {path!r} holds no samples")
+        if not np.all(np.isfinite(self.data["t"])) or np.any(np.diff(self.data["t"]) < 0):
+            raise ValueError(f"replay file {path!r}: sample times must be finite and non-decreasing")
+        self.speed, self.loop = float(speed), bool(loop)
+        self.clock = clock or MonotonicClock()
+        self._offsets = (self.data["t"] - self.data["t"][0]) / self.speed
+        self._span = float(self._offsets[-1]) + (float(np.median(np.diff(self._offsets))) if len(self.data) > 1
+                                                  else 1.0)
+        self._t0: float | None = None
+        self._i = 0
+        self._lap = 0
+
+    def start(self) -> None:
+        self._t0 = self.clock.now()
+        self._i = 0
+        self._lap = 0
+
+    @property
+    def finished(self) -> bool:
+        return not self.loop and self._i >= len(self.data)
+
+    def read(self) -> list[BallSample]:
+        if self._t0 is None:
+            self.start()
+        now = self.clock.now() - self._t0
+        out = []
+        n = len(self.data)
+        while True:
+            if self._i >= n:
+                if not self.loop:
+                    break
+                self._i, self._lap = 0, self._lap + 1
+            t_rel = self._offsets[self._i] + self._lap * self._span
+            if t_rel > now:
+                break
+            row = self.data[self._i]
+            t_dev = None if math.isnan(row["t_device"]) else float(row["t_device"])
+            seq = int(row["seq"]) + self._lap * n
+            out.append(BallSample(self._t0 + float(t_rel), seq, (float(row["rx"]), float(row["ry"]),
+                                                                 float(row["rz"])), t_dev, float(row["quality"])))
+            self._i += 1
+        return out
+
+    def status(self) -> dict[str, Any]:
+        return {"connected": True, "replayed": self._i + self._lap * len(self.data), "total": len(self.data),
+                "finished": self.finished}

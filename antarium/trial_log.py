@@ -1,0 +1,340 @@
+"""Trial logs: one self-describing HDF5 file per recording (h5py), written so that nothing is lost.
+
+The frame loop only appends rows to in-memory buffers (cheap); a writer thread appends them to the
+file and flushes it every `flush_s` seconds (at most 1 s). The file is written in SWMR mode, so after
+a crash or SIGKILL it still opens (`open_log`, or `h5py.File(path, "r", swmr=True)`) and holds
+everything up to the last flush. A write error (disk full) does not stop the stimulus: the log keeps
+counting what it could not write and reports it in `status()`, and the server makes that loud.
+Every dataset and its units are listed in `docs/logs.md`.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+FORMAT_VERSION = 1
+
+#: per-frame table: times in seconds on the loop's clock, positions in metres, angles in radians
+FRAME_DTYPE = np.dtype([
+    ("frame", "<i8"), ("t_target", "<f8"), ("t_start", "<f8"), ("t_sent", "<f8"),
+    ("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("heading", "<f8"), ("scene_rotation", "<f8"),
+    ("closed_loop", "u1"), ("fixed_tether", "u1"), ("sample_seq", "<i8"), ("latency", "<f8"),
+    ("render", "<f8"), ("sample", "<f8"), ("convert", "<f8"), ("encode", "<f8"), ("send", "<f8"),
+    ("pacing_error", "<f8"), ("late", "u1"), ("skipped", "<i4"), ("locomotion_connected", "u1"), ("link_ok", "u1"),
+])
+#: per-sample locomotion table: ball rotation increments in radians about the dome axes
+SAMPLE_DTYPE = np.dtype([
+    ("t", "<f8"), ("seq", "<i8"), ("rx", "<f8"), ("ry", "<f8"), ("rz", "<f8"), ("t_device", "<f8"), ("quality", "<f4"),
+])
+
+
+def _text_dtypes():
+    import h5py
+
+    s = h5py.string_dtype()
+    events = np.dtype([("t", "<f8"), ("kind", s), ("data", s)])
+    commands = np.dtype([("t", "<f8"), ("name", s), ("request", s), ("reply", s), ("ok", "u1")])
+    scenes = np.dtype([("t", "<f8"), ("name", s), ("sha256", s)])
+    return {"events": events, "commands": commands, "scenes": scenes}
+
+
+class LogError(RuntimeError):
+    """A trial log that cannot be created (bad path, no permission); raised before anything starts."""
+
+
+def file_sha256(path: str | Path) -> str:
+    """Hex SHA-256 of a file's bytes (scene files are hashed into the log)."""
+    h = hashlib.sha256()
+    with Path(path).open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _json(value: Any) -> str:
+    return json.dumps(value, sort_keys=True, default=str)
+
+
+class TrialLog:
+    """One recording. Append rows from any thread (cheap); a separate writer process owns the HDF5 file.
+
+    path:     the .h5 file to create (its folder must exist and be writable; an existing file is refused)
+    config:   the resolved rig config (stored as JSON in the `config` attribute)
+    name:     trial name; metadata: JSON-serialisable dict stored in the `metadata` attribute
+    flush_s:  seconds between hand-overs to the writer, which appends and flushes to disk (at most 1 s)
+
+    The writer is a process of its own so that HDF5 never holds the frame loop's GIL and a failing disk
+    cannot take the stimulus down: a write error is reported in `status()["error"]`, the loop goes on.
+    If this process dies (even SIGKILL) the writer sees its pipe close, writes nothing more and closes the file.
+    """
+
+    def __init__(self, path: str | Path, config: dict[str, Any], name: str = "", metadata: dict | None = None,
+                 flush_s: float = 1.0, start_timeout_s: float = 30.0) -> None:
+        import multiprocessing
+
+        from antarium import __version__
+
+        if not 0 < flush_s <= 1.0:
+            raise ValueError(f"flush_s must be in (0, 1] seconds, got {flush_s}")
+        self.path = Path(path)
+        if self.path.exists():
+            raise LogError(f"trial log {str(self.path)!r} already exists; a recording never overwrites one")
+        try:
+            metadata_json = json.dumps(metadata or {}, sort_keys=True)
+        except (TypeError, ValueError) as exc:
+            raise LogError(f"trial metadata must be JSON-serialisable: {exc}") from None
+        attrs = {"format": "antarium-trial-log", "format_version": FORMAT_VERSION, "software_version": __version__,
+                 "created_utc": _dt.datetime.now(_dt.UTC).isoformat(), "trial_name": name,
+                 "metadata": metadata_json, "config": _json(config)}
+        ctx = multiprocessing.get_context("spawn")  # never fork a process holding zenoh or GL threads
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_writer_main, args=(child, str(self.path), attrs),
+                                 name=f"trial-log {self.path.name}", daemon=True)
+        self._proc.start()
+        child.close()
+        if not self._conn.poll(start_timeout_s):
+            self._proc.kill()
+            raise LogError(f"trial log writer for {str(self.path)!r} did not start within {start_timeout_s} s")
+        kind, detail = self._conn.recv()
+        if kind != "ready":
+            self._proc.join(5)
+            raise LogError(f"cannot create trial log {str(self.path)!r}: {detail}")
+        self.flush_s = float(flush_s)
+        self._tables = ("frames", "locomotion", "events", "commands", "scenes")
+        self._pending: dict[str, list] = {table: [] for table in self._tables}
+        self._lock = threading.Lock()
+        self._send_lock = threading.Lock()
+        self.rows_written = dict.fromkeys(self._tables, 0)
+        self.rows_lost = 0
+        self.error: str | None = None
+        self._closed = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._sender, name=f"trial-log {self.path.name}", daemon=True)
+        self._thread.start()
+
+    # -- appending (any thread; cheap) -----------------------------------------------------------------
+    def add_frame(self, row: tuple) -> None:
+        """One row in `FRAME_DTYPE` field order."""
+        self._append("frames", row)
+
+    def add_samples(self, samples) -> None:
+        """`BallSample`s as they were consumed by the loop."""
+        for s in samples:
+            t_dev = s.t_device if s.t_device is not None else float("nan")
+            self._append("locomotion", (s.t, s.seq, *s.rotation, t_dev, s.quality))
+
+    def add_event(self, t: float, kind: str, data: Any = None) -> None:
+        self._append("events", (t, kind, _json(data)))
+
+    def add_command(self, t: float, name: str, request: Any, reply: Any, ok: bool) -> None:
+        self._append("commands", (t, name, _json(request), _json(reply), int(ok)))
+
+    def add_scene(self, t: float, name: str, sha256: str) -> None:
+        self._append("scenes", (t, name, sha256))
+
+    def _append(self, table: str, row: tuple) -> None:
+        with self._lock:
+            if not self._closed:
+                self._pending[table].append(row)
+
+    # -- handing rows to the writer --------------------------------------------------------------------
+    def _sender(self) -> None:
+        while not self._stop.wait(self.flush_s):
+            self.flush()
+
+    def _collect_replies(self) -> None:
+        while self._conn.poll():
+            kind, detail = self._conn.recv()
+            if kind == "written":
+                for table, n in detail["rows_written"].items():
+                    self.rows_written[table] = n
+                self.rows_lost = detail["rows_lost"]
+                self.error = detail["error"] or self.error
+
+    def flush(self, wait: bool = False) -> None:
+        """Hand every pending row to the writer (which appends and flushes it); with `wait`, until it is on disk."""
+        with self._lock:
+            pending, self._pending = self._pending, {table: [] for table in self._tables}
+        with self._send_lock:
+            if self._conn is None:
+                return
+            n = sum(len(rows) for rows in pending.values())
+            try:
+                self._collect_replies()
+                if n or wait:
+                    self._conn.send(("rows", {t: rows for t, rows in pending.items() if rows}))
+                if wait:
+                    if self._conn.poll(30.0):
+                        self._collect_replies()
+            except (OSError, EOFError, ValueError) as exc:
+                code = self._proc.exitcode
+                self.error = self.error or f"trial log writer for {str(self.path)!r} died (exit {code}): {exc}"
+                self.rows_lost += n
+
+    def status(self) -> dict[str, Any]:
+        with self._send_lock:
+            if self._conn is not None:
+                try:
+                    self._collect_replies()
+                except (OSError, EOFError):
+                    self.error = self.error or f"trial log writer for {str(self.path)!r} died"
+        return {"path": str(self.path), "rows_written": dict(self.rows_written), "rows_lost": self.rows_lost,
+                "error": self.error}
+
+    def close(self, timeout_s: float = 30.0) -> None:
+        """Hand over what is pending, close the file (clears its SWMR flag) and end the writer. Safe twice."""
+        if self._closed:
+            return
+        self._stop.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join()
+        self.flush()
+        with self._lock:
+            self._closed = True
+        with self._send_lock:
+            try:
+                self._conn.send(("close", None))
+                while self._conn.poll(timeout_s):
+                    kind, detail = self._conn.recv()
+                    if kind in ("written", "closed"):
+                        self.rows_written.update(detail["rows_written"])
+                        self.rows_lost = detail["rows_lost"]
+                        self.error = detail["error"] or self.error
+                    if kind == "closed":
+                        break
+            except (OSError, EOFError) as exc:
+                self.error = self.error or f"trial log writer for {str(self.path)!r} died before closing: {exc}"
+            self._conn.close()
+            self._conn = None
+        self._proc.join(timeout_s)
+        if self._proc.exitcode is None:
+            self._proc.kill()
+
+    def __enter__(self) -> TrialLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
+    """The writer process: create the file, append the row batches it receives, flush after each."""
+    import os
+    import signal
+
+    import h5py
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group: the parent closes us
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    dtypes = {"frames": FRAME_DTYPE, "locomotion": SAMPLE_DTYPE, **_text_dtypes()}
+    try:
+        f = h5py.File(path, "w-", libver="latest")
+        for key, value in attrs.items():
+            f.attrs[key] = value
+        for table, dtype in dtypes.items():
+            f.create_dataset(table, shape=(0,), maxshape=(None,), dtype=dtype,
+                             chunks=(1024 if table in ("frames", "locomotion") else 64,))
+        f.swmr_mode = True
+        f.flush()
+    except (OSError, ValueError) as exc:
+        conn.send(("error", str(exc)))
+        return
+    conn.send(("ready", None))
+    written = dict.fromkeys(dtypes, 0)
+    lost = 0
+    error = None
+    while True:
+        try:
+            kind, batch = conn.recv()
+        except (EOFError, OSError):  # the server died: keep what is written, close cleanly
+            break
+        if kind == "close":
+            break
+        if error is None:
+            try:
+                for table, rows in batch.items():
+                    data = np.array(rows, dtype=dtypes[table])
+                    ds = f[table]
+                    n = ds.shape[0]
+                    ds.resize((n + len(data),))
+                    ds[n:] = data
+                    written[table] += len(data)
+                    rows.clear()
+                f.flush()
+            except (OSError, RuntimeError, ValueError, TypeError) as exc:
+                error = f"writing trial log {path!r} failed: {exc}"
+        if error is not None:
+            lost += sum(len(rows) for rows in batch.values())
+        try:
+            conn.send(("written", {"rows_written": written, "rows_lost": lost, "error": error}))
+        except (OSError, EOFError):
+            break
+    if error is not None:  # HDF5 cannot close a file whose writes failed without risking a crash: keep what is
+        # on disk (readable as after a crash), tell the parent, and leave without HDF5's shutdown
+        _send_quietly(conn, ("closed", {"rows_written": written, "rows_lost": lost, "error": error}))
+        os._exit(0)
+    f.close()
+    _send_quietly(conn, ("closed", {"rows_written": written, "rows_lost": lost, "error": error}))
+
+
+def _send_quietly(conn, message) -> None:
+    try:
+        conn.send(message)
+    except (OSError, EOFError):
+        pass
+
+
+def check_log_dir(folder: str | Path) -> Path:
+    """The log folder, created if missing; raises `LogError` at start when it cannot be written."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / ".antarium-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise LogError(f"trial log folder {str(folder)!r} is not writable: {exc}") from None
+    return folder
+
+
+def log_path(folder: str | Path, rig: str, name: str, when: _dt.datetime | None = None) -> Path:
+    """`<folder>/<rig>_<UTC yyyymmdd-hhmmss>_<name>.h5` (name reduced to [A-Za-z0-9_-]; a suffix if taken)."""
+    when = when or _dt.datetime.now(_dt.UTC)
+    safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in name)[:64] or "trial"
+    base = Path(folder) / f"{rig}_{when:%Y%m%d-%H%M%S}_{safe}"
+    path, k = base.with_suffix(".h5"), 1
+    while path.exists():
+        path, k = Path(f"{base}-{k}.h5"), k + 1
+    return path
+
+
+def open_log(path: str | Path):
+    """Open a trial log read-only, also one left open by a crashed or killed server (SWMR read)."""
+    import h5py
+
+    try:
+        return h5py.File(path, "r")
+    except OSError:
+        return h5py.File(path, "r", libver="latest", swmr=True)
+
+
+def read_table(path: str | Path, table: str) -> dict[str, np.ndarray]:
+    """One table of a log as columns (text decoded to str): `pandas.DataFrame(read_table(path, "frames"))`."""
+    with open_log(path) as f:
+        if table not in f:
+            raise ValueError(f"{str(path)!r} has no table {table!r}; tables: {', '.join(sorted(f))}")
+        data = f[table][:]
+    columns = {}
+    for name in data.dtype.names:
+        col = data[name]
+        if col.dtype == object:
+            col = np.array([v.decode() if isinstance(v, bytes) else v for v in col], dtype=object)
+        columns[name] = col
+    return columns

@@ -1,0 +1,172 @@
+"""The locomotion back-ends shipped with the server: one test class run against every one of them."""
+
+import time
+
+import numpy as np
+import pytest
+
+from antarium import bus
+from antarium.clock import MonotonicClock, SimulatedClock
+from antarium.locomotion import BallSample, LocomotionSource, open_source, wire
+from antarium.locomotion.scripted import ScriptedSource
+
+
+def _write_csv(path, n=200, rate=100.0):
+    lines = ["t,seq,rx,ry,rz"]
+    for i in range(n):
+        lines.append(f"{10 + i / rate},{i},0.0,-0.002,0.0")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+class Feeder:
+    """Publishes locomotion structs from a client session, as a trackball driver would."""
+
+    def __init__(self, section, rig):
+        self.session = bus.open_session(section, "client")
+        self.pub = self.session.declare_publisher(bus.locomotion_key(rig), express=True)
+        self.seq = 0
+
+    def push(self, n):
+        for _ in range(n):
+            self.seq += 1
+            self.pub.put(wire.encode(BallSample(0.0, self.seq, (0.0, -0.002, 0.0))))
+
+    def close(self):
+        self.session.close()
+
+
+@pytest.fixture(params=["scripted", "replay", "bus"])
+def backend(request, tmp_path):
+    """(source, advance(seconds) -> None) for each back-end."""
+    if request.param == "bus":
+        section = {"listen": [bus.free_tcp_endpoint()]}
+        server = bus.open_session(section, "server")
+        src = open_source("bus", rig="tloco", session=server, clock=MonotonicClock())
+        src.start()
+        feeder = Feeder(section, "tloco")
+        time.sleep(0.3)
+
+        def advance(seconds):
+            feeder.push(int(seconds * 100))
+            deadline = time.monotonic() + 3.0
+            while src.received < feeder.seq and time.monotonic() < deadline:
+                time.sleep(0.01)
+
+        yield src, advance
+        src.stop()
+        feeder.close()
+        server.close()
+        return
+    clock = SimulatedClock()
+    if request.param == "scripted":
+        src = open_source("scripted", speed=0.01, rate_hz=100.0, clock=clock)
+    else:
+        src = open_source("replay", path=str(_write_csv(tmp_path / "walk.csv")), clock=clock)
+    src.start()
+    yield src, clock.advance
+    src.stop()
+
+
+class TestEveryBackend:
+    def test_is_a_locomotion_source(self, backend):
+        src, _ = backend
+        assert isinstance(src, LocomotionSource)
+        assert src.status()["connected"] is True
+
+    def test_read_returns_ordered_samples_with_increasing_seq(self, backend):
+        src, advance = backend
+        advance(0.5)
+        samples = src.read()
+        assert len(samples) >= 40
+        seqs = [s.seq for s in samples]
+        assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+        assert all(isinstance(s, BallSample) and len(s.rotation) == 3 for s in samples)
+        assert src.read() == []  # nothing new
+
+    def test_forward_walk_rolls_the_ball_about_minus_y(self, backend):
+        src, advance = backend
+        advance(0.3)
+        total = np.sum([s.rotation for s in src.read()], axis=0)
+        assert total[1] < 0 and abs(total[0]) < 1e-9 and abs(total[2]) < 1e-9
+
+
+def test_scripted_path_is_followed():
+    clock = SimulatedClock()
+    src = ScriptedSource(path=[(0, 0), (0.1, 0), (0.1, 0.1)], speed=0.05, clock=clock)
+    src.start()
+    clock.advance(10.0)
+    from antarium.ball import pole_motion
+
+    moves = np.array([pole_motion(s.rotation)[:2] for s in src.read()])
+    end = moves.sum(axis=0)
+    assert end == pytest.approx([0.1, 0.1], abs=1e-3)
+
+
+def test_scripted_meander_is_seeded():
+    def walk(seed):
+        clock = SimulatedClock()
+        src = ScriptedSource(meander=1.0, seed=seed, clock=clock)
+        src.start()
+        clock.advance(3.0)
+        return [s.rotation for s in src.read()]
+
+    assert walk(1) == walk(1) and walk(1) != walk(2)
+
+
+def test_replay_from_trial_log_reproduces_the_recorded_samples(tmp_path):
+    from antarium.trial_log import TrialLog
+
+    recorded = [BallSample(5.0 + i * 0.01, i, (0.001 * i, 0.0, -0.001), None, 0.5) for i in range(50)]
+    with TrialLog(tmp_path / "t.h5", {}, "x") as log:
+        log.add_samples(recorded)
+    clock = SimulatedClock(100.0)
+    src = open_source("replay", path=str(tmp_path / "t.h5"), clock=clock)
+    src.start()
+    clock.advance(0.245)
+    first = src.read()
+    assert [s.seq for s in first] == list(range(25))
+    clock.advance(10.0)
+    rest = src.read()
+    assert [s.rotation for s in first + rest] == [s.rotation for s in recorded]
+    assert rest[-1].t == pytest.approx(100.0 + 0.49) and src.status()["finished"]
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"speed": -1}, "speed"), ({"tether": "loose"}, "tether"), ({"path": [(0, 0)]}, "at least 2"),
+    ({"rate_hz": 0}, "rate_hz"),
+])
+def test_scripted_rejects_bad_arguments(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        ScriptedSource(**kwargs)
+
+
+def test_replay_rejects_bad_files(tmp_path):
+    with pytest.raises(ValueError, match="does not exist"):
+        open_source("replay", path=str(tmp_path / "none.csv"))
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,rx\n0,1\n")
+    with pytest.raises(ValueError, match="lacks columns"):
+        open_source("replay", path=str(bad))
+    with pytest.raises(ValueError, match="unknown locomotion source 'mouse'"):
+        open_source("mouse")
+
+
+def test_bus_source_counts_malformed_payloads_and_reports_silence():
+    section = {"listen": [bus.free_tcp_endpoint()]}
+    clock = MonotonicClock()
+    with bus.open_session(section, "server") as server, bus.open_session(section, "client") as client:
+        src = open_source("bus", rig="tbad", session=server, timeout_s=0.2, clock=clock)
+        src.start()
+        pub = client.declare_publisher(bus.locomotion_key("tbad"))
+        time.sleep(0.3)
+        pub.put(b"short")
+        pub.put(wire.encode(BallSample(0.0, 1, (0.0, 0.0, 0.0))))
+        deadline = time.monotonic() + 3
+        while src.received < 1 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert src.malformed == 1 and "44 bytes" in src.status()["last_error"]
+        assert src.status()["connected"] is True
+        time.sleep(0.3)
+        assert src.status()["connected"] is False
+        src.stop()

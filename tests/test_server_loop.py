@@ -1,0 +1,176 @@
+"""The frame loop on a simulated clock: pacing, closed/open loop, tether modes, gains, commands, health."""
+
+import math
+
+import numpy as np
+import pytest
+
+from antarium.clock import SimulatedClock
+from antarium.frame_loop import FrameLoop
+from antarium.locomotion import BallSample, LocomotionSource, open_source
+from antarium.pose import Pose
+
+
+class SlowRenderer:
+    """A renderer whose work takes `cost` seconds of the simulated clock (the seam the loop times)."""
+
+    def __init__(self, clock, cost):
+        self.clock, self.cost, self.last_timings = clock, cost, {}
+
+    def render(self, pose, out=None):
+        self.clock.advance(self.cost)
+        self.last_timings = {"render": self.cost, "sample": 0.0, "convert": 0.0}
+        return np.zeros((20350, 2), np.uint16) if out is None else out
+
+
+class RecordingLink:
+    def __init__(self):
+        self.frames = 0
+
+    def send_frame(self, frame):
+        self.frames += 1
+
+    def send_polarisers(self, angles):
+        pass
+
+    def telemetry(self):
+        return {}
+
+
+class SwitchableSource(LocomotionSource):
+    """A constant forward walker whose `connected` flag the test flips (an unplugged trackball)."""
+
+    def __init__(self, clock):
+        self.clock, self.connected, self.seq = clock, True, 0
+
+    def read(self):
+        if not self.connected:
+            return []
+        self.seq += 1
+        return [BallSample(self.clock.now(), self.seq, (0.0, -0.001, 0.0))]
+
+    def status(self):
+        return {"connected": self.connected}
+
+
+def make_loop(clock, **kwargs):
+    source = kwargs.pop("source", None) or open_source("scripted", speed=0.02, clock=clock)
+    return FrameLoop(clock=clock, source=source, **kwargs)
+
+
+def test_free_yaw_walker_moves_in_dome_frame_and_keeps_heading():
+    clock = SimulatedClock()
+    loop = make_loop(clock)
+    loop.run(until=10.0)
+    assert loop.frame == pytest.approx(1900, abs=1)
+    assert loop.pose.x == pytest.approx(0.2, rel=0.01)
+    assert loop.pose.y == pytest.approx(0.0, abs=1e-9)
+    assert loop.pose.heading == 0.0
+    assert loop.late_frames == 0 and loop.skipped_frames == 0
+
+
+def test_fixed_tether_turns_the_heading_and_gains_scale_motion():
+    clock = SimulatedClock()
+    src = open_source("scripted", speed=0.02, turn_rate=0.1, tether="fixed", clock=clock)
+    loop = make_loop(clock, source=src, tether="fixed", gain_rotation=2.0, gain_translation=0.5)
+    loop.run(until=5.0)
+    assert loop.pose.heading == pytest.approx(2.0 * 0.1 * 5.0, rel=0.01)
+    assert math.hypot(loop.pose.x, loop.pose.y) == pytest.approx(0.5 * 0.02 * 5.0, rel=0.05)
+
+
+def test_scene_rotation_turns_the_mapping_of_dome_to_world():
+    clock = SimulatedClock()
+    loop = make_loop(clock)
+    loop.rotate_scene(math.pi / 2)  # scene turns CCW: walking along dome +x now goes along world -y
+    loop.run(until=5.0)
+    assert loop.pose.heading == pytest.approx(-math.pi / 2)
+    assert loop.pose.y == pytest.approx(-0.1, rel=0.01) and abs(loop.pose.x) < 1e-9
+    assert loop.scene_rotation == pytest.approx(math.pi / 2)
+
+
+def test_open_loop_ignores_the_ball_and_set_pose_displaces():
+    clock = SimulatedClock()
+    loop = make_loop(clock, closed_loop=False)
+    loop.run(until=2.0)
+    assert loop.pose == Pose()
+    loop.set_pose(Pose(3.0, 4.0, 0.01, 1.0))
+    loop.set_closed_loop(True)
+    loop.run(until=3.0)
+    assert loop.pose.x > 3.0 and loop.pose.heading == 1.0
+    loop.reset_origin()
+    assert loop.pose == Pose() and loop.scene_rotation == 0.0
+
+
+def test_bad_control_values_leave_state_unchanged():
+    clock = SimulatedClock()
+    loop = make_loop(clock)
+    before = (loop.pose, loop.gain_translation, loop.gain_rotation, loop.tether, loop.closed_loop)
+    for call, match in [
+        (lambda: loop.set_gains(translation=float("nan")), "gain translation"),
+        (lambda: loop.set_gains(rotation=1.0, translation=1e9), "gain translation"),
+        (lambda: loop.set_tether("loose"), "tether"),
+        (lambda: loop.set_closed_loop("yes"), "closed_loop"),
+        (lambda: loop.rotate_scene(float("inf")), "finite angle"),
+        (lambda: loop.set_pose((1, 2)), "Pose"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            call()
+    assert (loop.pose, loop.gain_translation, loop.gain_rotation, loop.tether, loop.closed_loop) == before
+
+
+def test_late_frames_are_counted_and_skipped_not_queued():
+    clock = SimulatedClock()
+    period = 1 / 190
+    renderer = SlowRenderer(clock, 0.2 * period)
+    loop = make_loop(clock, renderer=renderer, link=RecordingLink())
+    loop.run(frames=50)
+    assert loop.late_frames == 0
+    renderer.cost = 2.5 * period  # three slots' worth of work: late, and two slots skipped
+    rec = loop.step()
+    assert rec.late and rec.skipped == 2
+    renderer.cost = 0.2 * period
+    nxt = loop.step()
+    assert nxt.t_start == pytest.approx(rec.t_target + 3 * period)  # back on the grid, no backlog
+    assert nxt.pacing_error == pytest.approx(0.0) and not nxt.late
+    assert loop.late_frames == 1 and loop.skipped_frames == 2
+    stats = loop.stats()
+    assert stats["late_frames"] == 1 and stats["render"]["max"] == pytest.approx(2.5 * period)
+
+
+def test_lost_locomotion_holds_the_pose_and_resumes():
+    clock = SimulatedClock()
+    events = []
+    src = SwitchableSource(clock)
+    loop = make_loop(clock, source=src, on_event=lambda t, kind, data: events.append(kind))
+    loop.run(frames=20)
+    x = loop.pose.x
+    assert x > 0
+    src.connected = False
+    loop.run(frames=20)
+    assert "locomotion_lost" in events and not loop.locomotion_connected
+    held = loop.pose.x
+    loop.run(frames=20)
+    assert loop.pose.x == held
+    src.connected = True
+    loop.run(frames=20)
+    assert "locomotion_back" in events and loop.pose.x > held
+
+
+def test_call_soon_runs_in_the_loop_and_returns_errors():
+    clock = SimulatedClock()
+    loop = make_loop(clock)
+    ok = loop.call_soon(loop.set_gains, 2.0, None)
+    bad = loop.call_soon(loop.set_tether, "loose")
+    loop.step()
+    assert ok.result(0) is None and loop.gain_translation == 2.0
+    with pytest.raises(ValueError, match="tether"):
+        bad.result(0)
+
+
+def test_latency_measures_newest_sample_to_last_datagram():
+    clock = SimulatedClock()
+    renderer = SlowRenderer(clock, 0.001)
+    loop = make_loop(clock, source=SwitchableSource(clock), renderer=renderer, link=RecordingLink())
+    rec = loop.step()
+    assert rec.latency == pytest.approx(0.001)
+    assert rec.sample_seq == 1
