@@ -8,7 +8,9 @@ from importlib import import_module
 HELP = "run a benchmark and report it against the dome's 190 frames/s (5.3 ms frame period)"
 
 #: benchmark name -> "module:function"; the function takes the parsed args and returns an exit code.
-TARGETS: dict[str, str] = {}
+TARGETS: dict[str, str] = {
+    "ant": "antarium.ant.bench:run",
+}
 
 DOME_RATE_HZ = 190.0
 FRAME_PERIOD_S = 1.0 / DOME_RATE_HZ
