@@ -17,6 +17,7 @@ COMMANDS: dict[str, str] = {
     "layout": "antarium.commands.layout",
     "demo": "antarium.commands.demo",
     "bench": "antarium.commands.bench",
+    "emulate": "antarium.commands.emulate",
     "trackball": "antarium.commands.trackball",
 }
 

@@ -1,0 +1,182 @@
+"""The dome link (python-can style): `open_link(interface, **kwargs)` over a registry of back-ends.
+
+Every back-end speaks the same datagrams through the same `Link` methods; a back-end only moves bytes
+(`_transmit`, `_receive`). Back-ends are imported lazily, when opened.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from importlib import import_module
+
+import numpy as np
+
+from antarium.geometry.constants import LEDS_PER_PANEL, N_PANELS, N_PIXELS
+
+from .config import check_percent, encode_brightness, encode_dot_correction
+from .control import encode_hello, encode_latch, encode_status_request
+from .errors import ProtocolError
+from .header import SEQ_MODULO
+from .polariser import angles_to_codes, encode_polarisers
+from .replies import OP_ACTUATORS, OP_COUNTERS, OP_FAULTS, OP_TEMPERATURES, OP_VERSION, STATUS_OPCODES, decode_reply
+from .video import VIDEO_PAYLOAD_SIZE, encode_frame
+
+#: interface name -> "module:Class"
+BACKENDS: dict[str, str] = {
+    "udp": "antarium.firmware_proto.udp:UdpLink",
+    "virtual": "antarium.firmware_proto.virtual:VirtualLink",
+}
+
+
+def open_link(interface: str, **kwargs) -> Link:
+    """Open the dome link `interface` ("udp" or "virtual"); kwargs go to the back-end's constructor."""
+    if interface not in BACKENDS:
+        raise ValueError(f"link interface {interface!r} unknown: allowed {sorted(BACKENDS)}")
+    module_name, cls_name = BACKENDS[interface].split(":")
+    return getattr(import_module(module_name), cls_name)(**kwargs)
+
+
+class Link(ABC):
+    """What every back-end offers; a back-end implements `_transmit` and `_receive`."""
+
+    def __init__(self) -> None:
+        self._seq = 0
+        self._frame_buf = np.empty((N_PANELS, VIDEO_PAYLOAD_SIZE), np.uint8)
+        self._last_polariser_codes: np.ndarray | None = None
+        self._tag = 0
+        self._status: dict = {}
+        self._last_reply_t: float | None = None
+        self.counters = {"frames_sent": 0, "datagrams_sent": 0, "datagrams_failed": 0,
+                         "replies_received": 0, "replies_rejected": 0}
+        self.closed = False
+
+    # ---- back-end seam ----
+    @abstractmethod
+    def _transmit(self, data) -> bool:
+        """Send one datagram; False (never an exception) when the transport failed."""
+
+    @abstractmethod
+    def _receive(self, timeout_s: float) -> bytes | None:
+        """The next upstream datagram, waiting up to `timeout_s`; None when there is none."""
+
+    # ---- public API ----
+    def send(self, data) -> bool:
+        """Send one raw datagram; failures are counted, never raised."""
+        ok = self._transmit(data)
+        self.counters["datagrams_sent" if ok else "datagrams_failed"] += 1
+        return ok
+
+    def send_frame(self, frame: np.ndarray) -> int:
+        """Send LED frame (20350, 2) uint16 as 55 VIDEO datagrams and its LATCH; returns its 7-bit sequence.
+
+        Raises ValueError on a bad frame (nothing sent); never raises for transport problems (counted).
+        """
+        seq = self._seq
+        rows = encode_frame(frame, seq, out=self._frame_buf)
+        for row in rows:
+            self.send(row.data)
+        self.send(encode_latch(seq))
+        self._seq = (seq + 1) % SEQ_MODULO
+        self.counters["frames_sent"] += 1
+        return seq
+
+    def send_polarisers(self, angles, force: bool = False) -> bool:
+        """Send (55, 9) polariser e-vector angles (rad, [0, pi)) in one datagram; skipped (False) when their
+        16-bit codes equal the last ones sent, unless `force`. Raises ValueError on bad angles."""
+        a = np.asarray(angles, dtype=np.float64)
+        if a.shape != (N_PANELS, 9):
+            raise ValueError(f"polariser angles must have shape ({N_PANELS}, 9), got {a.shape}")
+        codes = angles_to_codes(a)
+        if not force and self._last_polariser_codes is not None and np.array_equal(codes, self._last_polariser_codes):
+            return False
+        ok = self.send(encode_polarisers(a))
+        self._last_polariser_codes = codes
+        return ok
+
+    def send_config(self, dot_correction=None, brightness: int | None = None) -> None:
+        """Send driver settings: `dot_correction` percent 0..100 per LED — a scalar, (55, 740) (LED k = 2*local
+        + led) or (20350, 2) in frame layout — and/or global `brightness` percent 0..100. Raises ValueError."""
+        if dot_correction is not None:
+            dot = np.asarray(dot_correction)
+            if dot.ndim == 0:
+                dot = np.full((N_PANELS, LEDS_PER_PANEL), dot)
+            if dot.shape == (N_PIXELS, 2):
+                dot = dot.reshape(N_PANELS, LEDS_PER_PANEL)
+            if dot.shape != (N_PANELS, LEDS_PER_PANEL):
+                allowed = f"a scalar, ({N_PANELS}, {LEDS_PER_PANEL}) or ({N_PIXELS}, 2)"
+                raise ValueError(f"dot correction must be {allowed}; got shape {dot.shape}")
+            dot = check_percent("dot correction", dot)
+        if brightness is not None:
+            check_percent("brightness", np.asarray([brightness]))
+        datagrams = [] if dot_correction is None else [encode_dot_correction(p, dot[p]) for p in range(N_PANELS)]
+        if brightness is not None:
+            datagrams.append(encode_brightness(int(brightness)))
+        for d in datagrams:
+            self.send(d)
+
+    def hello(self, wait_s: float = 0.0) -> dict | None:
+        """Ask for the distributor's VERSION reply; returns it if it arrives within `wait_s`."""
+        self._tag = (self._tag + 1) % 256
+        self.send(encode_hello(self._tag))
+        self._drain(wait_s, until={OP_VERSION})
+        return self._status.get("version")
+
+    def telemetry(self, wait_s: float = 0.0) -> dict:
+        """Latest upstream status, JSON-serialisable: sends a STATUS_REQUEST and collects replies for up to
+        `wait_s` seconds (0: only what has already arrived). Keys: "link" (this side's counters), "connected"
+        (an answer ever arrived) and, once the distributor has answered: "age_s" (since the last reply),
+        "counters", "temperature_c", "current_a", "faults", "fault_total", "polariser_codes", "polariser_angles",
+        "holding", and "version" after `hello`."""
+        self._tag = (self._tag + 1) % 256
+        self.send(encode_status_request(self._tag))
+        self._drain(wait_s, until=set(STATUS_OPCODES), tag=self._tag)
+        out = {**self._status, "link": dict(self.counters), "connected": self._last_reply_t is not None}
+        if self._last_reply_t is not None:
+            out["age_s"] = time.monotonic() - self._last_reply_t
+        return out
+
+    def _drain(self, wait_s: float, until: set[int], tag: int | None = None) -> None:
+        """Read replies until every opcode in `until` (with `tag`, if given) arrived or `wait_s` passed."""
+        deadline = time.monotonic() + wait_s
+        seen: set[int] = set()
+        while True:
+            data = self._receive(max(0.0, deadline - time.monotonic()))
+            if data is None:
+                return
+            try:
+                reply = decode_reply(data)
+            except ProtocolError:
+                self.counters["replies_rejected"] += 1
+                continue
+            self.counters["replies_received"] += 1
+            self._last_reply_t = time.monotonic()
+            self._absorb(reply.opcode, reply.fields)
+            if tag is None or reply.tag == tag:
+                seen.add(reply.opcode)
+            if until <= seen:
+                return
+
+    def _absorb(self, opcode: int, f: dict) -> None:
+        s = self._status
+        if opcode == OP_VERSION:
+            s["version"] = f
+        elif opcode == OP_COUNTERS:
+            s["counters"] = f
+        elif opcode == OP_TEMPERATURES:
+            s["temperature_c"], s["current_a"] = f["temperature_c"], f["current_a"]
+        elif opcode == OP_FAULTS:
+            s["faults"], s["fault_total"] = f["faults"], f["total"]
+        elif opcode == OP_ACTUATORS:
+            s["polariser_codes"] = f["angle_codes"]
+            s["polariser_angles"] = (np.asarray(f["angle_codes"]) * (np.pi / 65536)).tolist()
+            s["holding"] = f["holding"]
+
+    def close(self) -> None:
+        self.closed = True
+
+    def __enter__(self) -> Link:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

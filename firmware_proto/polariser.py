@@ -1,0 +1,71 @@
+"""POLARISER control messages (class 1, opcode 0x02): target e-vector angles of the UV polariser actuators.
+
+    4-byte control header (TD = 0x40 | panel, or 0x7F for the whole dome; OPCODE 0x02; INFO 0)
+    body  9 (one panel) or 55 * 9 (whole dome, panel-major) angle codes, uint16 big-endian
+
+Angle code a <-> angle theta = a * pi / 65536 rad, theta in [0, pi) (resolution 0.0027 deg). Angle j of a panel
+drives the actuator behind UV pixel local 361 + j, measured in the panel plane from the panel's local +x axis.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from antarium.geometry.constants import N_ACTUATORS, N_PANELS
+
+from .errors import FieldRangeError, LengthError, UnknownTypeError
+from .header import ADDR_ALL, CLASS_CONTROL, CONTROL_HEADER_SIZE, control_header, parse_control_header
+
+OP_POLARISER = 0x02
+CODES_PER_PI = 65536
+CODE_DTYPE = np.dtype(">u2")
+
+
+class PolariserMessage(NamedTuple):
+    address: int       # panel 0..54, or ADDR_ALL
+    codes: np.ndarray  # (n_panels, 9) uint16 angle codes; n_panels = 1 or 55
+
+
+def angles_to_codes(angles) -> np.ndarray:
+    """Angles in radians, each in [0, pi) -> uint16 codes round(angle * 65536 / pi) mod 65536.
+
+    Raises ValueError naming the first non-finite or out-of-range angle.
+    """
+    a = np.asarray(angles, dtype=np.float64)
+    bad = ~np.isfinite(a) | (a < 0) | (a >= np.pi)
+    if bad.any():
+        i = np.unravel_index(int(np.argmax(bad)), a.shape)
+        raise ValueError(f"polariser angle at {tuple(int(v) for v in i)} is {a[i]!r} rad: allowed [0, pi)")
+    return (np.rint(a * (CODES_PER_PI / np.pi)).astype(np.int64) % CODES_PER_PI).astype(np.uint16)
+
+
+def codes_to_angles(codes) -> np.ndarray:
+    """uint16 codes -> angles in radians [0, pi)."""
+    return np.asarray(codes, dtype=np.float64) * (np.pi / CODES_PER_PI)
+
+
+def encode_polarisers(angles, panel: int | None = None) -> bytes:
+    """(55, 9) angles for the whole dome (panel None), or (9,) angles for one `panel` -> one datagram."""
+    a = np.asarray(angles, dtype=np.float64)
+    expected = (N_PANELS, N_ACTUATORS) if panel is None else (N_ACTUATORS,)
+    if a.shape != expected:
+        raise ValueError(f"polariser angles must have shape {expected}, got {a.shape}")
+    header = control_header(CLASS_CONTROL, ADDR_ALL if panel is None else panel, OP_POLARISER)
+    return header + angles_to_codes(a).astype(CODE_DTYPE).tobytes()
+
+
+def decode_polarisers(buf) -> PolariserMessage:
+    """Check a POLARISER datagram -> PolariserMessage. Raises a ProtocolError subclass."""
+    address, opcode, info = parse_control_header(buf, CLASS_CONTROL)
+    if opcode != OP_POLARISER:
+        raise UnknownTypeError(f"opcode 0x{opcode:02x} is not POLARISER (0x{OP_POLARISER:02x})")
+    n = N_PANELS if address == ADDR_ALL else 1
+    size = CONTROL_HEADER_SIZE + 2 * N_ACTUATORS * n
+    if len(buf) != size:
+        raise LengthError(f"POLARISER datagram to address {address} must be {size} bytes, got {len(buf)}")
+    if info != 0:
+        raise FieldRangeError(f"POLARISER info byte must be 0, got {info}")
+    codes = np.frombuffer(bytes(buf), CODE_DTYPE, offset=CONTROL_HEADER_SIZE).astype(np.uint16)
+    return PolariserMessage(address, codes.reshape(n, N_ACTUATORS))

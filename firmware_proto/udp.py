@@ -1,0 +1,74 @@
+"""The "udp" link: datagrams to a distributor board (or `antarium emulate`) at host:port.
+
+The socket is connected, so the kernel reports an ICMP port-unreachable from a vanished peer as
+ConnectionRefusedError on a later send or receive; those, and a full send buffer, are counted in
+`telemetry()["link"]` and never raised, so a frame loop survives the distributor being restarted.
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+
+from . import DEFAULT_HOST, DEFAULT_PORT
+from .link import Link
+
+__all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "UdpLink"]
+SOCKET_BUFFER_BYTES = 4 * 1024 * 1024
+MAX_DATAGRAM = 65535
+
+
+class UdpLink(Link):
+    """A link over UDP to `host`:`port`; sends HELLO on open (the VERSION answer shows up in `telemetry`)."""
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> None:
+        super().__init__()
+        if not isinstance(port, int) or not 0 < port < 65536:
+            raise ValueError(f"UDP port must be an integer 1..65535, got {port!r}")
+        self.address = (host, port)
+        self.counters.update(peer_refused=0, send_buffer_full=0, socket_errors=0)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            for opt in (socket.SO_SNDBUF, socket.SO_RCVBUF):
+                self.sock.setsockopt(socket.SOL_SOCKET, opt, SOCKET_BUFFER_BYTES)
+            self.sock.setblocking(False)
+            self.sock.connect(self.address)
+        except OSError as exc:
+            self.sock.close()
+            raise ValueError(f"cannot open UDP link to {host}:{port}: {exc}") from exc
+        self.hello()
+
+    def _transmit(self, data) -> bool:
+        if self.closed:
+            return False
+        try:
+            self.sock.send(data)
+            return True
+        except ConnectionRefusedError:
+            self.counters["peer_refused"] += 1
+        except BlockingIOError:
+            self.counters["send_buffer_full"] += 1
+        except OSError:
+            self.counters["socket_errors"] += 1
+        return False
+
+    def _receive(self, timeout_s: float) -> bytes | None:
+        if self.closed:
+            return None
+        while True:
+            try:
+                return self.sock.recv(MAX_DATAGRAM)
+            except BlockingIOError:
+                if timeout_s <= 0 or not select.select([self.sock], [], [], timeout_s)[0]:
+                    return None
+                timeout_s = 0.0  # readable now; one more try
+            except ConnectionRefusedError:
+                self.counters["peer_refused"] += 1
+            except OSError:
+                self.counters["socket_errors"] += 1
+                return None
+
+    def close(self) -> None:
+        if not self.closed:
+            self.sock.close()
+        super().close()
