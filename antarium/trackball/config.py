@@ -156,7 +156,7 @@ def to_section(config: TrackballConfig) -> dict[str, Any]:
         "slip_floor_mm": config.slip_floor_mm,
         "sensors": [
             {"azimuth_deg": s.azimuth_deg, "elevation_deg": s.elevation_deg, "roll_deg": s.roll_deg,
-             "counts_per_mm": [round(v, 6) for v in s.counts_per_mm], "signs": list(s.signs)}
+             "counts_per_mm": list(s.counts_per_mm), "signs": list(s.signs)}
             for s in config.sensors
         ],
     }

@@ -235,7 +235,7 @@ class FicTracReplay(LocomotionSource):
     def read(self) -> list[BallSample]:
         if self._t0 is None:
             return []
-        elapsed = self.clock.now() - self._t0
+        elapsed = self.clock.now() - self._t0 + 1e-9  # a frame due now is not missed by rounding
         out = []
         frames = self._frames
         while self._next < len(frames) and frames[self._next][0] <= elapsed:

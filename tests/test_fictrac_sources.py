@@ -1,0 +1,119 @@
+"""FicTrac live stream (UDP and TCP on loopback) and .dat replay as locomotion sources."""
+
+import socket
+import threading
+import time
+
+import pytest
+
+from antarium.clock import SimulatedClock
+from antarium.locomotion import open_source
+from antarium.trackball.fictrac import FicTracFrame, format_line
+
+
+def frame(i: int, t_ms: float = 0.0, dy: float = 0.01) -> FicTracFrame:
+    values = [0.0] * 25
+    values[0], values[22] = i, i
+    values[6] = dy  # d_rot_lab_y
+    values[21] = t_ms
+    values[23] = 10.0
+    return FicTracFrame(*values)
+
+
+def wait_for(predicate, timeout_s=5.0):
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        assert time.monotonic() < deadline, "condition not reached in time"
+        time.sleep(0.002)
+
+
+def test_udp_stream_with_malformed_lines_and_a_gap():
+    with open_source("fictrac", transport="udp", host="127.0.0.1", port=0) as src:
+        assert src.status()["connected"] is False  # nothing yet
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        lines = [format_line(frame(i)) for i in (1, 2, 3)] + ["FT, garbage", "", format_line(frame(6))]
+        for line in lines:
+            tx.sendto((line + "\n").encode(), src.address)
+        tx.sendto((format_line(frame(7)) + "\n" + format_line(frame(8)) + "\n").encode(), src.address)  # 2 in one
+        tx.close()
+        got = []
+        wait_for(lambda: len(got.extend(src.read()) or got) >= 6)
+        status = src.status()
+    assert [s.seq for s in got] == [1, 2, 3, 6, 7, 8]
+    assert got[0].rotation == (0.0, -0.01, -0.0)
+    assert status["connected"] and status["malformed"] == 1 and status["frames"] == 6
+    assert status["gaps"] == 1 and status["lost_frames"] == 2
+    assert "25 comma-separated values" in status["last_error"]
+
+
+def test_connected_goes_false_when_frames_stop():
+    clock = SimulatedClock(100.0)
+    with open_source("fictrac", port=0, clock=clock, timeout_s=0.5) as src:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            tx.sendto(format_line(frame(1)).encode(), src.address)
+        wait_for(lambda: src.status()["frames"] == 1)
+        assert src.status()["connected"]
+        clock.advance(0.6)
+        assert not src.status()["connected"]
+
+
+def test_tcp_client_reassembles_lines_and_reconnects():
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    port = server.getsockname()[1]
+
+    def fictrac(first: int) -> None:
+        conn, _ = server.accept()
+        with conn:
+            data = "".join(format_line(frame(i)) + "\n" for i in range(first, first + 5)).encode()
+            for k in range(0, len(data), 37):  # lines split across TCP segments
+                conn.sendall(data[k: k + 37])
+                time.sleep(0.001)
+
+    with open_source("fictrac", transport="tcp", port=port, retry_s=0.05) as src:
+        t = threading.Thread(target=fictrac, args=(1,))
+        t.start()
+        got = []
+        wait_for(lambda: len(got.extend(src.read()) or got) >= 5)
+        t.join()
+        # FicTrac restarts: the source connects again by itself; the frame counter restarting is a reset
+        t = threading.Thread(target=fictrac, args=(1,))
+        t.start()
+        wait_for(lambda: len(got.extend(src.read()) or got) >= 10)
+        t.join()
+        status = src.status()
+    server.close()
+    assert [s.seq for s in got] == [1, 2, 3, 4, 5] * 2
+    assert status["malformed"] == 0 and status["resets"] == 1
+
+
+def test_replay_is_paced_by_the_log_timestamps(tmp_path):
+    path = tmp_path / "run.dat"
+    lines = [format_line(frame(i, t_ms=1000.0 + 10.0 * i), prefix=False) for i in range(1, 101)]
+    lines.insert(50, "1, 2, not a line")
+    path.write_text("\n".join(lines) + "\n")
+    clock = SimulatedClock(5.0)
+    with open_source("fictrac-replay", path=path, clock=clock, speed=2.0) as src:
+        first = src.read()
+        assert [s.seq for s in first] == [1]
+        clock.advance(0.1)  # 0.2 s of log time at speed 2
+        batch = src.read()
+        assert [s.seq for s in batch] == list(range(2, 22))
+        assert batch[-1].t == pytest.approx(5.1)
+        clock.advance(10.0)
+        rest = src.read()
+        status = src.status()
+    assert len(rest) == 79 and src.finished
+    assert status["malformed"] == 1 and status["frames"] == 100 and status["replayed"] == 100
+
+
+def test_bad_arguments_are_rejected_clearly(tmp_path):
+    with pytest.raises(ValueError, match="transport must be one of udp, tcp"):
+        open_source("fictrac", transport="serial")
+    with pytest.raises(ValueError, match="port must be"):
+        open_source("fictrac", port=70000)
+    with pytest.raises(ValueError, match="speed must be > 0"):
+        open_source("fictrac-replay", path=tmp_path / "x.dat", speed=0)
+    with pytest.raises(FileNotFoundError, match="not found"):
+        open_source("fictrac-replay", path=tmp_path / "x.dat").start()

@@ -1,0 +1,109 @@
+"""Every trackball back-end through one interface (python-can style), and publication on the bus."""
+
+import json
+import socket
+import threading
+import time
+
+import pytest
+
+from antarium import bus
+from antarium.cli import main
+from antarium.clock import SimulatedClock
+from antarium.locomotion import BallSample, LocomotionSource, open_source, wire
+from antarium.trackball.emulator import EmulatedTrackball, constant
+from antarium.trackball.fictrac import FicTracFrame, format_line
+
+
+def _fictrac_line(i: int) -> str:
+    values = [0.0] * 25
+    values[0] = values[22] = i
+    values[7] = 0.02
+    values[21] = 10.0 * i
+    return format_line(FicTracFrame(*values))
+
+
+def _open_usb(tmp_path):
+    src = open_source("usb", backend=EmulatedTrackball(motion=constant((0.0, 0.0, 1.0)), realtime=False))
+    return src, lambda: None
+
+
+def _open_fictrac(tmp_path):
+    src = open_source("fictrac", port=0)
+
+    def feed():
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for i in range(1, 6):
+                tx.sendto(_fictrac_line(i).encode(), src.address)
+
+    return src, feed
+
+
+def _open_replay(tmp_path):
+    path = tmp_path / "log.dat"
+    path.write_text("\n".join(_fictrac_line(i)[4:] for i in range(1, 6)))
+    clock = SimulatedClock()
+    src = open_source("fictrac-replay", path=path, clock=clock)
+    return src, lambda: clock.advance(1.0)
+
+
+@pytest.mark.parametrize("opener", [_open_usb, _open_fictrac, _open_replay], ids=["usb", "fictrac", "fictrac-replay"])
+class TestEveryBackend:
+    def test_start_read_status_stop(self, opener, tmp_path):
+        src, feed = opener(tmp_path)
+        assert isinstance(src, LocomotionSource)
+        src.start()
+        src.start()  # idempotent
+        try:
+            feed()
+            got = []
+            deadline = time.monotonic() + 5.0
+            while len(got) < 5:
+                assert time.monotonic() < deadline
+                got.extend(src.read())
+                time.sleep(0.002)
+            assert all(isinstance(s, BallSample) for s in got)
+            assert all(len(s.rotation) == 3 and 0.0 <= s.quality <= 1.0 for s in got)
+            seqs = [s.seq for s in got]
+            assert seqs == sorted(seqs)
+            assert abs(got[1].rotation[2]) > 0  # each back-end's samples carry yaw
+            status = src.status()
+            assert status["connected"] is True
+            json.dumps(status)  # the status is JSON-serialisable for the server's status message
+        finally:
+            src.stop()
+            src.stop()  # safe twice
+
+
+def test_cli_publishes_samples_and_unplug_events_on_the_bus(tmp_path):
+    import zenoh
+
+    endpoint = bus.free_tcp_endpoint()
+    rig = tmp_path / "rig.toml"
+    rig.write_text(f'[rig]\nname = "tb"\n\n[bus]\nlisten = ["{endpoint}"]\n')
+    events: list[dict] = []
+    with bus.open_session({"listen": [endpoint]}, "server") as server:
+        raw = server.declare_subscriber(bus.locomotion_key("tb"), zenoh.handlers.FifoChannel(100000))
+        server.declare_subscriber(bus.events_key("tb"), lambda s: events.append(json.loads(s.payload.to_string())))
+        status_sub = server.declare_subscriber(bus.rig_key("tb", "trackball", "status"),
+                                               zenoh.handlers.RingChannel(4))
+        loop_source = open_source("bus", rig="tb", session=server)  # the server's own back-end for remote balls
+        loop_source.start()
+        code = []
+        cli = threading.Thread(target=lambda: code.append(main([
+            "trackball", "--emulate", "--config", str(rig), "--seconds", "1.2", "--unplug-at", "0.6",
+            "--replug-after", "0.1"])))
+        cli.start()
+        cli.join(30)
+        time.sleep(0.1)
+        samples = []
+        while (s := raw.try_recv()) is not None:
+            samples.append(wire.decode(s.payload.to_bytes(), t=0.0))
+        via_loop = loop_source.read()
+        loop_source.stop()
+        status = status_sub.try_recv()
+    assert code == [0]
+    assert len(samples) > 300 and len(via_loop) > 300
+    assert all(b.seq > a.seq for a, b in zip(samples, samples[1:], strict=False) if b.seq)  # 0 after the replug
+    assert [e["event"] for e in events if e["source"] == "usb"][-2:] == ["locomotion_lost", "locomotion_back"]
+    assert status is not None and "connected" in json.loads(status.payload.to_string())
