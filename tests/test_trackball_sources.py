@@ -107,3 +107,41 @@ def test_cli_publishes_samples_and_unplug_events_on_the_bus(tmp_path):
     assert all(b.seq > a.seq for a, b in zip(samples, samples[1:], strict=False) if b.seq)  # 0 after the replug
     assert [e["event"] for e in events if e["source"] == "usb"][-2:] == ["locomotion_lost", "locomotion_back"]
     assert status is not None and "connected" in json.loads(status.payload.to_string())
+
+
+def test_frame_loop_holds_the_pose_while_the_usb_trackball_is_unplugged():
+    """In-process: the server's frame loop reads the USB driver; unplugged, it holds the pose and logs an event."""
+    from antarium.clock import MonotonicClock
+    from antarium.frame_loop import FrameLoop
+
+    events = []
+    backend = EmulatedTrackball(motion=constant((0.0, -0.6, 0.0)), realtime=True)  # the ant walks 3 cm/s forward
+    src = open_source("usb", backend=backend)
+    loop = FrameLoop(clock=MonotonicClock(), source=src, on_event=lambda t, kind, data: events.append((t, kind)))
+
+    def wait_for(predicate, timeout_s=5.0):
+        deadline = time.monotonic() + timeout_s
+        while not predicate():
+            assert time.monotonic() < deadline
+            time.sleep(0.005)
+
+    with src:
+        loop.start_thread()
+        try:
+            wait_for(lambda: loop.pose.x > 0.003)
+            t_unplug = time.monotonic()
+            backend.unplug()
+            wait_for(lambda: not loop.locomotion_connected, 1.0)
+            seen_after = time.monotonic() - t_unplug
+            held = loop.pose
+            time.sleep(0.2)
+            assert loop.pose == held  # no samples, no drift
+            backend.replug()
+            wait_for(lambda: loop.locomotion_connected and loop.pose.x > held.x + 0.002)
+        finally:
+            loop.stop()
+            loop.join(2.0)
+    kinds = [k for _, k in events]
+    assert "locomotion_lost" in kinds and kinds.index("locomotion_back") > kinds.index("locomotion_lost")
+    assert abs(loop.pose.y) < 1e-3 and loop.pose.heading == 0.0
+    print(f"frame loop saw the unplug after {seen_after * 1e3:.1f} ms")
