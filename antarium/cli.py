@@ -19,6 +19,7 @@ COMMANDS: dict[str, str] = {
     "bench": "antarium.commands.bench",
     "emulate": "antarium.commands.emulate",
     "trackball": "antarium.commands.trackball",
+    "ant": "antarium.commands.ant",
 }
 
 

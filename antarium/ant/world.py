@@ -1,0 +1,63 @@
+"""Put a virtual ant on an emulated rig: renderer -> encoder -> virtual link (emulated panels) -> the ant's eye.
+
+    with virtual_rig(model, scene="habitat") as ant:
+        learning_walk(ant, route, spacing=0.01)
+        result = follow_route(ant, route, max_decisions=500)
+
+The rig is the real one: `antarium.renderers.Renderer` renders the scene at the loop's pose, the frame loop
+sends it over `open_link("virtual")`, and the ant reads `link.emulator.led_values()` — what the panels show.
+Everything runs on a `SimulatedClock` unless a clock is given, so it runs as fast as the computer allows.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from antarium.ant.agent import VirtualAnt
+from antarium.ant.eye import Eye, EyeParams
+from antarium.ant.locomotion import AntLocomotion
+from antarium.clock import Clock, SimulatedClock
+from antarium.pose import Pose
+
+#: eye height above the ground at ant scale (m)
+EYE_HEIGHT_M = 0.01
+
+
+@contextlib.contextmanager
+def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = None, tether: str = "free_yaw",
+                clock: Clock | None = None, log_path: str | Path | None = None, log_metadata: dict | None = None,
+                frames_per_decision: int = 1, eye_height: float = EYE_HEIGHT_M,
+                renderer_kwargs: dict | None = None) -> Iterator[VirtualAnt]:
+    """A `VirtualAnt` with `model` in a frame loop on an emulated dome showing `scene`.
+
+    log_path: write an HDF5 trial log there (like a real trial's), or None.
+    """
+    from antarium.firmware_proto.link import open_link
+    from antarium.frame_loop import FrameLoop
+    from antarium.geometry import load_dome
+    from antarium.renderers import Renderer
+    from antarium.trial_log import TrialLog
+
+    clock = clock or SimulatedClock()
+    dome = load_dome()
+    eye = Eye.from_dome(dome, eye_params)
+    if eye.params.n_pn != model.n_pn:
+        raise ValueError(f"the model expects {model.n_pn} PNs but the eye gives {eye.params.n_pn}")
+    with contextlib.ExitStack() as stack:
+        renderer = Renderer(dome, **(renderer_kwargs or {}))
+        if hasattr(renderer, "close"):
+            stack.callback(renderer.close)
+        renderer.set_scene(scene)
+        link = open_link("virtual", clock=clock)
+        stack.callback(link.close)
+        log = None
+        if log_path is not None:
+            config = {"ant": {"model": model.kind, "tether": tether, "scene": str(scene), "eye": eye.params.channel}}
+            log = stack.enter_context(TrialLog(log_path, config, name="virtual ant", metadata=log_metadata))
+        legs = AntLocomotion(tether, clock=clock)
+        loop = FrameLoop(clock=clock, source=legs, renderer=renderer, link=link, tether=tether, log=log,
+                         origin=Pose(0.0, 0.0, eye_height, 0.0))
+        yield VirtualAnt(eye, model, loop, legs, link.emulator.led_values, frames_per_decision)

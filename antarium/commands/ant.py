@@ -1,0 +1,149 @@
+"""`antarium ant learn | run | evaluate | demo`: the virtual ant on an emulated rig (no hardware needed)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+HELP = "virtual ant: learn a route, follow it in closed loop, evaluate models over seeded routes"
+
+KINDS = ("antcar", "ardin", "perfect_memory")
+
+
+def _params(pairs: list[str]) -> dict:
+    """--param key=value pairs: ints, floats or words."""
+    out: dict = {}
+    for pair in pairs or ():
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--param wants key=value, got {pair!r}")
+        for cast in (int, float):
+            try:
+                out[key] = cast(value)
+                break
+            except ValueError:
+                continue
+        else:
+            out[key] = value
+    return out
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scene", default="habitat", help="scene shown by the dome (name or file; default: habitat)")
+    p.add_argument("--tether", choices=("free_yaw", "fixed"), default="free_yaw",
+                   help="free_yaw: the ant turns inside the dome; fixed: the scene turns (default free_yaw)")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="action", metavar="ACTION")
+    sub.required = True
+    p = sub.add_parser("learn", help="walk the ant along a route while its model learns; save the model")
+    p.add_argument("--model", choices=KINDS, default="antcar")
+    p.add_argument("--route", required=True, help="curved:SEED, a path file (x_m,y_m) or a trial log (.h5)")
+    p.add_argument("--length", type=float, default=10.0, help="length of a curved:SEED route (m, default 10)")
+    p.add_argument("--spacing", type=float, default=None, help="metres between learned views (model default)")
+    p.add_argument("--param", action="append", metavar="KEY=VALUE", help="model parameter, e.g. task=homing")
+    p.add_argument("--log", default=None, help="also write the learning walk's trial log here (.h5)")
+    p.add_argument("--out", required=True, help="model file to write (.npz)")
+    _common(p)
+    p = sub.add_parser("run", help="release a trained ant on its route in closed loop; log, pictures, summary")
+    p.add_argument("model_file", help="model file written by 'antarium ant learn'")
+    p.add_argument("--route", default=None, help="route to judge against (default: the one it learned)")
+    p.add_argument("--length", type=float, default=10.0, help="length of a curved:SEED route (m)")
+    p.add_argument("--max-decisions", type=int, default=None)
+    p.add_argument("--lateral-cm", type=float, default=0.0, help="release this far left of the route start (cm)")
+    p.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
+    p.add_argument("--out", required=True, help="folder for run.h5, run_paths.png, run_traces.png, run.json")
+    _common(p)
+    p = sub.add_parser("evaluate", help="each model learns and follows seeded curved routes; writes a table")
+    p.add_argument("--routes", type=int, default=10)
+    p.add_argument("--length", type=float, default=10.0, help="route length (m, default 10)")
+    p.add_argument("--models", default=",".join(KINDS), help=f"comma-separated, from {', '.join(KINDS)}")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first route")
+    p.add_argument("--out", required=True, help="folder for logs, pictures, evaluation.md/.json")
+    p.add_argument("--scene", default="habitat")
+    p = sub.add_parser("demo", help="train on a short route, follow it; log and picture of both paths")
+    p.add_argument("--out", required=True)
+    p.add_argument("--scene", default="habitat")
+
+
+def _bar(desc: str, total=None):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="step", leave=False)
+
+
+def run(args: argparse.Namespace) -> int:
+    from antarium.ant import experiments
+
+    if args.action == "learn":
+        return _learn(args)
+    if args.action == "run":
+        return _run(args)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if args.action == "evaluate":
+        kinds = tuple(k.strip() for k in args.models.split(",") if k.strip())
+        bad = [k for k in kinds if k not in KINDS]
+        if bad or not kinds:
+            raise ValueError(f"--models: unknown {bad or 'none given'}; allowed: {', '.join(KINDS)}")
+        if args.routes < 1 or args.length <= 0:
+            raise ValueError("--routes must be >= 1 and --length > 0 m")
+        print(experiments.evaluate(out, args.routes, args.length, kinds, args.seed, args.scene, _bar))
+        return 0
+    outcome = experiments.demo(out, scene=args.scene, progress=_bar("virtual ant demo").update)
+    print(f"virtual ant demo: {outcome.summary}\n  log: {outcome.log}\n  picture: {outcome.picture}")
+    return 0
+
+
+def _learn(args: argparse.Namespace) -> int:
+    from antarium.ant.agent import learning_walk
+    from antarium.ant.experiments import LEARN_SPACING_M, parse_route
+    from antarium.ant.eye import EyeParams
+    from antarium.ant.models import make_model
+    from antarium.ant.storage import mbon_bytes, save_model
+    from antarium.ant.world import virtual_rig
+
+    route = parse_route(args.route, args.length)
+    out = Path(args.out)
+    if not out.parent.is_dir():
+        raise FileNotFoundError(f"folder {str(out.parent)!r} for the model file does not exist")
+    eye_params = EyeParams()
+    model = make_model(args.model, eye_params.n_pn, **_params(args.param))
+    spacing = args.spacing or LEARN_SPACING_M[args.model]
+    bar = _bar("learning walk", total=int(math.ceil(route.length / spacing)) + 1)
+    with virtual_rig(model, scene=args.scene, eye_params=eye_params, tether=args.tether, log_path=args.log) as ant:
+        views = learning_walk(ant, route, spacing, progress=bar.update)
+    bar.close()
+    save_model(out, model, eye_params, route.points)
+    print(f"learned {views} views along {route.length:.2f} m; memory {mbon_bytes(model)} bytes; wrote {out}")
+    return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    from antarium.ant.experiments import follow_saved, parse_route
+    from antarium.ant.routes import Route
+    from antarium.ant.storage import load_model
+
+    model, eye_params, stored = load_model(args.model_file)
+    if args.route is not None:
+        route = parse_route(args.route, args.length)
+    elif stored is not None:
+        route = Route(stored)
+    else:
+        raise ValueError(f"{args.model_file} holds no route; give --route")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    bar = _bar("closed loop")
+    outcome, _ = follow_saved(model, eye_params, route, out, scene=args.scene, tether=args.tether,
+                              max_decisions=args.max_decisions,
+                              start_offset=(args.lateral_cm / 100.0, math.radians(args.heading_deg)),
+                              progress=bar.update)
+    bar.close()
+    s = outcome.summary
+    print(f"{model.kind}: lateral error {100 * s['lateral_median']:.1f} ± {100 * s['lateral_mad']:.1f} cm, "
+          f"angular {s['angular_median_deg']:.1f} ± {s['angular_mad_deg']:.1f} deg, arrived {s['arrived']}, "
+          f"errors {s['errors']}, {s['decisions']} decisions, {1e3 * outcome.seconds_per_decision:.1f} ms each")
+    print(f"  log: {outcome.log}\n  picture: {outcome.picture}")
+    return 0
