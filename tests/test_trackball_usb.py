@@ -179,3 +179,15 @@ def test_segments_motion_and_bad_fault_names():
     assert list(m(0.5)) == [1.0, 0.0, 0.0] and list(m(1.5)) == [0.0, 2.0, 0.0] and list(m(3.0)) == [0.0] * 3
     with pytest.raises(ValueError, match="allowed"):
         EmulatedTrackball(faults={1: "melt"})
+
+
+def test_a_failing_publisher_is_counted_and_reading_goes_on():
+    def broken(sample):
+        raise ConnectionError("bus down")
+
+    with UsbTrackball(backend=EmulatedTrackball(realtime=False), on_sample=broken) as src:
+        samples = collect(src, 50)
+        status = src.status()
+    assert len(samples) >= 50 and status["connected"]
+    assert status["publish_errors"] >= 50 and "bus down" in status["last_error"]
+    assert 0.0 <= status["quality_avg"] <= 1.0

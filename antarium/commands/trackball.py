@@ -54,13 +54,16 @@ def _rig(config_path: str | None) -> dict[str, Any]:
     return load_config(config_path)
 
 
-def _open_source(args: argparse.Namespace, on_sample=None, on_event=None):
+def _open_source(args: argparse.Namespace, rig: dict[str, Any], on_sample=None, on_event=None):
     from antarium.locomotion import open_source
 
     if args.source == "usb":
         from antarium.trackball import config as tbconfig
 
         trackball = tbconfig.load(args.config)
+        if not math.isclose(trackball.ball_radius, rig["loop"]["ball_radius"]):
+            print(f"warning: [trackball] ball_radius {trackball.ball_radius} m differs from [loop] ball_radius "
+                  f"{rig['loop']['ball_radius']} m: the ant's motion will be scaled by their ratio", file=sys.stderr)
         backend = None
         if args.emulate:
             from antarium.trackball.emulator import EmulatedTrackball, walk
@@ -113,7 +116,7 @@ def _run(args: argparse.Namespace) -> int:
         session = open_session(rig["bus"], role="client")
     publisher = _Publisher(session, rig["rig"]["name"])
     try:
-        source = _open_source(args, on_sample=publisher.sample, on_event=publisher.event)
+        source = _open_source(args, rig, on_sample=publisher.sample, on_event=publisher.event)
         pushes = args.source != "usb"  # the USB driver publishes from its reader thread
         t0 = time.monotonic()
         next_status = t0

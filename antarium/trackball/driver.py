@@ -33,6 +33,7 @@ from antarium.trackball import protocol as P
 
 Event = dict[str, Any]
 LATENCY_WINDOW = 1 << 16  # reports kept for the arrival -> publication latency statistics
+QUALITY_SMOOTHING = 0.01  # weight of each report in `quality_avg` (about the last 100 reports)
 
 
 class UsbTrackball(LocomotionSource):
@@ -70,7 +71,8 @@ class UsbTrackball(LocomotionSource):
         self._raw = [0] * (2 * P.N_SENSORS)
         self.counters = dict.fromkeys(
             ("reports", "gaps", "lost_reports", "seq_resets", "short_reports", "bad_reports", "overflows",
-             "unplugs", "connects", "dropped_samples"), 0)
+             "unplugs", "connects", "dropped_samples", "publish_errors"), 0)
+        self.quality_avg = 1.0
         self._prev_seq: int | None = None
         self._last_report = 0.0
         self.last_error = ""
@@ -107,7 +109,7 @@ class UsbTrackball(LocomotionSource):
         return {"connected": self._connected, "source": "usb",
                 "device": f"{self.config.vendor_id:04x}:{self.config.product_id:04x}",
                 "rate_hz": self.config.sample_rate_hz, "last_report_age_s": age,
-                "last_error": self.last_error, **self.counters}
+                "quality_avg": self.quality_avg, "last_error": self.last_error, **self.counters}
 
     # --- statistics ---------------------------------------------------------------------------
     def raw_counts(self) -> list[int]:
@@ -170,7 +172,10 @@ class UsbTrackball(LocomotionSource):
             self.counters["connects"] += 1
             self._emit("locomotion_back" if self.counters["connects"] > 1 else "locomotion_connected",
                        device=f"{dev.idVendor:04x}:{dev.idProduct:04x}")
-            reason = self._read_loop(dev)
+            try:
+                reason = self._read_loop(dev)
+            except Exception as exc:  # never die silently: report, reconnect
+                reason = f"driver error: {type(exc).__name__}: {exc}"
             if reason is not None:
                 self._connected = False
                 self.counters["unplugs"] += 1
@@ -253,7 +258,12 @@ class UsbTrackball(LocomotionSource):
                 counters["dropped_samples"] += 1
             self._queue.append(sample)
         if self.on_sample is not None:
-            self.on_sample(sample)
+            try:
+                self.on_sample(sample)
+            except Exception as exc:  # a failing publisher must not stop the reading
+                counters["publish_errors"] += 1
+                self.last_error = f"publishing failed: {type(exc).__name__}: {exc}"
+        self.quality_avg += QUALITY_SMOOTHING * (quality - self.quality_avg)
         self._latency[counters["reports"] % LATENCY_WINDOW] = time.perf_counter() - t_arrival
         counters["reports"] += 1
         self._last_report = time.monotonic()
