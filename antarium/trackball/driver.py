@@ -86,8 +86,8 @@ class UsbTrackball(LocomotionSource):
 
             self.backend = usb.backend.libusb1.get_backend()
             if self.backend is None:
-                raise RuntimeError("no libusb-1.0 found for the USB trackball; install libusb-1.0 "
-                                   "(apt-get install libusb-1.0-0) or use the emulated device (emulate=True)")
+                raise RuntimeError("no libusb-1.0 found for the USB trackball; install it "
+                                   "(apt-get install libusb-1.0-0) or use the emulated device (--emulate)")
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="usb-trackball", daemon=True)
         self._thread.start()
@@ -137,6 +137,11 @@ class UsbTrackball(LocomotionSource):
         if dev is None:
             return None
         try:
+            try:
+                if dev.is_kernel_driver_active(0):  # Linux: a generic driver may have bound the interface
+                    dev.detach_kernel_driver(0)
+            except NotImplementedError:  # backends without kernel drivers (Windows, macOS, the emulator)
+                pass
             dev.set_configuration()
             usb.util.claim_interface(dev, 0)
             info = P.decode_info(dev.ctrl_transfer(P.REQUEST_TYPE_IN, P.REQ_GET_INFO, 0, 0, P.INFO.size))
