@@ -95,7 +95,7 @@ def session_config(bus: dict[str, Any], role: str = "server"):
 
     if role not in ("server", "client"):
         raise ValueError(f"bus role must be 'server' or 'client', got {role!r}")
-    if bus.get("access_control"):
+    if bus.get("access_control") and role == "server":  # the server enforces who may command the rig
         path = Path(bus["access_control"])
         try:
             text = path.read_text()

@@ -1,0 +1,265 @@
+"""The experiment-script API: drive a running `antarium serve` over the bus, synchronously.
+
+    import antarium
+
+    with antarium.Rig("rig1") as rig:
+        rig.load_scene("familiar.glb")
+        rig.closed_loop(True)
+        with rig.trial("familiar-1", ant=7, colony="M. croslandi"):
+            rig.wait(30)
+            rig.rotate_scene(90)
+            rig.wait(30)
+        print(rig.pose())
+
+Every method waits for the server's reply; an error reply raises `RigError` carrying the server's message
+(the rig's state is then unchanged). Angles are in degrees here (the script's edge), metres for positions.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from antarium import bus
+from antarium.pose import Pose
+
+
+class RigError(RuntimeError):
+    """The server refused a command (its message says why), or no server answered."""
+
+
+@dataclass(frozen=True, slots=True)
+class PoseUpdate:
+    """One pose from the server's stream: frame number, server time (s), pose, scene rotation (rad), mode."""
+
+    frame: int
+    t: float
+    pose: Pose
+    scene_rotation: float
+    closed_loop: bool
+    fixed_tether: bool
+
+
+def _decode_pose(payload: bytes) -> PoseUpdate:
+    d = bus.decode_pose(payload)
+    return PoseUpdate(d["frame"], d["t"], Pose(d["x"], d["y"], d["z"], d["heading"]), d["scene_rotation"],
+                      d["closed_loop"], d["fixed_tether"])
+
+
+class Rig:
+    """A connection to rig `name`.
+
+    config: a rig config (TOML path or resolved dict) whose `[bus]` section says where the server listens;
+    default: the embedded default (127.0.0.1:7447). connect: endpoints to use instead, e.g.
+    ["tcp/192.168.1.10:7447"]. timeout_s: how long to wait for the server and for each reply.
+    """
+
+    def __init__(self, name: str = "rig1", *, config: str | Path | dict | None = None,
+                 connect: list[str] | None = None, timeout_s: float = 10.0, session=None) -> None:
+        from antarium.config import load_config, resolve
+
+        self.name = bus.check_rig_name(name)
+        if isinstance(config, dict):
+            cfg = resolve(config) if "bus" not in config or "rig" not in config else config
+        else:
+            cfg = load_config(config)
+        self.bus_section = dict(cfg["bus"])
+        if connect is not None:
+            self.bus_section["connect"] = list(connect)
+        self.timeout_s = float(timeout_s)
+        self._session = session
+        self._own_session = session is None
+        self._latest: PoseUpdate | None = None
+        self._latest_lock = threading.Lock()
+        self._subs: list = []
+        self._alive = threading.Event()
+
+    # -- connection ------------------------------------------------------------------------------------
+    def connect(self) -> Rig:
+        """Open the session and wait until the server's liveliness token is seen."""
+        if self._session is None:
+            self._session = bus.open_session(self.bus_section, role="client")
+        self._subs.append(self._session.declare_subscriber(bus.pose_key(self.name), self._on_pose_sample))
+        self._subs.append(self._session.liveliness().declare_subscriber(
+            bus.alive_key(self.name), self._on_alive, history=True))
+        if not self._alive.wait(self.timeout_s):
+            where = self.bus_section.get("connect") or self.bus_section.get("listen")
+            self.close()
+            raise RigError(f"no antarium server for rig {self.name!r} answered within {self.timeout_s} s "
+                           f"(tried {where}); is `antarium serve` running?")
+        return self
+
+    def _on_alive(self, sample) -> None:
+        import zenoh
+
+        if sample.kind == zenoh.SampleKind.PUT:
+            self._alive.set()
+        else:
+            self._alive.clear()
+
+    def _on_pose_sample(self, sample) -> None:
+        try:
+            update = _decode_pose(sample.payload.to_bytes())
+        except bus.StreamError:
+            return
+        with self._latest_lock:
+            self._latest = update
+
+    def close(self) -> None:
+        for sub in self._subs:
+            with contextlib.suppress(Exception):
+                sub.undeclare()
+        self._subs = []
+        if self._own_session and self._session is not None:
+            self._session.close()
+            self._session = None
+
+    def __enter__(self) -> Rig:
+        return self.connect()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- the one request path --------------------------------------------------------------------------
+    def call(self, command: str, **params: Any) -> Any:
+        """Send `command` with JSON `params`; return the server's result or raise `RigError` with its message."""
+        if self._session is None:
+            raise RigError("the rig is not connected; use `with Rig(...) as rig:` or `rig.connect()`")
+        key = bus.command_key(self.name, command)
+        replies = self._session.get(key, payload=json.dumps(params), timeout=self.timeout_s)
+        for reply in replies:
+            if reply.ok is not None:
+                body = json.loads(reply.ok.payload.to_bytes())
+                return body.get("result")
+            try:
+                message = json.loads(reply.err.payload.to_bytes()).get("error", "")
+            except (ValueError, AttributeError):
+                message = reply.err.payload.to_bytes().decode(errors="replace")
+            raise RigError(message)
+        raise RigError(f"{command}: no reply from rig {self.name!r} within {self.timeout_s} s "
+                       "(server gone, or the command was refused by the bus's access control)")
+
+    # -- commands --------------------------------------------------------------------------------------
+    def load_scene(self, scene: str | Path) -> dict:
+        """Show `scene` (a scene file, or a built-in name such as "default"); on failure the old one stays."""
+        return self.call("load_scene", scene=str(scene))
+
+    def closed_loop(self, on: bool = True) -> dict:
+        """Closed loop (the ball moves the ant through the world) or open loop (pose under script control)."""
+        return self.call("closed_loop", on=on)
+
+    def tether(self, mode: str) -> dict:
+        """"free_yaw" (ball gives translation only) or "fixed" (ball gives yaw too; the scene rotates)."""
+        return self.call("tether", tether=mode)
+
+    def gains(self, translation: float | None = None, rotation: float | None = None) -> dict:
+        params = {k: v for k, v in (("translation", translation), ("rotation", rotation)) if v is not None}
+        return self.call("gains", **params)
+
+    def rotate_scene(self, deg: float) -> dict:
+        """Rotate the scene instantly by `deg` degrees, counter-clockwise seen from above."""
+        return self.call("rotate_scene", deg=deg)
+
+    def set_pose(self, x: float, y: float, heading_deg: float | None = None, z: float | None = None) -> dict:
+        """Virtual displacement to (x, y) metres (and heading, degrees), now."""
+        params: dict[str, Any] = {"x": x, "y": y}
+        if heading_deg is not None:
+            params["heading_deg"] = heading_deg
+        if z is not None:
+            params["z"] = z
+        return self.call("set_pose", **params)
+
+    def reset_origin(self, x: float | None = None, y: float | None = None, heading_deg: float | None = None) -> dict:
+        """Back to the virtual origin; with x, y (and heading) make that the new origin first."""
+        params = {k: v for k, v in (("x", x), ("y", y), ("heading_deg", heading_deg)) if v is not None}
+        return self.call("reset_origin", **params)
+
+    def scene_edit(self, **edit: Any) -> dict:
+        return self.call("scene_edit", edit=edit)
+
+    def sky(self, **sky: Any) -> dict:
+        return self.call("sky", sky=sky)
+
+    def polarisers(self, angles_deg) -> dict:
+        """Set the 55 x 9 polariser e-vector angles (degrees) directly."""
+        import numpy as np
+
+        return self.call("polarisers", angles_deg=np.asarray(angles_deg, dtype=float).tolist())
+
+    def start_trial(self, name: str, **metadata: Any) -> str:
+        """Start recording a trial; returns the log file's path (on the server's computer)."""
+        return self.call("trial_start", name=name, metadata=metadata)["path"]
+
+    def stop_trial(self) -> dict:
+        return self.call("trial_stop")
+
+    @contextlib.contextmanager
+    def trial(self, name: str, **metadata: Any) -> Iterator[str]:
+        """`with rig.trial("name", ant=3):` records the block in one log file (its path is yielded)."""
+        path = self.start_trial(name, **metadata)
+        try:
+            yield path
+        finally:
+            self.stop_trial()
+
+    def status(self) -> dict:
+        return self.call("status")
+
+    # -- streams ---------------------------------------------------------------------------------------
+    def pose(self, timeout_s: float | None = None) -> Pose:
+        """The newest pose from the server's stream (waits for the first one up to `timeout_s`)."""
+        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
+        while True:
+            with self._latest_lock:
+                latest = self._latest
+            if latest is not None:
+                return latest.pose
+            if time.monotonic() >= deadline:
+                p = self.status()["pose"]
+                return Pose(p["x"], p["y"], p["z"], math.radians(p["heading_deg"]))
+            time.sleep(0.005)
+
+    def latest(self) -> PoseUpdate | None:
+        """The newest `PoseUpdate` (frame, time, pose, scene rotation), or None before the first."""
+        with self._latest_lock:
+            return self._latest
+
+    def on_pose(self, callback: Callable[[PoseUpdate], None]):
+        """Call `callback(PoseUpdate)` for every pose the server publishes (on a bus thread; keep it short).
+        Returns the subscription; `.undeclare()` it to stop."""
+        if self._session is None:
+            raise RigError("the rig is not connected")
+
+        def handler(sample) -> None:
+            try:
+                update = _decode_pose(sample.payload.to_bytes())
+            except bus.StreamError:
+                return
+            callback(update)
+
+        sub = self._session.declare_subscriber(bus.pose_key(self.name), handler)
+        self._subs.append(sub)
+        return sub
+
+    def on_event(self, callback: Callable[[dict], None]):
+        """Call `callback({"t", "kind", "data"})` for every server event."""
+        if self._session is None:
+            raise RigError("the rig is not connected")
+        sub = self._session.declare_subscriber(
+            bus.events_key(self.name), lambda s: callback(json.loads(s.payload.to_bytes())))
+        self._subs.append(sub)
+        return sub
+
+    @staticmethod
+    def wait(seconds: float) -> None:
+        """Wait `seconds` of wall time (the dome keeps running)."""
+        if not isinstance(seconds, (int, float)) or seconds < 0 or not math.isfinite(seconds):
+            raise ValueError(f"wait needs a finite number of seconds >= 0, got {seconds!r}")
+        time.sleep(seconds)

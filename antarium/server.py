@@ -1,0 +1,547 @@
+"""The stimulus server: one rig = frame loop + locomotion source + renderer + dome link + bus + trial logs.
+
+`Server(config).run()` runs the frame loop in the calling thread (the renderer's GL context lives in the
+thread that renders) until `stop()` (a signal handler, a bus command from another thread, or `until`).
+Commands arrive on zenoh threads as queries, are validated (`antarium.control`), and are executed in the
+loop's thread between frames; the reply carries the result or the error. See `docs/bus.md`.
+
+Everything the server drives can be injected (clock, source, renderer factory, link), so tests and the
+virtual ant run it without hardware; by default it is built from the rig config (`antarium.config`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from antarium import bus
+from antarium.clock import Clock, MonotonicClock
+from antarium.control import CommandError, parse_command
+from antarium.frame_loop import FrameLoop, FrameRecord
+from antarium.pose import Pose
+
+#: events that are also printed on stderr: an operator must notice them
+ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "late_frames")
+COMMAND_TIMEOUT_S = 60.0
+
+
+class ServerError(RuntimeError):
+    """The server cannot start as configured (the message says what to change)."""
+
+
+class EmulatorProcess:
+    """`antarium emulate` as a process of its own on loopback (the embedded default's dome)."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, extra_args: list[str] | None = None) -> None:
+        self.host = host
+        self.port = port or _free_udp_port(host)
+        self.extra_args = list(extra_args or [])
+        self.proc: subprocess.Popen | None = None
+
+    def start(self) -> None:
+        cmd = [sys.executable, "-m", "antarium", "emulate", "--host", self.host, "--port", str(self.port),
+               *self.extra_args]
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.PIPE, text=True)
+
+    @property
+    def running(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        if self.proc is None:
+            return
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout_s)
+        if self.proc.stderr is not None:
+            self.proc.stderr.close()
+        self.proc = None
+
+
+def _free_udp_port(host: str) -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+def default_renderer_factory(render_cfg: dict[str, Any]):
+    """The default habitat renderer from `[render]` (built in the thread that will render)."""
+    from antarium.geometry import load_dome
+    from antarium.renderers import Renderer
+
+    return Renderer(load_dome(), face_size=render_cfg["face_size"])
+
+
+class Server:
+    """config: a resolved rig config (`antarium.config.load_config`). Injectable: clock, source,
+    renderer_factory (called in the loop's thread; None for a pose-only rig), link (None: from `[link]`,
+    False: no dome), session (an open zenoh session; None: from `[bus]` if enabled)."""
+
+    def __init__(self, config: dict[str, Any], *, clock: Clock | None = None, source=None,
+                 renderer_factory: Callable | None | bool = True, link=None, session=None,
+                 echo: Callable[[str], None] | None = None) -> None:
+        from antarium.trial_log import check_log_dir
+
+        self.config = config
+        self.rig = bus.check_rig_name(config["rig"]["name"])
+        self.clock = clock or MonotonicClock()
+        self.echo = echo or (lambda line: print(line, file=sys.stderr, flush=True))
+        self.log_dir = check_log_dir(config["log"]["dir"])
+        self._renderer_factory = default_renderer_factory if renderer_factory is True else renderer_factory
+        self.source = source if source is not None else self._open_source()
+        self.emulator: EmulatorProcess | None = None
+        self._link_arg = link
+        self.link = None
+        self.session = session
+        self._own_session = session is None
+        self.renderer = None
+        self.loop: FrameLoop | None = None
+        self.trial_log = None
+        self.trial_name: str | None = None
+        self.scene_name: str | None = None
+        self._entities: list = []
+        self._pose_pub = self._stats_pub = None
+        self._ready = threading.Event()
+        self._stopping = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._status_thread: threading.Thread | None = None
+        self._start_error: BaseException | None = None
+        self._last_log_error: str | None = None
+        self._trial_lock = threading.Lock()
+        self._loop_thread: threading.Thread | None = None
+
+    # -- building --------------------------------------------------------------------------------------
+    def _open_source(self):
+        from antarium.locomotion import open_source
+
+        loco = dict(self.config["locomotion"])
+        name = loco.pop("source")
+        if name == "bus":
+            loco.setdefault("rig", self.rig)
+            loco.setdefault("bus", self.config["bus"])
+        loco.setdefault("clock", self.clock)
+        if name == "scripted":
+            loco.setdefault("tether", self.config["loop"]["tether"])
+        try:
+            return open_source(name, **loco)
+        except TypeError as exc:
+            raise ServerError(f"[locomotion] options do not fit source {name!r}: {exc}") from None
+
+    def _open_link(self):
+        if self._link_arg is False:
+            return None
+        if self._link_arg is not None:
+            return self._link_arg
+        from antarium.firmware_proto.link import open_link
+
+        cfg = self.config["link"]
+        if cfg["interface"] == "virtual":
+            return open_link("virtual")
+        host, port = cfg["host"], cfg["port"]
+        if cfg["spawn_emulator"]:
+            self.emulator = EmulatorProcess(host, port)
+            self.emulator.start()
+            port = self.emulator.port
+        elif port == 0:
+            raise ServerError("[link] port must be set (the distributor's UDP port) when spawn_emulator is false")
+        return open_link("udp", host=host, port=port)
+
+    def _open_bus(self) -> None:
+        if self.session is None:
+            if not self.config["bus"]["enabled"]:
+                return
+            self.session = bus.open_session(self.config["bus"], role="server")
+        s = self.session
+        self._pose_pub = s.declare_publisher(bus.pose_key(self.rig), express=True)
+        self._stats_pub = s.declare_publisher(bus.stats_key(self.rig), express=True)
+        self._entities += [self._pose_pub, self._stats_pub,
+                           s.declare_queryable(bus.rig_key(self.rig, "cmd", "*"), self._on_query),
+                           s.liveliness().declare_token(bus.alive_key(self.rig))]
+
+    # -- bus traffic -----------------------------------------------------------------------------------
+    def _on_query(self, query) -> None:
+        """A command query (zenoh thread): JSON in, JSON reply or an error reply naming what was wrong."""
+        name = str(query.key_expr).rsplit("/", 1)[-1]
+        try:
+            raw = query.payload.to_bytes() if query.payload is not None else b""
+            params = json.loads(raw) if raw.strip() else {}
+        except (ValueError, UnicodeDecodeError) as exc:
+            query.reply_err(json.dumps({"error": f"{name}: payload is not JSON: {exc}"}))
+            return
+        try:
+            result = self.command(name, params)
+        except (CommandError, ValueError, RuntimeError, OSError) as exc:
+            query.reply_err(json.dumps({"error": str(exc)}))
+            return
+        query.reply(query.key_expr, json.dumps({"ok": True, "result": result}, default=_json_default))
+
+    def _publish_event(self, t: float, kind: str, data: dict) -> None:
+        if kind in ALARM_EVENTS:
+            self.echo(f"antarium serve: {kind}: {json.dumps(data, default=_json_default)}")
+        if self.session is not None:
+            try:
+                self.session.put(bus.events_key(self.rig),
+                                 json.dumps({"t": t, "kind": kind, "data": data}, default=_json_default))
+            except Exception as exc:  # zenoh errors must never stop the frame loop  # noqa: BLE001
+                self.echo(f"antarium serve: publishing event {kind} failed: {exc}")
+
+    def _on_frame(self, rec: FrameRecord) -> None:
+        loop_cfg = self.config["loop"]
+        if self._pose_pub is not None and rec.frame % loop_cfg["pose_every"] == 0:
+            self._pose_pub.put(bus.encode_pose(rec.frame, rec.t_start, rec.pose, rec.scene_rotation,
+                                               rec.closed_loop, rec.fixed_tether))
+        if self._stats_pub is not None and rec.frame % loop_cfg["stats_every"] == 0:
+            self._stats_pub.put(bus.encode_stats(rec.frame, self.loop.late_frames, rec.t_start, rec.latency,
+                                                 _nan0(rec.render) + _nan0(rec.sample) + _nan0(rec.convert),
+                                                 rec.sample, rec.encode, rec.send, rec.pacing_error))
+
+    def _status_loop(self) -> None:
+        while not self._stopping.wait(1.0):
+            try:
+                status = self.status()
+                if self.session is not None:
+                    self.session.put(bus.status_key(self.rig), json.dumps(status, default=_json_default))
+            except Exception as exc:  # the status thread must outlive any one bad status  # noqa: BLE001
+                self.echo(f"antarium serve: status failed: {exc}")
+
+    def status(self) -> dict[str, Any]:
+        """Frame rate, late frames, latency percentiles, distributor telemetry, trial and log state."""
+        loop = self.loop
+        out: dict[str, Any] = {"rig": self.rig, "t": self.clock.now(), "trial": self.trial_name,
+                               "scene": self.scene_name, "alarms": []}
+        if loop is not None:
+            p = loop.pose
+            out.update(loop.stats())
+            out.update({"pose": {"x": p.x, "y": p.y, "z": p.z, "heading_deg": math.degrees(p.heading)},
+                        "scene_rotation_deg": math.degrees(loop.scene_rotation), "closed_loop": loop.closed_loop,
+                        "tether": loop.tether, "gains": {"translation": loop.gain_translation,
+                                                          "rotation": loop.gain_rotation}})
+            if not loop.link_ok:
+                out["alarms"].append("dome link down: " + (loop.last_link_error or "no telemetry"))
+            if not loop.locomotion_connected:
+                out["alarms"].append("locomotion source disconnected: pose held")
+        if self.source is not None:
+            out["locomotion"] = self.source.status()
+        if self.link is not None:
+            try:
+                out["telemetry"] = self.link.telemetry()
+            except OSError as exc:
+                out["telemetry"] = {"error": str(exc)}
+        if self.emulator is not None:
+            out["emulator_running"] = self.emulator.running
+        log = self.trial_log
+        if log is not None:
+            out["log"] = log.status()
+            error = out["log"]["error"]
+            if error:
+                out["alarms"].append("TRIAL LOG NOT WRITTEN: " + error)
+                if error != self._last_log_error and loop is not None:
+                    self._last_log_error = error
+                    loop.call_soon(loop.event, "log_error", error=error)
+        return out
+
+    # -- commands --------------------------------------------------------------------------------------
+    def command(self, name: str, params: Any = None) -> Any:
+        """Validate and execute one command (any thread); returns its result or raises with the reason."""
+        try:
+            checked = parse_command(name, params)
+        except CommandError as exc:
+            self._log_command(name, params, {"error": str(exc)}, False)
+            raise
+        if name == "status":
+            return self.status()
+        if name in ("trial_start", "trial_stop"):
+            result = self._trial_start(**checked) if name == "trial_start" else self._trial_stop()
+            return result
+        if self.loop is None or not self._loop_running():
+            raise RuntimeError(f"{name}: the server is not running")
+        future = self.loop.call_soon(self._apply, name, checked, params)
+        try:
+            return future.result(COMMAND_TIMEOUT_S)
+        except TimeoutError:
+            raise RuntimeError(f"{name}: the frame loop did not run the command within {COMMAND_TIMEOUT_S} s") \
+                from None
+
+    def _apply(self, name: str, p: dict[str, Any], request: Any) -> Any:
+        """Run a checked command in the loop's thread; log it with its outcome."""
+        try:
+            result = self._dispatch(name, p)
+        except (CommandError, ValueError, RuntimeError, OSError) as exc:
+            self._log_command(name, request, {"error": str(exc)}, False)
+            raise
+        self._log_command(name, request, {"result": result}, True)
+        return result
+
+    def _log_command(self, name, request, reply, ok) -> None:
+        if self.trial_log is not None:
+            self.trial_log.add_command(self.clock.now(), name, request, reply, ok)
+
+    def _dispatch(self, name: str, p: dict[str, Any]) -> Any:
+        loop = self.loop
+        if name == "set_pose":
+            cur = loop.pose
+            z = cur.z if p["z"] is None else p["z"]
+            heading = cur.heading if p["heading_deg"] is None else math.radians(p["heading_deg"])
+            loop.set_pose(Pose(p["x"], p["y"], z, math.remainder(heading, math.tau)))
+        elif name == "reset_origin":
+            origin = None
+            if p["x"] is not None:
+                o = loop.origin
+                origin = Pose(p["x"], p["y"], o.z if p["z"] is None else p["z"],
+                              o.heading if p["heading_deg"] is None else math.radians(p["heading_deg"]))
+            loop.reset_origin(origin)
+        elif name == "rotate_scene":
+            loop.rotate_scene(math.radians(p["deg"]))
+        elif name == "closed_loop":
+            loop.set_closed_loop(p["on"])
+        elif name == "tether":
+            loop.set_tether(p["tether"])
+        elif name == "gains":
+            loop.set_gains(p["translation"], p["rotation"])
+        elif name == "load_scene":
+            self._load_scene(p["scene"])
+        elif name == "scene_edit":
+            self._renderer_call("edit_scene", "scene edits", p["edit"])
+        elif name == "sky":
+            self._renderer_call("set_sky", "sky settings", p["sky"])
+        elif name == "polarisers":
+            if self.link is None:
+                raise RuntimeError("polarisers: this rig has no dome link")
+            angles = (p["angles_deg"] * math.pi / 180.0) % math.pi
+            self.link.send_polarisers(angles)
+            loop.event("polarisers_set", source="command")
+        return self._state()
+
+    def _state(self) -> dict[str, Any]:
+        loop = self.loop
+        pose = loop.pose
+        return {"pose": {"x": pose.x, "y": pose.y, "z": pose.z, "heading_deg": math.degrees(pose.heading)},
+                "scene_rotation_deg": math.degrees(loop.scene_rotation), "closed_loop": loop.closed_loop,
+                "tether": loop.tether, "gains": {"translation": loop.gain_translation, "rotation": loop.gain_rotation},
+                "scene": self.scene_name, "trial": self.trial_name}
+
+    def _renderer_call(self, method: str, what: str, kwargs: dict[str, Any]) -> None:
+        fn = getattr(self.renderer, method, None)
+        if fn is None:
+            raise RuntimeError(f"this rig's renderer does not support {what}")
+        try:
+            fn(**kwargs)
+        except TypeError as exc:
+            raise CommandError(f"{what}: {exc}") from None
+        self.loop.renderer_changed()
+        self.loop.event(method, **kwargs)
+
+    def _load_scene(self, scene: str) -> None:
+        """Load a scene into the renderer; on failure the previous scene stays on the dome."""
+        from antarium.trial_log import file_sha256
+
+        if self.renderer is None:
+            raise RuntimeError("load_scene: this rig has no renderer (pose-only)")
+        path = Path(scene)
+        digest = file_sha256(path) if path.is_file() else ""
+        if not path.is_file() and scene != "default" and (path.suffix or "/" in scene):
+            raise CommandError(f"load_scene: scene file {scene!r} does not exist")
+        try:
+            self.renderer.set_scene(scene)
+        except (OSError, ValueError, RuntimeError, KeyError) as exc:
+            raise RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); "
+                               f"the current scene {self.scene_name!r} stays on the dome") from None
+        self.scene_name = scene
+        self.loop.renderer_changed()
+        if self.trial_log is not None:
+            self.trial_log.add_scene(self.clock.now(), scene, digest)
+        self.loop.event("scene_loaded", scene=scene, sha256=digest)
+
+    def _trial_start(self, name: str, metadata: dict) -> dict[str, Any]:
+        from antarium.trial_log import LogError, TrialLog, log_path
+
+        with self._trial_lock:
+            if self.trial_log is not None:
+                raise RuntimeError(f"trial_start: trial {self.trial_name!r} is running; stop it first")
+            try:
+                json.dumps(metadata)
+            except (TypeError, ValueError) as exc:
+                raise CommandError(f"trial_start: metadata must be JSON-serialisable: {exc}") from None
+            path = log_path(self.log_dir, self.rig, name)
+            try:
+                log = TrialLog(path, self.config, name, metadata, flush_s=self.config["log"]["flush_s"])
+            except LogError as exc:
+                raise RuntimeError(f"trial_start: {exc}") from None
+            if self.scene_name is not None:
+                log.add_scene(self.clock.now(), self.scene_name,
+                              _sha_or_empty(self.scene_name))
+            self.trial_log, self.trial_name = log, name
+            self._last_log_error = None
+            if self.loop is not None:
+                if self._loop_running():
+                    self.loop.call_soon(self._attach_log, log, name, metadata).result(COMMAND_TIMEOUT_S)
+                else:
+                    self._attach_log(log, name, metadata)
+            log.add_command(self.clock.now(), "trial_start", {"name": name, "metadata": metadata},
+                            {"path": str(path)}, True)
+            return {"path": str(path)}
+
+    def _loop_running(self) -> bool:
+        """True when frames run in another thread (commands must then go through `call_soon`)."""
+        return (self._ready.is_set() and not self._stopping.is_set() and self._start_error is None
+                and threading.current_thread() is not self._loop_thread)
+
+    def _attach_log(self, log, name: str, metadata: dict) -> None:
+        self.loop.log = log
+        self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path))
+
+    def _trial_stop(self) -> dict[str, Any]:
+        with self._trial_lock:
+            log = self.trial_log
+            if log is None:
+                raise RuntimeError("trial_stop: no trial is running")
+            if self.loop is not None:
+                if self._loop_running():
+                    self.loop.call_soon(self._detach_log).result(COMMAND_TIMEOUT_S)
+                else:
+                    self._detach_log()
+            log.add_command(self.clock.now(), "trial_stop", {}, {"path": str(log.path)}, True)
+            log.close()
+            self.trial_log, self.trial_name = None, None
+            return {"path": str(log.path), **log.status()}
+
+    def _detach_log(self) -> None:
+        self.loop.event("trial_stopped", name=self.trial_name, path=str(self.trial_log.path))
+        self.loop.log = None
+
+    # -- running ---------------------------------------------------------------------------------------
+    def run(self, until: float | None = None, frames: int | None = None) -> int:
+        """Build the renderer here, start the bus and run frames until `stop()` or `until`/`frames`."""
+        try:
+            loop_cfg = self.config["loop"]
+            self.link = self._open_link()
+            self.renderer = self._renderer_factory(self.config["render"]) if self._renderer_factory else None
+            origin = Pose(loop_cfg["start_x"], loop_cfg["start_y"], loop_cfg["eye_height"],
+                          math.radians(loop_cfg["start_heading_deg"]))
+            self.loop = FrameLoop(
+                clock=self.clock, source=self.source, renderer=self.renderer, link=self.link,
+                rate_hz=loop_cfg["rate_hz"], closed_loop=loop_cfg["closed_loop"], tether=loop_cfg["tether"],
+                gain_translation=loop_cfg["gain_translation"], gain_rotation=loop_cfg["gain_rotation"],
+                origin=origin, ball_radius=loop_cfg["ball_radius"], log=self.trial_log,
+                on_frame=self._on_frame, on_event=self._publish_event)
+            if self.renderer is not None:
+                self._load_scene(self.config["render"]["scene"])
+            if self.source is not None:
+                self.source.start()
+            self._open_bus()
+            if self.config["log"]["record"] and self.trial_log is None:
+                self._trial_start("recording", {})
+        except BaseException as exc:
+            self._start_error = exc
+            self._ready.set()
+            self._shutdown()
+            raise
+        self._status_thread = threading.Thread(target=self._status_loop, name="status", daemon=True)
+        self._status_thread.start()
+        self._loop_thread = threading.current_thread()
+        self._ready.set()
+        self.loop.event("server_started", rig=self.rig)
+        try:
+            return self.loop.run(until=until, frames=frames)
+        finally:
+            self._shutdown()
+
+    def start_thread(self, timeout_s: float = 60.0) -> Server:
+        """Run the server in a thread of its own; returns when it runs (or raises why it could not start)."""
+        self._thread = threading.Thread(target=self._run_quietly, name=f"antarium-server {self.rig}", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(timeout_s):
+            raise ServerError(f"the server did not start within {timeout_s} s")
+        if self._start_error is not None:
+            raise ServerError(f"the server could not start: {self._start_error}") from self._start_error
+        return self
+
+    def _run_quietly(self) -> None:
+        try:
+            self.run()
+        except BaseException as exc:  # reported by start_thread  # noqa: BLE001
+            self._start_error = self._start_error or exc
+
+    def stop(self, timeout_s: float = 30.0) -> None:
+        """Stop the frame loop (thread-safe); with a server thread, wait until everything is closed."""
+        self._stopping.set()
+        if self.loop is not None:
+            self.loop.stop()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout_s)
+
+    def _shutdown(self) -> None:
+        self._stopping.set()
+        if self.trial_log is not None:
+            try:
+                self._trial_stop()
+            except RuntimeError as exc:
+                self.echo(f"antarium serve: closing the trial log: {exc}")
+        for entity in reversed(self._entities):
+            try:
+                entity.undeclare()
+            except Exception:  # noqa: BLE001 - a closed session has undeclared them already
+                pass
+        self._entities = []
+        if self._own_session and self.session is not None:
+            self.session.close()
+            self.session = None
+        if self.source is not None:
+            self.source.stop()
+        if self.link is not None and self._link_arg is None:
+            self.link.close()
+        if self.emulator is not None:
+            self.emulator.stop()
+        release = getattr(self.renderer, "release", None)
+        if release is not None:
+            release()
+
+    def __enter__(self) -> Server:
+        return self.start_thread()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+def _nan0(v: float) -> float:
+    return 0.0 if v != v else v
+
+
+def _sha_or_empty(scene: str) -> str:
+    from antarium.trial_log import file_sha256
+
+    return file_sha256(scene) if Path(scene).is_file() else ""
+
+
+def _json_default(value: Any) -> Any:
+    import numpy as np
+
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return str(value)
+
+
+def wait_for(predicate: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
+    """Poll `predicate` until it holds or `timeout_s` passes (for scripts and tests on real time)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(poll_s)
+    return predicate()

@@ -1,0 +1,163 @@
+"""The server on the bus, driven through `antarium.Rig`: commands, refusals with state unchanged, streams,
+trials, access control. Pose-only rig (no renderer, no dome link): the bus and command paths are real."""
+
+import json
+import math
+
+import pytest
+
+import antarium
+from antarium import bus
+from antarium.config import resolve
+from antarium.rig import RigError
+from antarium.server import Server, wait_for
+from antarium.trial_log import read_table
+
+
+def _config(tmp_path, rig="tb", **bus_extra):
+    return resolve({
+        "rig": {"name": rig},
+        "bus": {"listen": [bus.free_tcp_endpoint()], **bus_extra},
+        "log": {"dir": str(tmp_path / "logs"), "flush_s": 0.1},
+        "locomotion": {"source": "scripted", "speed": 0.02},
+    })
+
+
+@pytest.fixture
+def served(tmp_path):
+    config = _config(tmp_path)
+    server = Server(config, renderer_factory=None, link=False).start_thread()
+    rig = antarium.Rig("tb", config=config, timeout_s=5.0).connect()
+    yield server, rig
+    rig.close()
+    server.stop()
+
+
+def test_commands_change_the_state_and_reply_with_it(served):
+    server, rig = served
+    state = rig.closed_loop(False)
+    assert state["closed_loop"] is False
+    state = rig.set_pose(1.0, 2.0, heading_deg=90)
+    assert state["pose"]["x"] == 1.0 and state["pose"]["heading_deg"] == pytest.approx(90)
+    state = rig.rotate_scene(90)
+    assert state["pose"]["heading_deg"] == pytest.approx(0.0, abs=1e-9)
+    assert state["scene_rotation_deg"] == pytest.approx(90)
+    rig.gains(translation=2.0)
+    rig.tether("fixed")
+    assert server.loop.gain_translation == 2.0 and server.loop.tether == "fixed"
+    assert wait_for(lambda: rig.latest() is not None and rig.latest().pose.x == 1.0, 3.0)
+    assert rig.pose().y == 2.0
+    state = rig.reset_origin()
+    assert state["pose"]["x"] == 0.0 and state["scene_rotation_deg"] == 0.0
+
+
+@pytest.mark.parametrize("command, params, message", [
+    ("rotate_scene", {"deg": "ninety"}, "must be a finite number"),
+    ("rotate_scene", {}, "missing parameter 'deg'"),
+    ("set_pose", {"x": 1.0, "y": 2.0, "heading": 3}, "unknown parameter"),
+    ("gains", {"translation": 1e9}, "must be in"),
+    ("tether", {"tether": "loose"}, "must be one of"),
+    ("closed_loop", {"on": 1}, "true or false"),
+    ("load_scene", {"scene": "/nonexistent/world.glb"}, "no renderer"),
+    ("trial_stop", {}, "no trial is running"),
+])
+def test_bad_commands_are_refused_with_the_state_unchanged(served, command, params, message):
+    server, rig = served
+    before = rig.status()
+    with pytest.raises(RigError, match=message):
+        rig.call(command, **params)
+    after = rig.status()
+    for key in ("pose", "closed_loop", "tether", "gains", "scene_rotation_deg", "trial", "scene"):
+        if key == "pose" and before["closed_loop"]:
+            continue  # the walker moves on in closed loop
+        assert after[key] == before[key], key
+
+
+def test_unknown_command_and_bad_json_are_refused(served):
+    server, rig = served
+    replies = list(rig._session.get(bus.rig_key("tb", "cmd", "fly"), payload=b"{}", timeout=5))
+    assert json.loads(replies[0].err.payload.to_bytes())["error"].startswith("unknown command 'fly'")
+    replies = list(rig._session.get(bus.command_key("tb", "set_pose"), payload=b"{x:", timeout=5))
+    assert "not JSON" in json.loads(replies[0].err.payload.to_bytes())["error"]
+
+
+def test_trial_records_frames_commands_and_metadata(served, tmp_path):
+    server, rig = served
+    with rig.trial("homing one", ant=3, colony="M. croslandi") as path:
+        rig.rotate_scene(-90)
+        with pytest.raises(RigError):
+            rig.rotate_scene(float("nan"))
+        rig.wait(0.3)
+    frames = read_table(path, "frames")
+    assert len(frames["frame"]) >= 30
+    commands = read_table(path, "commands")
+    names = list(commands["name"])
+    assert names[0] == "trial_start" and "rotate_scene" in names and names[-1] == "trial_stop"
+    assert list(commands["ok"]).count(0) == 1  # the refused rotation is logged as refused
+    events = list(read_table(path, "events")["kind"])
+    assert "scene_rotated" in events and "trial_started" in events and "trial_stopped" in events
+    with pytest.raises(RigError, match="no trial is running"):
+        rig.stop_trial()
+
+
+def test_status_and_streams(served):
+    server, rig = served
+    poses, events = [], []
+    rig.on_pose(poses.append)
+    rig.on_event(events.append)
+    rig.rotate_scene(10)
+    assert wait_for(lambda: len(poses) > 20 and any(e["kind"] == "scene_rotated" for e in events), 5.0)
+    frames = [p.frame for p in poses]
+    assert frames == sorted(frames)
+    status = rig.status()
+    assert status["rig"] == "tb" and status["frames"] > 0 and status["target_rate_hz"] == 190.0
+    assert "latency" in status and status["locomotion"]["connected"] is True
+    received = []
+    sub = rig._session.declare_subscriber(bus.status_key("tb"), lambda s: received.append(s))
+    assert wait_for(lambda: len(received) >= 1, 3.0)
+    sub.undeclare()
+    assert json.loads(received[0].payload.to_bytes())["rig"] == "tb"
+
+
+def test_no_server_gives_a_clear_error(tmp_path):
+    config = _config(tmp_path, rig="nobody")
+    with pytest.raises(RigError, match="no antarium server for rig 'nobody'"):
+        antarium.Rig("nobody", config=config, timeout_s=0.5).connect()
+
+
+ACL = """{
+  enabled: true,
+  default_permission: "deny",
+  rules: [{id: "all", messages: ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
+            "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"],
+           flows: ["ingress", "egress"], permission: "allow", key_exprs: ["antarium/**"]}],
+  subjects: [{id: "operators", zids: ["%s"]}],
+  policies: [{rules: ["all"], subjects: ["operators"]}],
+}"""
+
+
+def test_access_control_refuses_an_unlisted_peer(tmp_path):
+    import zenoh
+
+    listed = "a1b2c3d4e5f6a7b8"
+    acl = tmp_path / "acl.json5"
+    acl.write_text(ACL % listed)
+    config = _config(tmp_path, rig="tacl", access_control=str(acl))
+    server = Server(config, renderer_factory=None, link=False).start_thread()
+    try:
+        def client(zid):
+            conf = bus.session_config(config["bus"], "client")
+            conf.insert_json5("id", json.dumps(zid))
+            return zenoh.open(conf)
+
+        with client(listed) as ok_session:
+            rig = antarium.Rig("tacl", config=config, session=ok_session, timeout_s=3.0).connect()
+            assert rig.rotate_scene(45)["scene_rotation_deg"] == pytest.approx(45)
+        with client("f0e0d0c0b0a0908") as other:
+            with pytest.raises(RigError, match="no antarium server"):  # it cannot even see the server
+                antarium.Rig("tacl", config=config, session=other, timeout_s=1.0).connect()
+            replies = list(other.get(bus.command_key("tacl", "rotate_scene"), payload=b'{"deg": 45}', timeout=1.0))
+            assert replies == []  # the query was dropped by the server's access control
+        assert math.degrees(server.loop.scene_rotation) == pytest.approx(45)
+    finally:
+        server.stop()
