@@ -160,6 +160,7 @@ class UsbTrackball(LocomotionSource):
         return dev
 
     def _run(self) -> None:
+        import usb.core
         import usb.util
 
         while not self._stop.is_set():
