@@ -32,7 +32,7 @@ class AircoreBank:
         self.target = np.zeros(shape)   # rotor target angle (unwrapped)
         self.error0 = np.zeros(shape)   # rotor angle - target at t_cmd
         self.rate0 = np.zeros(shape)    # rotor angular velocity at t_cmd
-        self.t_cmd = np.full(shape, float(t0))
+        self.t_cmd = np.full(shape, float(t0) - HOLD_DELAY_S - HOLD_RAMP_S)  # at rest, on holding current
 
     def _state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(error, rate) of every rotor at time t: the closed-form underdamped response since its command."""
@@ -78,6 +78,11 @@ class AircoreBank:
     def holding(self, t: float) -> np.ndarray:
         """True where an actuator is on holding current."""
         return np.maximum(t - self.t_cmd, 0.0) >= HOLD_DELAY_S + HOLD_RAMP_S
+
+    def supply_current_a(self, t: float) -> np.ndarray:
+        """Current each actuator draws from the 12 V supply: |sin coil| + |cos coil| (at most 77 mA moving)."""
+        s, c = self.coil_currents_a(t)
+        return np.abs(s) + np.abs(c)
 
     def coil_currents_a(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(sin coil, cos coil) currents in A: amplitude times sin/cos of the field (target) angle."""

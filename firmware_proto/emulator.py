@@ -150,6 +150,8 @@ class Emulator:
         self.panel_current_a = supply_current_a(self.raw, CHIPS_PER_PANEL)
         self._next_thermal = t0
         self._latched: list[tuple[int, bytes]] = []
+        self._polariser_targets = np.zeros((N_PANELS, N_ACTUATORS))
+        self._polariser_commanded = np.zeros((N_PANELS, N_ACTUATORS), bool)
         self._shown: np.ndarray | None = None
         self._drive_cache: np.ndarray | None = None
         # upstream status as last received from the panels
@@ -203,6 +205,7 @@ class Emulator:
             panels = range(N_PANELS) if msg.codes.shape[0] == N_PANELS else [msg.address]
             for row, p in zip(msg.codes, panels, strict=True):
                 self._to_panel(p, ST_POLARISER, row.astype(">u2").tobytes())
+            self._flush_polarisers()
             self.counters["polariser_updates"] += 1
             return []
         if opcode in (OP_DOT_CORRECTION, OP_BRIGHTNESS):
@@ -279,7 +282,7 @@ class Emulator:
         if self.faults.any():
             drive = np.where(self.faults == 1, 0, drive)  # an open LED draws nothing; a short still does
         self.panel_current_a = supply_current_a(drive, CHIPS_PER_PANEL)
-        coils = np.abs(np.stack(self.actuators.coil_currents_a(t))).sum(axis=(0, 2))
+        coils = self.actuators.supply_current_a(t).sum(axis=1)
         self.thermal.set_power(t, LED_SUPPLY_V * self.panel_current_a + COIL_VOLTAGE_V * coils)
 
     def led_values(self) -> np.ndarray:
@@ -301,14 +304,20 @@ class Emulator:
         self.brightness[panel] = percent
         self._changed()
 
-    def actuators_command(self, panel: int, angles: np.ndarray) -> None:
+    def queue_polariser(self, panel: int, angles: np.ndarray) -> None:
+        """A panel was told to turn its polarisers to `angles` (9,); applied with the others of the same
+        datagram in one vectorised step."""
+        self._polariser_targets[panel] = angles
+        self._polariser_commanded[panel] = True
+
+    def _flush_polarisers(self) -> None:
+        if not self._polariser_commanded.any():
+            return
         t = self.clock.now()
-        present = self.actuators.polariser_angle(t)[panel]
-        moved = np.zeros(self.actuators.target.shape, bool)
-        moved[panel] = np.abs(np.angle(np.exp(2j * (angles - present)))) > 1e-9
-        target = np.zeros(self.actuators.target.shape)
-        target[panel] = angles
-        self.actuators.command_polariser(t, target, moved)
+        present = self.actuators.polariser_angle(t)
+        moved = self._polariser_commanded & (np.abs(np.sin(self._polariser_targets - present)) > 1e-9)
+        self.actuators.command_polariser(t, self._polariser_targets, moved)
+        self._polariser_commanded[:] = False
 
     def polariser_angles(self) -> np.ndarray:
         """(55, 9) present e-vector angles of the polarisers, rad in [0, pi)."""

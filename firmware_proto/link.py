@@ -62,7 +62,9 @@ class Link(ABC):
 
     # ---- public API ----
     def send(self, data) -> bool:
-        """Send one raw datagram; failures are counted, never raised."""
+        """Send one raw datagram; transport failures are counted, never raised (RuntimeError once closed)."""
+        if self.closed:
+            raise RuntimeError("the dome link is closed")
         ok = self._transmit(data)
         self.counters["datagrams_sent" if ok else "datagrams_failed"] += 1
         return ok

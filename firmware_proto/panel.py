@@ -58,7 +58,7 @@ class Panel:
             return self._latch(frame.info & (SEQ_MODULO - 1))
         if ftype == ST_POLARISER:
             codes = np.frombuffer(frame.data, ">u2")
-            self.dome.actuators_command(self.index, codes_to_angles(codes))
+            self.dome.queue_polariser(self.index, codes_to_angles(codes))
             return None
         if ftype == ST_DOT_CORRECTION:
             self.dome.set_dot_correction(self.index, np.frombuffer(frame.data, np.uint8))

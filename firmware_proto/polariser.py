@@ -16,7 +16,14 @@ import numpy as np
 from antarium.geometry.constants import N_ACTUATORS, N_PANELS
 
 from .errors import FieldRangeError, LengthError, UnknownTypeError
-from .header import ADDR_ALL, CLASS_CONTROL, CONTROL_HEADER_SIZE, control_header, parse_control_header
+from .header import (
+    ADDR_ALL,
+    CLASS_CONTROL,
+    CONTROL_HEADER_SIZE,
+    check_address,
+    control_header,
+    parse_control_header,
+)
 
 OP_POLARISER = 0x02
 CODES_PER_PI = 65536
@@ -61,6 +68,7 @@ def decode_polarisers(buf) -> PolariserMessage:
     address, opcode, info = parse_control_header(buf, CLASS_CONTROL)
     if opcode != OP_POLARISER:
         raise UnknownTypeError(f"opcode 0x{opcode:02x} is not POLARISER (0x{OP_POLARISER:02x})")
+    check_address(address, allow_all=True)
     n = N_PANELS if address == ADDR_ALL else 1
     size = CONTROL_HEADER_SIZE + 2 * N_ACTUATORS * n
     if len(buf) != size:

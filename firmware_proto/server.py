@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import signal
 import socket
+import threading
 import time
 
 from .emulator import Emulator
@@ -19,11 +20,10 @@ def format_stats(stats: dict) -> str:
     return "\n".join(lines)
 
 
-def serve(emulator: Emulator, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
-          seconds: float | None = None, ready=None) -> dict:
-    """Answer datagrams on host:port until `seconds` pass (None: until SIGINT/SIGTERM); returns the stats.
-
-    `ready(address)` is called once the socket is bound.
+def serve(emulator: Emulator, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, seconds: float | None = None,
+          ready=None, stop: threading.Event | None = None, handle_signals: bool = False) -> dict:
+    """Answer datagrams on host:port until `seconds` pass, `stop` is set, or (with `handle_signals`, main thread
+    only) SIGINT/SIGTERM arrives; returns the emulator's stats. `ready(address)` is called once bound.
     """
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
@@ -33,24 +33,22 @@ def serve(emulator: Emulator, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT
     except OSError as exc:
         sock.close()
         raise RuntimeError(f"cannot listen on UDP {host}:{port}: {exc}") from exc
-    stop = False
+    stop = stop or threading.Event()
 
     def _stop(signum, frame):
-        nonlocal stop
-        stop = True
+        stop.set()
 
-    previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    signals = (signal.SIGINT, signal.SIGTERM) if handle_signals else ()
+    previous = {s: signal.signal(s, _stop) for s in signals}
     sock.settimeout(0.1)
     end = None if seconds is None else time.monotonic() + seconds
     if ready is not None:
         ready(sock.getsockname())
     try:
-        while not stop and (end is None or time.monotonic() < end):
+        while not stop.is_set() and (end is None or time.monotonic() < end):
             try:
                 data, peer = sock.recvfrom(MAX_DATAGRAM)
-            except TimeoutError:
-                continue
-            except InterruptedError:
+            except (TimeoutError, InterruptedError):
                 continue
             except OSError:
                 continue  # e.g. ICMP from a vanished client; the board keeps going

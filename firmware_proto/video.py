@@ -7,17 +7,17 @@ Layout (1,112 bytes, big-endian):
     bytes 2..     370 pixels in local pixel order, 3 bytes each:
                   L (uint16, big-endian) = luminance, C (uint8) = chromaticity
 
-A green/blue pixel carries L = G + B and C = round(255 * G / L) (the green share; C = 0 when L = 0); a UV pixel
-carries L = plain + polarised drive and C = round(255 * polarised / L), the share of its polarised LED. The panel
-decodes G = (L * C + 127) div 255 (integer round-to-nearest), B = L - G. Each of G and B is then within
-L / 510 + 0.5 LSB of the original (see docs/protocol.md).
+A green/blue pixel carries L = G + B and C = floor(255 * G / L + 1/2), the green share (C = 0 when L = 0); a UV
+pixel carries L = plain + polarised drive and C = floor(255 * P / L + 1/2), the share of its polarised LED P.
+The panel decodes the share S = (L * C + 127) div 255 (integer round-to-nearest): G = S, B = L - S for a green/blue
+pixel, P = S, plain = L - S for a UV pixel. Each LED value is then within L / 510 + 1/2 LSB of the original.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from antarium.geometry.constants import LEDS_PER_PANEL, N_PANELS, N_PIXELS, PIXELS_PER_PANEL
+from antarium.geometry.constants import GB_PER_PANEL, LEDS_PER_PANEL, N_PANELS, N_PIXELS, PIXELS_PER_PANEL
 
 from .errors import FieldRangeError, LengthError, PanelError, UnknownTypeError
 from .header import CLASS_VIDEO, FLAG_IMMEDIATE, SEQ_MODULO, split_td
@@ -49,18 +49,17 @@ def video_info(seq: int, immediate: bool = False) -> int:
     return (FLAG_IMMEDIATE if immediate else 0) | seq
 
 
-def luma_chroma(first, second) -> tuple[np.ndarray, np.ndarray]:
-    """Two LED drives (uint16 arrays, same shape) -> (L uint32, C uint8), L = first + second.
-
-    C = round(255 * first / L), 0 where L == 0. Raises ValueError where L > 65535.
+def luma_chroma(share, other) -> tuple[np.ndarray, np.ndarray]:
+    """Two LED drives (uint16 arrays, same shape) -> (L uint32, C uint8): L = share + other,
+    C = floor(255 * share / L + 1/2), 0 where L == 0. Raises ValueError where L > 65535.
     """
-    total = np.add(first, second, dtype=np.uint32)
+    total = np.add(share, other, dtype=np.uint32)
     if total.size and int(total.max()) > 0xFFFF:
         bad = int(np.argmax(total > 0xFFFF))
         raise ValueError(
             f"pixel {bad}: drive sum {int(total.flat[bad])} > 65535; a pixel never draws more than one LED's current"
         )
-    num = np.multiply(first, 510, dtype=np.uint32)
+    num = np.multiply(share, 510, dtype=np.uint32)
     num += total
     den = total << 1
     np.maximum(den, 1, out=den)
@@ -69,12 +68,12 @@ def luma_chroma(first, second) -> tuple[np.ndarray, np.ndarray]:
 
 
 def split_luma_chroma(lum, chroma) -> tuple[np.ndarray, np.ndarray]:
-    """(L, C) as on the wire -> (first, second) uint16: first = (L * C + 127) div 255, second = L - first."""
+    """(L, C) as on the wire -> (share, other) uint16: share = (L * C + 127) div 255, other = L - share."""
     lum = np.asarray(lum, dtype=np.uint32)
-    first = lum * np.asarray(chroma, dtype=np.uint32)
-    first += 127
-    first //= 255
-    return first.astype(np.uint16), (lum - first).astype(np.uint16)
+    share = lum * np.asarray(chroma, dtype=np.uint32)
+    share += 127
+    share //= 255
+    return share.astype(np.uint16), (lum - share).astype(np.uint16)
 
 
 def encode_frame(frame: np.ndarray, seq: int, immediate: bool = False, out: np.ndarray | None = None) -> np.ndarray:
@@ -89,12 +88,16 @@ def encode_frame(frame: np.ndarray, seq: int, immediate: bool = False, out: np.n
         out = np.empty((N_PANELS, VIDEO_PAYLOAD_SIZE), np.uint8)
     elif out.shape != (N_PANELS, VIDEO_PAYLOAD_SIZE) or out.dtype != np.uint8 or not out.flags.c_contiguous:
         raise ValueError(f"out must be a C-contiguous ({N_PANELS}, {VIDEO_PAYLOAD_SIZE}) uint8 array")
-    lum, chroma = luma_chroma(frame[:, 0], frame[:, 1])
+    by_panel = frame.reshape(N_PANELS, PIXELS_PER_PANEL, 2)
+    share = by_panel[:, :, 0].copy()   # green; for UV pixels the polarised LED (column 1)
+    other = by_panel[:, :, 1].copy()   # blue; for UV pixels the plain LED (column 0)
+    share[:, GB_PER_PANEL:], other[:, GB_PER_PANEL:] = by_panel[:, GB_PER_PANEL:, 1], by_panel[:, GB_PER_PANEL:, 0]
+    lum, chroma = luma_chroma(share, other)
     out[:, 0] = np.arange(N_PANELS, dtype=np.uint8)  # TD: class 0, panel
     out[:, 1] = info
     pixels = out[:, VIDEO_HEADER_SIZE:].view(PIXEL_DTYPE)  # (55, 370)
-    pixels["L"] = lum.reshape(N_PANELS, PIXELS_PER_PANEL)
-    pixels["C"] = chroma.reshape(N_PANELS, PIXELS_PER_PANEL)
+    pixels["L"] = lum
+    pixels["C"] = chroma
     return out
 
 
@@ -117,10 +120,13 @@ def decode_panel_data(data) -> np.ndarray:
     if arr.size % PANEL_DATA_SIZE:
         raise LengthError(f"panel data must be a multiple of {PANEL_DATA_SIZE} bytes, got {arr.size}")
     pixels = np.ascontiguousarray(arr, dtype=np.uint8).reshape(-1, PANEL_DATA_SIZE).view(PIXEL_DTYPE)
-    first, second = split_luma_chroma(pixels["L"], pixels["C"])
+    share, other = split_luma_chroma(pixels["L"], pixels["C"])
     leds = np.empty((pixels.shape[0], LEDS_PER_PANEL), np.uint16)
-    leds[:, 0::2] = first
-    leds[:, 1::2] = second
+    leds[:, 0::2] = share   # green
+    leds[:, 1::2] = other   # blue
+    uv = 2 * GB_PER_PANEL   # UV pixels: the share is the polarised LED (1), the rest the plain one (0)
+    leds[:, uv + 1::2] = share[:, GB_PER_PANEL:]
+    leds[:, uv::2] = other[:, GB_PER_PANEL:]
     return leds
 
 

@@ -37,6 +37,6 @@ def run(args: argparse.Namespace) -> int:
     def ready(address):
         print(f"antarium emulate: listening on udp://{address[0]}:{address[1]} (line: {args.line})", flush=True)
 
-    stats = serve(emulator, args.host, args.port, args.seconds, ready)
+    stats = serve(emulator, args.host, args.port, args.seconds, ready, handle_signals=True)
     print("antarium emulate: statistics\n" + format_stats(stats), flush=True)
     return 0
