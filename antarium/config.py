@@ -40,7 +40,10 @@ DEFAULTS: dict[str, dict[str, Any]] = {
         "port": 0,  # 0 with spawn_emulator: an OS-chosen free port
         "spawn_emulator": True,  # start `antarium emulate` as its own process on loopback
     },
-    "render": {"scene": "default", "face_size": 64},
+    "render": {
+        "scene": "habitat",  # a scene name, a file path, or a table {scene = name, ...parameters} (renderers)
+        "face_size": 0,  # cube face side in texels; 0: the renderer's default (from the LED pitch)
+    },
     "bus": {
         "enabled": True,
         "mode": "peer",
@@ -71,7 +74,7 @@ _RANGES = {
     ("loop", "stats_every"): (1, 100000),
     ("loop", "pose_every"): (1, 100000),
     ("link", "port"): (0, 65535),
-    ("render", "face_size"): (8, 4096),
+    ("render", "face_size"): (0, 2048),
     ("log", "flush_s"): (0.01, 1.0),
 }
 #: sections whose extra keys are allowed (passed on to a back-end)
@@ -96,6 +99,9 @@ def check_value(section: str, key: str, value: Any) -> Any:
     elif isinstance(default, int):
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{where} must be an integer, got {value!r}")
+    elif (section, key) == ("render", "scene"):
+        if not isinstance(value, (str, dict)) or (isinstance(value, dict) and "scene" not in value):
+            raise ConfigError(f"{where} must be a scene name, a file path or a table with 'scene', got {value!r}")
     elif isinstance(default, str):
         if not isinstance(value, str):
             raise ConfigError(f"{where} must be a string, got {value!r}")

@@ -18,7 +18,7 @@ class CommandError(ValueError):
 
 @dataclass(frozen=True)
 class Param:
-    kind: str  # "number", "bool", "str", "object", "number_list"
+    kind: str  # "number", "bool", "str", "object", "scene", "number_list"
     required: bool = False
     default: Any = None
     lo: float | None = None
@@ -30,7 +30,7 @@ class Param:
 _XY = 1e6  # metres: anything farther is a typo, not a world
 #: command name -> parameter name -> declaration
 COMMANDS: dict[str, dict[str, Param]] = {
-    "load_scene": {"scene": Param("str", True, doc="scene file path, or a built-in scene name ('default')")},
+    "load_scene": {"scene": Param("scene", True, doc="scene name, file path, or {scene: name, ...parameters}")},
     "set_pose": {
         "x": Param("number", True, lo=-_XY, hi=_XY, doc="m"),
         "y": Param("number", True, lo=-_XY, hi=_XY, doc="m"),
@@ -50,15 +50,24 @@ COMMANDS: dict[str, dict[str, Param]] = {
         "translation": Param("number", False, None, lo=-100, hi=100),
         "rotation": Param("number", False, None, lo=-100, hi=100),
     },
-    "scene_edit": {"edit": Param("object", True, doc="passed to the renderer's scene-edit call")},
+    "scene_edit": {
+        "op": Param("str", True, choices=("move_object", "remove_object", "scale_channel", "swap_green_blue",
+                                          "set_lowpass", "set_contrast", "set_brightness")),
+        "args": Param("object", False, {}, doc="the operation's arguments (see docs/bus.md)"),
+    },
     "trial_start": {
         "name": Param("str", True, doc="trial name (part of the log file name)"),
         "metadata": Param("object", False, {}, doc="JSON object stored with the trial"),
     },
     "trial_stop": {},
-    "sky": {"sky": Param("object", True, doc="passed to the renderer's sky call (sun position, polarisation)")},
+    "sky": {
+        "sun_azimuth_deg": Param("number", False, None, lo=-360, hi=360),
+        "sun_elevation_deg": Param("number", False, None, lo=-90, hi=90),
+        "dop_max": Param("number", False, None, lo=0, hi=1, doc="maximum degree of polarisation"),
+        "sun_radiance": Param("number", False, None, lo=0, hi=1000),
+    },
     "polarisers": {
-        "angles_deg": Param("number_list", True, lo=-3600, hi=3600, doc="55 x 9 e-vector angles, degrees"),
+        "angles_deg": Param("number_list", False, None, doc="55 x 9 e-vector angles, degrees; null: follow the sky"),
     },
     "status": {},
 }
@@ -83,8 +92,11 @@ def _check(command: str, name: str, p: Param, value: Any) -> Any:
     elif p.kind == "object":
         if not isinstance(value, dict):
             raise CommandError(f"{where} must be a JSON object, got {value!r}")
+    elif p.kind == "scene":
+        if not (isinstance(value, str) and value) and not (isinstance(value, dict) and "scene" in value):
+            raise CommandError(f"{where} must be a scene name, a file path or an object with 'scene', got {value!r}")
     elif p.kind == "number_list":
-        if not isinstance(value, list):
+        if value is not None and not isinstance(value, list):
             raise CommandError(f"{where} must be a (nested) list of numbers, got {type(value).__name__}")
     return value
 
@@ -111,7 +123,7 @@ def parse_command(command: str, params: Any) -> dict[str, Any]:
             out[name] = _check(command, name, p, params[name])
     if command == "reset_origin" and (out["x"] is None) != (out["y"] is None):
         raise CommandError("reset_origin: give both 'x' and 'y' for a new origin, or neither")
-    if command == "polarisers":
+    if command == "polarisers" and out["angles_deg"] is not None:
         import numpy as np
 
         try:

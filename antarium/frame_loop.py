@@ -40,10 +40,13 @@ from antarium.pose import Pose
 TETHERS = ("free_yaw", "fixed")
 #: how many recent frames the statistics (percentiles, frame rate) cover
 STATS_WINDOW = 2048
-#: check the locomotion source's and link's health every this many frames
+#: check the locomotion source's health every this many frames
 HEALTH_EVERY = 10
-#: the link is reported down when its telemetry is older than this (s)
+#: ask the distributor for telemetry this often (s); the link is down when the newest reply is older than
+#: LINK_TIMEOUT_S, or when datagrams failed (peer refused: the distributor or emulator is gone)
+TELEMETRY_EVERY_S = 0.1
 LINK_TIMEOUT_S = 0.5
+LINK_STARTUP_S = 5.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,7 +124,6 @@ class FrameLoop:
         self.locomotion_connected = True
         self.link_ok = True
         self.link_outages = 0
-        self.link_errors = 0
         self.last_link_error = ""
         self._next_t: float | None = None
         self._frame_buf = None
@@ -130,7 +132,16 @@ class FrameLoop:
         self._loop_thread: threading.Thread | None = None
         self._stats = np.full((STATS_WINDOW, 8), np.nan)  # t_start, latency, render, sample, convert, encode, send,
         # pacing error
-        self._polarisers_dirty = renderer is not None
+        self.polariser_override = None
+        self.telemetry: dict[str, Any] = {}
+        self._next_telemetry_t = -math.inf
+        self._failed_datagrams = 0
+        self._t_first: float | None = None
+        self._polariser_heading: float | None = None
+        self._polarisers_dirty = False
+        self._sky_present = False
+        if renderer is not None:
+            self.renderer_changed()
 
     # -- events and commands ---------------------------------------------------------------------------
     def event(self, kind: str, **data: Any) -> None:
@@ -207,6 +218,19 @@ class FrameLoop:
     def renderer_changed(self) -> None:
         """Call after changing the renderer's scene or sky: the polariser angles are sent with the next frame."""
         self._polarisers_dirty = True
+        scene = getattr(self.renderer, "scene", None)
+        self._sky_present = getattr(scene, "sky", None) is not None
+
+    def set_polarisers(self, angles) -> None:
+        """Hold the polarisers at `angles` (55, 9) rad, or None to follow the scene's sky again."""
+        if angles is not None:
+            angles = np.asarray(angles, dtype=np.float64)
+            if angles.shape != (55, 9) or not np.all(np.isfinite(angles)):
+                raise ValueError(f"polariser angles must be (55, 9) finite radians, got shape {angles.shape}")
+            angles = np.mod(angles, math.pi)
+        self.polariser_override = angles
+        self._polarisers_dirty = True
+        self.event("polarisers", mode="sky" if angles is None else "fixed")
 
     # -- the frame -------------------------------------------------------------------------------------
     def _integrate(self, samples) -> None:
@@ -221,25 +245,45 @@ class FrameLoop:
             y += gt * (sn * dx + c * dy)
         self.pose = Pose(x, y, self.pose.z, math.remainder(heading, math.tau))
 
-    def _check_health(self) -> None:
+    def _check_health(self, now: float) -> None:
         if self.source is not None:
             connected = bool(self.source.status().get("connected", True))
             if connected != self.locomotion_connected:
                 self.locomotion_connected = connected
                 self.event("locomotion_back" if connected else "locomotion_lost", status=self.source.status())
-        if self.link is not None:
-            ok = self.link_errors == 0 and self._telemetry_fresh()
+        if self.link is not None and now >= self._next_telemetry_t:
+            self._next_telemetry_t = now + TELEMETRY_EVERY_S
+            self.telemetry = self.link.telemetry()
+            failed = self.telemetry.get("link", {}).get("datagrams_failed", 0)
+            new_failures, self._failed_datagrams = failed - self._failed_datagrams, failed
+            age = self.telemetry.get("age_s")
+            if age is None:  # the distributor has not answered yet: allow it time to come up
+                fresh = now - self._t_first < LINK_STARTUP_S
+            else:
+                fresh = age <= LINK_TIMEOUT_S
+            ok = fresh and new_failures == 0
+            if new_failures:
+                self.last_link_error = f"{new_failures} datagrams failed (peer refused or buffer full)"
+            elif not fresh:
+                self.last_link_error = "no telemetry from the distributor" + (
+                    f" for {age:.2f} s" if age is not None else "")
             if ok != self.link_ok:
                 self.link_ok = ok
                 if not ok:
                     self.link_outages += 1
-                self.event("link_back" if ok else "link_outage", error=self.last_link_error)
-            self.link_errors = 0
+                self.event("link_back" if ok else "link_outage", error="" if ok else self.last_link_error)
 
-    def _telemetry_fresh(self) -> bool:
-        telemetry = self.link.telemetry() or {}
-        age = telemetry.get("age_s")
-        return age is None or age <= LINK_TIMEOUT_S
+    def _send_polarisers(self, pose: Pose) -> None:
+        """Polariser angles to the link: a commanded override, or the sky's for this pose (when they change)."""
+        if self.polariser_override is not None:
+            if self._polarisers_dirty:
+                self.link.send_polarisers(self.polariser_override)
+                self._polarisers_dirty = False
+            return
+        if self._polarisers_dirty or (self._sky_present and pose.heading != self._polariser_heading):
+            self.link.send_polarisers(self.renderer.polariser_angles())
+            self._polarisers_dirty = False
+            self._polariser_heading = pose.heading
 
     def step(self) -> FrameRecord:
         """Run one frame (waiting for its slot on the clock) and return what happened."""
@@ -250,8 +294,10 @@ class FrameLoop:
         t_target = self._next_t
         clock.sleep_until(t_target)
         t_start = clock.now()
+        if self._t_first is None:
+            self._t_first = t_start
         if self.frame % HEALTH_EVERY == 0:
-            self._check_health()
+            self._check_health(t_start)
         samples = self.source.read() if self.source is not None else []
         newest = samples[-1] if samples else None
         if samples:
@@ -270,14 +316,9 @@ class FrameLoop:
             convert = timings.get("convert", math.nan)
         if self.link is not None and self._frame_buf is not None:
             t0 = clock.now()
-            try:
-                if self._polarisers_dirty and hasattr(self.renderer, "polariser_angles"):
-                    self.link.send_polarisers(self.renderer.polariser_angles())
-                    self._polarisers_dirty = False
-                self.link.send_frame(self._frame_buf)
-            except OSError as exc:
-                self.link_errors += 1
-                self.last_link_error = f"{type(exc).__name__}: {exc}"
+            if self.renderer is not None and hasattr(self.renderer, "polariser_angles"):
+                self._send_polarisers(pose)
+            self.link.send_frame(self._frame_buf)
             t1 = clock.now()
             link_timings = getattr(self.link, "last_timings", None) or {}
             encode = link_timings.get("encode", math.nan)

@@ -21,6 +21,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from antarium import bus
 from antarium.clock import Clock, MonotonicClock
 from antarium.control import CommandError, parse_command
@@ -78,12 +80,26 @@ def _free_udp_port(host: str) -> int:
         return s.getsockname()[1]
 
 
-def default_renderer_factory(render_cfg: dict[str, Any]):
-    """The default habitat renderer from `[render]` (built in the thread that will render)."""
+def default_renderer_factory(render_cfg: dict[str, Any], clock: Clock | None = None):
+    """The renderer from `[render]` (built in the thread that will render; the scene is loaded after)."""
     from antarium.geometry import load_dome
     from antarium.renderers import Renderer
 
-    return Renderer(load_dome(), face_size=render_cfg["face_size"])
+    return Renderer(load_dome(), face_size=render_cfg["face_size"] or None, clock=clock)
+
+
+#: scene_edit operations -> (renderer method, {bus argument: (renderer argument, converter)})
+_DEG = math.radians
+SCENE_EDITS: dict[str, tuple[str, dict[str, tuple[str, Callable]]]] = {
+    "move_object": ("move_object", {"name": ("name", str), "position": ("position", lambda v: [float(c) for c in v]),
+                                    "yaw_deg": ("yaw", lambda v: _DEG(float(v)))}),
+    "remove_object": ("remove_object", {"name": ("name", str)}),
+    "scale_channel": ("scale_channel", {"channel": ("channel", str), "factor": ("factor", float)}),
+    "swap_green_blue": ("swap_green_blue", {"swap": ("swap", bool)}),
+    "set_lowpass": ("set_lowpass", {"cutoff_deg": ("cutoff_deg", lambda v: None if v is None else float(v))}),
+    "set_contrast": ("set_contrast", {"contrast": ("contrast", float)}),
+    "set_brightness": ("set_brightness", {"brightness": ("brightness", float)}),
+}
 
 
 class Server:
@@ -113,6 +129,7 @@ class Server:
         self.trial_log = None
         self.trial_name: str | None = None
         self.scene_name: str | None = None
+        self._scene_digest = ""
         self._entities: list = []
         self._pose_pub = self._stats_pub = None
         self._ready = threading.Event()
@@ -236,11 +253,8 @@ class Server:
                 out["alarms"].append("locomotion source disconnected: pose held")
         if self.source is not None:
             out["locomotion"] = self.source.status()
-        if self.link is not None:
-            try:
-                out["telemetry"] = self.link.telemetry()
-            except OSError as exc:
-                out["telemetry"] = {"error": str(exc)}
+        if loop is not None and self.link is not None:
+            out["telemetry"] = loop.telemetry  # polled by the loop's thread (the link is not shared)
         if self.emulator is not None:
             out["emulator_running"] = self.emulator.running
         log = self.trial_log
@@ -315,15 +329,13 @@ class Server:
         elif name == "load_scene":
             self._load_scene(p["scene"])
         elif name == "scene_edit":
-            self._renderer_call("edit_scene", "scene edits", p["edit"])
+            self._scene_edit(p["op"], p["args"])
         elif name == "sky":
-            self._renderer_call("set_sky", "sky settings", p["sky"])
+            self._set_sky(p)
         elif name == "polarisers":
             if self.link is None:
                 raise RuntimeError("polarisers: this rig has no dome link")
-            angles = (p["angles_deg"] * math.pi / 180.0) % math.pi
-            self.link.send_polarisers(angles)
-            loop.event("polarisers_set", source="command")
+            loop.set_polarisers(None if p["angles_deg"] is None else np.radians(p["angles_deg"]))
         return self._state()
 
     def _state(self) -> dict[str, Any]:
@@ -334,36 +346,70 @@ class Server:
                 "tether": loop.tether, "gains": {"translation": loop.gain_translation, "rotation": loop.gain_rotation},
                 "scene": self.scene_name, "trial": self.trial_name}
 
-    def _renderer_call(self, method: str, what: str, kwargs: dict[str, Any]) -> None:
-        fn = getattr(self.renderer, method, None)
-        if fn is None:
-            raise RuntimeError(f"this rig's renderer does not support {what}")
-        try:
-            fn(**kwargs)
-        except TypeError as exc:
-            raise CommandError(f"{what}: {exc}") from None
-        self.loop.renderer_changed()
-        self.loop.event(method, **kwargs)
-
-    def _load_scene(self, scene: str) -> None:
-        """Load a scene into the renderer; on failure the previous scene stays on the dome."""
-        from antarium.trial_log import file_sha256
-
+    def _require_renderer(self, what: str):
         if self.renderer is None:
-            raise RuntimeError("load_scene: this rig has no renderer (pose-only)")
-        path = Path(scene)
-        digest = file_sha256(path) if path.is_file() else ""
-        if not path.is_file() and scene != "default" and (path.suffix or "/" in scene):
-            raise CommandError(f"load_scene: scene file {scene!r} does not exist")
+            raise RuntimeError(f"{what}: this rig has no renderer (pose-only)")
+        return self.renderer
+
+    def _scene_edit(self, op: str, args: dict[str, Any]) -> None:
+        """One edit of the current scene (renderer methods); a failing edit changes nothing."""
+        renderer = self._require_renderer("scene_edit")
+        method, allowed = SCENE_EDITS[op]
+        unknown = sorted(set(args) - set(allowed))
+        if unknown:
+            raise CommandError(f"scene_edit {op}: unknown argument(s) {unknown}; allowed: {sorted(allowed)}")
+        kwargs = {}
+        for key, value in args.items():
+            target, convert = allowed[key]
+            try:
+                kwargs[target] = convert(value)
+            except (TypeError, ValueError):
+                raise CommandError(f"scene_edit {op}: argument {key!r} has a wrong type: {value!r}") from None
         try:
-            self.renderer.set_scene(scene)
-        except (OSError, ValueError, RuntimeError, KeyError) as exc:
+            getattr(renderer, method)(**kwargs)
+        except TypeError as exc:
+            raise CommandError(f"scene_edit {op}: {exc}") from None
+        self.loop.renderer_changed()
+        self.loop.event("scene_edit", op=op, args=args)
+
+    def _set_sky(self, p: dict[str, Any]) -> None:
+        """Move the sun / change the sky's polarisation of the current scene (rebuilds its far field)."""
+        import dataclasses
+
+        renderer = self._require_renderer("sky")
+        scene = renderer.scene
+        sky = getattr(scene, "sky", None)
+        if sky is None:
+            raise RuntimeError(f"sky: the current scene {self.scene_name!r} has no sky")
+        changes = {k: v for k, v in (("sun_azimuth", p["sun_azimuth_deg"]), ("sun_elevation", p["sun_elevation_deg"]))
+                   if v is not None}
+        changes = {k: math.radians(v) for k, v in changes.items()}
+        changes.update({k: p[k] for k in ("dop_max", "sun_radiance") if p[k] is not None})
+        if not changes:
+            raise CommandError("sky: give at least one of sun_azimuth_deg, sun_elevation_deg, dop_max, sun_radiance")
+        new_sky = dataclasses.replace(sky, **changes)
+        new_scene = dataclasses.replace(scene, far=[new_sky if layer is sky else layer for layer in scene.far])
+        try:
+            renderer.set_scene(new_scene)
+        except (OSError, ValueError, RuntimeError) as exc:
+            raise RuntimeError(f"sky: {exc}; the current sky stays") from None
+        self.loop.renderer_changed()
+        self.loop.event("sky", **{k: p[k] for k in p if p[k] is not None})
+
+    def _load_scene(self, scene: str | dict) -> None:
+        """Load a scene (name, file path or spec) into the renderer; on failure the previous scene stays."""
+        renderer = self._require_renderer("load_scene")
+        digest = _scene_sha256(scene)
+        try:
+            renderer.set_scene(scene)
+        except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
             raise RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); "
                                f"the current scene {self.scene_name!r} stays on the dome") from None
-        self.scene_name = scene
+        self.scene_name = scene if isinstance(scene, str) else json.dumps(scene, sort_keys=True)
+        self._scene_digest = digest
         self.loop.renderer_changed()
         if self.trial_log is not None:
-            self.trial_log.add_scene(self.clock.now(), scene, digest)
+            self.trial_log.add_scene(self.clock.now(), self.scene_name, digest)
         self.loop.event("scene_loaded", scene=scene, sha256=digest)
 
     def _trial_start(self, name: str, metadata: dict) -> dict[str, Any]:
@@ -382,8 +428,7 @@ class Server:
             except LogError as exc:
                 raise RuntimeError(f"trial_start: {exc}") from None
             if self.scene_name is not None:
-                log.add_scene(self.clock.now(), self.scene_name,
-                              _sha_or_empty(self.scene_name))
+                log.add_scene(self.clock.now(), self.scene_name, self._scene_digest)
             self.trial_log, self.trial_name = log, name
             self._last_log_error = None
             if self.loop is not None:
@@ -429,7 +474,8 @@ class Server:
         try:
             loop_cfg = self.config["loop"]
             self.link = self._open_link()
-            self.renderer = self._renderer_factory(self.config["render"]) if self._renderer_factory else None
+            self.renderer = self._renderer_factory(self.config["render"], self.clock) if self._renderer_factory \
+                else None
             origin = Pose(loop_cfg["start_x"], loop_cfg["start_y"], loop_cfg["eye_height"],
                           math.radians(loop_cfg["start_heading_deg"]))
             self.loop = FrameLoop(
@@ -521,10 +567,13 @@ def _nan0(v: float) -> float:
     return 0.0 if v != v else v
 
 
-def _sha_or_empty(scene: str) -> str:
+def _scene_sha256(scene: str | dict) -> str:
+    """SHA-256 of the scene's file(s) (a path, or the spec's 'scene'/'path'/'panorama' files); "" for built-ins."""
     from antarium.trial_log import file_sha256
 
-    return file_sha256(scene) if Path(scene).is_file() else ""
+    paths = [scene] if isinstance(scene, str) else [scene.get(k) for k in ("scene", "path", "panorama", "uv")]
+    digests = [file_sha256(p) for p in paths if isinstance(p, str) and Path(p).is_file()]
+    return ",".join(digests)
 
 
 def _json_default(value: Any) -> Any:
