@@ -11,6 +11,7 @@ HELP = "run a benchmark and report it against the dome's 190 frames/s (5.3 ms fr
 TARGETS: dict[str, str] = {
     "ant": "antarium.ant.bench:run",
     "trackball": "antarium.trackball.bench:run",
+    "protocol": "antarium.firmware_proto.bench:run",
 }
 
 DOME_RATE_HZ = 190.0

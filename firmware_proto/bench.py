@@ -1,0 +1,175 @@
+"""`antarium bench protocol`: frame encode rate, emulator decode rate (one core), and a loopback run.
+
+Goals (issue 3): encode >= 5,000 frames/s; emulator decode >= 380 frames/s (twice the dome's 190) on one core;
+zero loss on loopback while sending at 190 frames/s to `antarium emulate` in its own process. Figures are also
+given as ratios to the dome's rate. Frames are seeded random LED frames.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+GOAL_ENCODE_FPS = 5000.0
+GOAL_DECODE_FPS = 380.0
+
+
+def _frames(n: int, seed: int = 0) -> list[np.ndarray]:
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        lum = rng.integers(0, 65536, 20350)
+        share = (rng.random(20350) * lum).astype(np.int64)
+        out.append(np.stack([share, lum - share], axis=1).astype(np.uint16))
+    return out
+
+
+def _rate(step, n: int, seconds: float) -> float:
+    """Calls per second of step(i % n) for i = 1, 2, ... over at least `seconds` (step(0) is the warm-up)."""
+    step(0)
+    i, t0 = 1, time.perf_counter()
+    while True:
+        step(i % n)
+        i += 1
+        dt = time.perf_counter() - t0
+        if dt >= seconds and i > n:
+            return (i - 1) / dt
+
+
+def measure_encode(frames, seconds: float) -> float:
+    from .video import encode_frame
+
+    out = np.empty((55, 1112), np.uint8)
+    return _rate(lambda i: encode_frame(frames[i], i % 128, out=out), len(frames), seconds)
+
+
+def measure_decode(frames, seconds: float, line: str) -> float:
+    """Frames per second the emulator takes in: 55 VIDEO datagrams + LATCH each, fed as bytes."""
+    from .control import encode_latch
+    from .emulator import Emulator
+    from .video import encode_frame
+
+    streams = []  # one per sequence number, so that the stream can be cycled without going back in sequence
+    for k in range(128):
+        rows = [r.tobytes() for r in encode_frame(frames[k % len(frames)], k)]
+        streams.append(rows + [encode_latch(k)])
+    emu = Emulator(line=line)
+
+    def step(i):
+        for d in streams[i]:
+            emu.handle_datagram(d)
+
+    rate = _rate(step, len(streams), seconds)
+    if emu.counters["frames_dropped"] or emu.counters["internal_errors"]:
+        raise RuntimeError(f"emulator lost frames during the decode benchmark: {emu.stats()}")
+    return rate
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def measure_loopback(frames, n_frames: int, rate_hz: float) -> dict:
+    """Send `n_frames` at `rate_hz` to `antarium emulate` in a child process; count what it latched."""
+    from antarium.clock import MonotonicClock
+
+    from .link import open_link
+
+    port = _free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "antarium", "emulate", "--port", str(port), "--seconds", str(n_frames / rate_hz + 30)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        line = proc.stdout.readline()
+        if "listening" not in line:
+            raise RuntimeError(f"antarium emulate did not start: {line!r}")
+        clock = MonotonicClock()
+        send_s = []
+        with open_link("udp", port=port) as link:
+            link.hello(wait_s=2.0)
+            t0 = clock.now()
+            late = 0
+            for k in range(n_frames):
+                due = t0 + k / rate_hz
+                if clock.now() > due + 1 / rate_hz:
+                    late += 1
+                clock.sleep_until(due)
+                a = time.perf_counter()
+                link.send_frame(frames[k % len(frames)])
+                send_s.append(time.perf_counter() - a)
+            elapsed = clock.now() - t0
+            t = link.telemetry(wait_s=3.0)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    c = t.get("counters", {})
+    latched = c.get("frames_latched", 0)
+    return {
+        "frames_sent": n_frames,
+        "achieved_rate_hz": n_frames / elapsed,
+        "frames_latched": latched,
+        "frames_lost": n_frames - latched,
+        "frames_dropped_partial": c.get("frames_dropped", 0),
+        "datagrams_received": c.get("datagrams_received", 0),
+        "late_sends": late,
+        "send_frame_ms_mean": 1000 * float(np.mean(send_s)),
+        "send_frame_ms_max": 1000 * float(np.max(send_s)),
+        "link": t["link"],
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    from antarium.commands.bench import DOME_RATE_HZ, FRAME_PERIOD_S
+
+    seconds = args.seconds or 2.0
+    n_loop = args.frames or 950
+    frames = _frames(16)
+    affinity = os.sched_getaffinity(0) if hasattr(os, "sched_setaffinity") else None
+    if affinity is not None:
+        os.sched_setaffinity(0, {min(affinity)})
+    try:
+        enc = measure_encode(frames, seconds)
+        dec = measure_decode(frames, seconds, "fast")
+        dec_bits = measure_decode(frames, seconds / 2, "bits")
+    finally:
+        if affinity is not None:
+            os.sched_setaffinity(0, affinity)
+    loop = measure_loopback(frames, n_loop, DOME_RATE_HZ)
+    result = {
+        "one_core": affinity is not None,
+        "encode_frames_per_s": enc,
+        "decode_frames_per_s": dec,
+        "decode_bit_exact_frames_per_s": dec_bits,
+        "loopback": loop,
+    }
+    period_ms = FRAME_PERIOD_S * 1000
+    print("antarium bench protocol (timings on a shared machine are noisy)")
+    print(f"  encode            {enc:9.0f} frames/s  = {enc / DOME_RATE_HZ:6.1f} x 190/s   "
+          f"(goal {GOAL_ENCODE_FPS:.0f}: {'met' if enc >= GOAL_ENCODE_FPS else 'NOT met'})")
+    print(f"  emulator decode   {dec:9.0f} frames/s  = {dec / DOME_RATE_HZ:6.1f} x 190/s   "
+          f"(goal {GOAL_DECODE_FPS:.0f} on one core: {'met' if dec >= GOAL_DECODE_FPS else 'NOT met'})")
+    print(f"  decode bit-exact  {dec_bits:9.0f} frames/s  = {dec_bits / DOME_RATE_HZ:6.1f} x 190/s   "
+          "(Manchester + CRC on every panel link)")
+    print(f"  loopback          {loop['frames_sent']} frames at {loop['achieved_rate_hz']:.1f}/s: "
+          f"{loop['frames_latched']} latched whole, {loop['frames_lost']} lost "
+          f"({'zero loss' if loop['frames_lost'] == 0 else 'LOSS'}); send_frame "
+          f"{loop['send_frame_ms_mean']:.2f} ms mean, {loop['send_frame_ms_max']:.2f} ms max "
+          f"of the {period_ms:.2f} ms period")
+    if args.json_out:
+        with open(args.json_out, "w") as fh:
+            json.dump(result, fh, indent=2)
+    return 0
