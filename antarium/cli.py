@@ -14,6 +14,7 @@ from antarium import __version__
 
 #: sub-command name -> module implementing it
 COMMANDS: dict[str, str] = {
+    "serve": "antarium.commands.serve",
     "layout": "antarium.commands.layout",
     "demo": "antarium.commands.demo",
     "bench": "antarium.commands.bench",

@@ -59,6 +59,11 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     },
 }
 
+#: the embedded default's walker, used when the config has no [locomotion] section: an ant-like scripted walk
+#: (about 3 cm/s, in spurts, meandering), seeded so that every run is the same
+DEFAULT_WALKER: dict[str, Any] = {"source": "scripted", "speed": 0.03, "meander": 0.6, "spurt_s": 0.8,
+                                  "pause_fraction": 0.2, "seed": 1}
+
 #: keys whose values are constrained beyond their type: key -> (allowed values or (lo, hi) range)
 _CHOICES = {
     ("loop", "tether"): ("free_yaw", "fixed"),
@@ -122,6 +127,8 @@ def resolve(raw: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(raw, dict):
         raise ConfigError(f"a rig config must be a table of sections, got {type(raw).__name__}")
     resolved = copy.deepcopy(DEFAULTS)
+    if "locomotion" not in raw:
+        resolved["locomotion"] = dict(DEFAULT_WALKER)
     for section, table in raw.items():
         if section not in DEFAULTS:
             resolved[section] = copy.deepcopy(table)

@@ -133,6 +133,8 @@ class FrameLoop:
         self._stats = np.full((STATS_WINDOW, 8), np.nan)  # t_start, latency, render, sample, convert, encode, send,
         # pacing error
         self.polariser_override = None
+        self.rejected_frames = 0
+        self._last_reject_event_t = -math.inf
         self.telemetry: dict[str, Any] = {}
         self._next_telemetry_t = -math.inf
         self._failed_datagrams = 0
@@ -273,6 +275,12 @@ class FrameLoop:
                     self.link_outages += 1
                 self.event("link_back" if ok else "link_outage", error="" if ok else self.last_link_error)
 
+    def _frame_rejected(self, t: float, reason: str) -> None:
+        self.rejected_frames += 1
+        if t - self._last_reject_event_t >= 1.0:  # at most one event a second, with the count so far
+            self._last_reject_event_t = t
+            self.event("frame_rejected", reason=reason, rejected_frames=self.rejected_frames)
+
     def _send_polarisers(self, pose: Pose) -> None:
         """Polariser angles to the link: a commanded override, or the sky's for this pose (when they change)."""
         if self.polariser_override is not None:
@@ -318,7 +326,10 @@ class FrameLoop:
             t0 = clock.now()
             if self.renderer is not None and hasattr(self.renderer, "polariser_angles"):
                 self._send_polarisers(pose)
-            self.link.send_frame(self._frame_buf)
+            try:
+                self.link.send_frame(self._frame_buf)
+            except ValueError as exc:  # a frame breaking the LED-frame contract is not sent; the loop goes on
+                self._frame_rejected(t0, str(exc))
             t1 = clock.now()
             link_timings = getattr(self.link, "last_timings", None) or {}
             encode = link_timings.get("encode", math.nan)
@@ -388,7 +399,8 @@ class FrameLoop:
         out: dict[str, Any] = {"frames": self.frame, "late_frames": self.late_frames,
                                "skipped_frames": self.skipped_frames, "target_rate_hz": self.rate_hz,
                                "frame_rate_hz": None, "locomotion_connected": self.locomotion_connected,
-                               "link_ok": self.link_ok, "link_outages": self.link_outages}
+                               "link_ok": self.link_ok, "link_outages": self.link_outages,
+                               "rejected_frames": self.rejected_frames}
         if n >= 2:
             t = window[:, 0]
             span = float(np.nanmax(t) - np.nanmin(t))

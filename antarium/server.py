@@ -30,7 +30,7 @@ from antarium.frame_loop import FrameLoop, FrameRecord
 from antarium.pose import Pose
 
 #: events that are also printed on stderr: an operator must notice them
-ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "late_frames")
+ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "frame_rejected")
 COMMAND_TIMEOUT_S = 60.0
 
 
@@ -105,11 +105,12 @@ SCENE_EDITS: dict[str, tuple[str, dict[str, tuple[str, Callable]]]] = {
 class Server:
     """config: a resolved rig config (`antarium.config.load_config`). Injectable: clock, source,
     renderer_factory (called in the loop's thread; None for a pose-only rig), link (None: from `[link]`,
-    False: no dome), session (an open zenoh session; None: from `[bus]` if enabled)."""
+    False: no dome), session (an open zenoh session; None: from `[bus]` if enabled); record: a trial name
+    to record from the first frame (also `[log] record = true`)."""
 
     def __init__(self, config: dict[str, Any], *, clock: Clock | None = None, source=None,
                  renderer_factory: Callable | None | bool = True, link=None, session=None,
-                 echo: Callable[[str], None] | None = None) -> None:
+                 record: str | None = None, echo: Callable[[str], None] | None = None) -> None:
         from antarium.trial_log import check_log_dir
 
         self.config = config
@@ -130,6 +131,9 @@ class Server:
         self.trial_name: str | None = None
         self.scene_name: str | None = None
         self._scene_digest = ""
+        self.record = record
+        self.trial_paths: list[Path] = []
+        self.final_stats: dict[str, Any] = {}
         self._entities: list = []
         self._pose_pub = self._stats_pub = None
         self._ready = threading.Event()
@@ -430,6 +434,7 @@ class Server:
             if self.scene_name is not None:
                 log.add_scene(self.clock.now(), self.scene_name, self._scene_digest)
             self.trial_log, self.trial_name = log, name
+            self.trial_paths.append(path)
             self._last_log_error = None
             if self.loop is not None:
                 if self._loop_running():
@@ -489,8 +494,8 @@ class Server:
             if self.source is not None:
                 self.source.start()
             self._open_bus()
-            if self.config["log"]["record"] and self.trial_log is None:
-                self._trial_start("recording", {})
+            if (self.record or self.config["log"]["record"]) and self.trial_log is None:
+                self._trial_start(self.record or "recording", {})
         except BaseException as exc:
             self._start_error = exc
             self._ready.set()
@@ -532,6 +537,8 @@ class Server:
 
     def _shutdown(self) -> None:
         self._stopping.set()
+        if self.loop is not None:
+            self.final_stats = self.loop.stats()
         if self.trial_log is not None:
             try:
                 self._trial_stop()

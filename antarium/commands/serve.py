@@ -1,0 +1,54 @@
+"""`antarium serve`: run the stimulus server (the embedded default rig when no config is given)."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "run the stimulus server: frame loop, closed loop, bus commands and trial logs"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", default=None, help="rig config (TOML); default: the embedded default rig "
+                        "(emulator on loopback, default habitat, scripted walker in closed loop)")
+    parser.add_argument("--seconds", type=float, default=None, help="stop after this many seconds (default: never)")
+    parser.add_argument("--record", default=None, metavar="NAME",
+                        help="record a trial named NAME from the start (stopped cleanly on exit)")
+    parser.add_argument("--print-config", action="store_true", help="print the resolved config (TOML) and exit")
+
+
+def run(args: argparse.Namespace) -> int:
+    import signal
+    import sys
+
+    from antarium.config import load_config
+    from antarium.server import Server
+
+    config = load_config(args.config)
+    if args.print_config:
+        import tomli_w
+
+        print(tomli_w.dumps(config), end="")
+        return 0
+    if args.seconds is not None and not args.seconds > 0:
+        raise ValueError(f"--seconds must be > 0, got {args.seconds}")
+    server = Server(config, record=args.record)
+
+    def stop(signum, frame):
+        print(f"antarium serve: {signal.Signals(signum).name}: stopping after this frame", file=sys.stderr,
+              flush=True)
+        server.stop()
+
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    bus = config["bus"]
+    where = ", ".join(bus["listen"]) if bus["enabled"] else "bus disabled"
+    print(f"antarium serve: rig {server.rig!r} at {config['loop']['rate_hz']:g} frames/s; bus: {where}; "
+          f"trial logs in {server.log_dir}", flush=True)
+    until = None if args.seconds is None else server.clock.now() + args.seconds
+    frames = server.run(until=until)
+    stats = server.final_stats
+    print(f"antarium serve: {frames} frames, {stats['late_frames']} late, {stats['skipped_frames']} skipped, "
+          f"{stats['link_outages']} link outages", flush=True)
+    for path in server.trial_paths:
+        print(f"antarium serve: trial log {path}", flush=True)
+    return 0
