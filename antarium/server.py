@@ -474,8 +474,9 @@ class Server:
         self.loop.log = None
 
     # -- running ---------------------------------------------------------------------------------------
-    def run(self, until: float | None = None, frames: int | None = None) -> int:
-        """Build the renderer here, start the bus and run frames until `stop()` or `until`/`frames`."""
+    def run(self, until: float | None = None, frames: int | None = None, seconds: float | None = None) -> int:
+        """Build the renderer here, start the bus and run frames until `stop()`, the clock reads `until`,
+        `frames` frames ran, or `seconds` passed since the first frame."""
         try:
             loop_cfg = self.config["loop"]
             self.link = self._open_link()
@@ -506,6 +507,9 @@ class Server:
         self._loop_thread = threading.current_thread()
         self._ready.set()
         self.loop.event("server_started", rig=self.rig)
+        if seconds is not None:
+            end = self.clock.now() + seconds
+            until = end if until is None else min(until, end)
         try:
             return self.loop.run(until=until, frames=frames)
         finally:

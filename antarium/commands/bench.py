@@ -9,6 +9,7 @@ HELP = "run a benchmark and report it against the dome's 190 frames/s (5.3 ms fr
 
 #: benchmark name -> "module:function"; the function takes the parsed args and returns an exit code.
 TARGETS: dict[str, str] = {
+    "loop": "antarium.loop_bench:run",
     "ant": "antarium.ant.bench:run",
     "trackball": "antarium.trackball.bench:run",
     "protocol": "antarium.firmware_proto.bench:run",

@@ -44,8 +44,7 @@ def run(args: argparse.Namespace) -> int:
     where = ", ".join(bus["listen"]) if bus["enabled"] else "bus disabled"
     print(f"antarium serve: rig {server.rig!r} at {config['loop']['rate_hz']:g} frames/s; bus: {where}; "
           f"trial logs in {server.log_dir}", flush=True)
-    until = None if args.seconds is None else server.clock.now() + args.seconds
-    frames = server.run(until=until)
+    frames = server.run(seconds=args.seconds)
     stats = server.final_stats
     print(f"antarium serve: {frames} frames, {stats['late_frames']} late, {stats['skipped_frames']} skipped, "
           f"{stats['link_outages']} link outages", flush=True)

@@ -1,0 +1,98 @@
+"""`antarium bench loop`: the whole server loop against `antarium emulate` over loopback UDP.
+
+Runs the embedded default rig (default habitat, scripted walker in closed loop, bus on loopback, a trial
+log being recorded) — or the rig config named by `$ANTARIUM_RIG_CONFIG` — for `--seconds` (default 30;
+the goal is stated for 600) or `--frames`, then reads the recorded per-frame table and reports achieved
+frame rate against target, late and skipped frames, closed-loop latency p50/p99/max and per-stage times,
+as ratios to the dome's needs (190 frames/s, 5.3 ms frame period). The first second (warm-up) is excluded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+from typing import Any
+
+import numpy as np
+
+WARMUP_S = 1.0
+
+
+def _pct(values: np.ndarray) -> dict[str, float] | None:
+    values = values[np.isfinite(values)]
+    if not len(values):
+        return None
+    p50, p99 = np.percentile(values, [50, 99])
+    return {"p50_ms": 1e3 * float(p50), "p99_ms": 1e3 * float(p99), "max_ms": 1e3 * float(values.max())}
+
+
+def summarise(frames: dict[str, np.ndarray], rate_hz: float) -> dict[str, Any]:
+    """Figures from a trial log's per-frame table (see docs/logs.md)."""
+    t = frames["t_start"]
+    keep = t >= t[0] + WARMUP_S if len(t) and t[-1] - t[0] > 2 * WARMUP_S else np.ones(len(t), bool)
+    f = {k: v[keep] for k, v in frames.items()}
+    n = int(keep.sum())
+    span = float(f["t_start"][-1] - f["t_start"][0]) if n > 1 else 0.0
+    achieved = (n - 1) / span if span > 0 else float("nan")
+    period = 1.0 / rate_hz
+    latency = _pct(f["latency"])
+    return {
+        "frames": n, "seconds": span, "target_rate_hz": rate_hz, "achieved_rate_hz": achieved,
+        "rate_ratio": achieved / rate_hz, "late_frames": int(f["late"].sum()), "skipped_slots": int(f["skipped"].sum()),
+        "latency": latency,
+        "latency_p99_over_period": None if latency is None else latency["p99_ms"] / (1e3 * period),
+        "stages": {k: _pct(f[k]) for k in ("render", "sample", "convert", "encode", "send")},
+        "frame_work": _pct(f["t_sent"] - f["t_start"]),
+        "pacing_error": _pct(f["pacing_error"]),
+        "link_down_frames": int((f["link_ok"] == 0).sum()),
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    from antarium.bus import free_tcp_endpoint
+    from antarium.config import load_config
+    from antarium.server import Server
+    from antarium.trial_log import read_table
+
+    seconds = 30.0 if args.seconds is None and args.frames is None else args.seconds
+    config = load_config(os.environ.get("ANTARIUM_RIG_CONFIG") or None)
+    with tempfile.TemporaryDirectory(prefix="antarium-bench-loop-") as tmp:
+        config["log"]["dir"] = tmp
+        if config["bus"]["enabled"] and config["bus"]["listen"] == ["tcp/127.0.0.1:7447"]:
+            config["bus"]["listen"] = [free_tcp_endpoint()]  # never collide with a running `antarium serve`
+        server = Server(config, record="bench-loop", echo=lambda line: None)
+        server.run(seconds=seconds, frames=args.frames)
+        frames = read_table(server.trial_paths[0], "frames")
+        result = summarise(frames, config["loop"]["rate_hz"])
+        result["rejected_frames"] = server.final_stats.get("rejected_frames", 0)
+        result["link_outages"] = server.final_stats.get("link_outages", 0)
+        result["config"] = {"render": config["render"], "loop_rate_hz": config["loop"]["rate_hz"],
+                            "link": config["link"]["interface"], "locomotion": config["locomotion"]["source"]}
+    _print(result)
+    if args.json_out:
+        with open(args.json_out, "w") as fh:
+            json.dump(result, fh, indent=2)
+    return 0
+
+
+def _fmt(p: dict | None) -> str:
+    return "n/a" if p is None else f"p50 {p['p50_ms']:.2f}  p99 {p['p99_ms']:.2f}  max {p['max_ms']:.2f} ms"
+
+
+def _print(r: dict[str, Any]) -> None:
+    period_ms = 1e3 / r["target_rate_hz"]
+    print(f"loop bench: {r['frames']} frames over {r['seconds']:.1f} s (first {WARMUP_S:g} s excluded), "
+          f"scene {r['config']['render']['scene']!r}, face size {r['config']['render']['face_size'] or 'default'}")
+    print(f"  frame rate      {r['achieved_rate_hz']:.1f} / {r['target_rate_hz']:.0f} Hz = {r['rate_ratio']:.3f} x "
+          f"target")
+    print(f"  late frames     {r['late_frames']}   skipped slots {r['skipped_slots']}   rejected frames "
+          f"{r['rejected_frames']}   link outages {r['link_outages']}")
+    ratio = r["latency_p99_over_period"]
+    print(f"  latency         {_fmt(r['latency'])}"
+          + ("" if ratio is None else f"   (p99 = {ratio:.2f} x the {period_ms:.2f} ms frame period)"))
+    print(f"  frame work      {_fmt(r['frame_work'])}")
+    for stage, p in r["stages"].items():
+        print(f"    {stage:<12}  {_fmt(p)}")
+    print(f"  pacing error    {_fmt(r['pacing_error'])}")
