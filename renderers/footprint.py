@@ -1,0 +1,124 @@
+"""Per-LED acceptance footprints: the sparse matrix from cube-map texels to LEDs, and a numpy reference.
+
+Every LED integrates the radiance of the cube map over its angular acceptance: a Gaussian of full width at
+half maximum `fwhm` (radians) around its direction, truncated at `radius` (default: one FWHM, where the
+weight has fallen to 1/16). The weight of texel t for LED i is
+
+    W[i, t] = g(angle(d_i, t)) * solid_angle(t) / sum_t' g(angle(d_i, t')) * solid_angle(t')
+
+so each row sums to 1 and an LED reports the footprint-weighted mean radiance: texture finer than the LED
+pitch averages out instead of aliasing. Matrices are cached on disk per (directions, face size, widths).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from .cubemap import atlas_directions, atlas_solid_angles
+
+_CACHE_VERSION = 1
+
+
+def gaussian_weight(angle: np.ndarray, fwhm: float) -> np.ndarray:
+    """Acceptance g(angle) = exp(-4 ln 2 angle^2 / fwhm^2); angle and fwhm in radians."""
+    return np.exp(-4.0 * np.log(2.0) * (np.asarray(angle) / fwhm) ** 2)
+
+
+def _validate(directions: np.ndarray, face_size: int, fwhm: float, radius: float | None) -> tuple:
+    d = np.asarray(directions, dtype=np.float64)
+    if d.ndim != 2 or d.shape[1] != 3 or not np.all(np.isfinite(d)):
+        raise ValueError(f"directions must be a finite (N, 3) array, got shape {d.shape}")
+    norms = np.linalg.norm(d, axis=1)
+    if np.any(np.abs(norms - 1.0) > 1e-6):
+        raise ValueError("directions must be unit vectors")
+    if not isinstance(face_size, (int, np.integer)) or face_size < 8:
+        raise ValueError(f"face_size must be an integer >= 8, got {face_size!r}")
+    if not (np.isfinite(fwhm) and 0 < fwhm < np.pi / 4):
+        raise ValueError(f"footprint FWHM must be in (0, 45) degrees, got {np.degrees(fwhm)!r} degrees")
+    radius = fwhm if radius is None else float(radius)
+    if not (np.isfinite(radius) and 0 < radius < np.pi / 2):
+        raise ValueError(f"footprint radius must be in (0, 90) degrees, got {np.degrees(radius)!r} degrees")
+    return d, int(face_size), float(fwhm), radius
+
+
+def build_matrix(directions: np.ndarray, face_size: int, fwhm: float, radius: float | None = None) -> sp.csr_matrix:
+    """(N_dirs, 6*face_size**2) float32 CSR matrix of normalised footprint weights (rows sum to 1).
+
+    directions: (N, 3) unit vectors in the cube's frame; fwhm, radius: radians. Texel columns follow the
+    atlas readback order of `cubemap.atlas_directions`.
+    """
+    d, n, fwhm, radius = _validate(directions, face_size, fwhm, radius)
+    texels = atlas_directions(n)
+    chord = 2.0 * np.sin(radius / 2.0)
+    pairs = cKDTree(d).sparse_distance_matrix(cKDTree(texels), chord, output_type="coo_matrix")
+    rows, cols = pairs.row, pairs.col
+    angle = 2.0 * np.arcsin(np.clip(pairs.data / 2.0, 0.0, 1.0))
+    w = gaussian_weight(angle, fwhm) * atlas_solid_angles(n)[cols]
+    # An LED exactly on a texel centre has distance 0, which the sparse result drops: add those back.
+    exact = cKDTree(texels).query(d, k=1)
+    hit = exact[0] == 0.0
+    if np.any(hit):
+        rows = np.concatenate([rows, np.flatnonzero(hit)])
+        cols = np.concatenate([cols, exact[1][hit]])
+        w = np.concatenate([w, atlas_solid_angles(n)[exact[1][hit]]])
+    m = sp.csr_matrix((w, (rows, cols)), shape=(len(d), 6 * n * n), dtype=np.float64)
+    sums = np.asarray(m.sum(axis=1)).ravel()
+    if np.any(sums <= 0):
+        raise ValueError("footprint radius is smaller than a texel: some LEDs see no texel; raise face_size")
+    m = sp.diags(1.0 / sums) @ m
+    m = m.tocsr().astype(np.float32)
+    m.sort_indices()
+    return m
+
+
+def cache_dir() -> Path:
+    """Where footprint matrices are cached: $ANTARIUM_CACHE or ~/.cache/antarium."""
+    return Path(os.environ.get("ANTARIUM_CACHE", Path.home() / ".cache" / "antarium"))
+
+
+def cached_matrix(directions: np.ndarray, face_size: int, fwhm: float, radius: float | None = None) -> sp.csr_matrix:
+    """`build_matrix`, memoised on disk by a hash of all inputs (a corrupt cache file is rebuilt)."""
+    d, n, fwhm, radius = _validate(directions, face_size, fwhm, radius)
+    h = hashlib.sha256(np.ascontiguousarray(d).tobytes())
+    h.update(np.array([n, fwhm, radius, _CACHE_VERSION], dtype=np.float64).tobytes())
+    path = cache_dir() / f"footprint-{h.hexdigest()[:24]}.npz"
+    if path.exists():
+        try:
+            with np.load(path) as z:
+                return sp.csr_matrix((z["data"], z["indices"], z["indptr"]), shape=tuple(z["shape"]))
+        except (OSError, ValueError, KeyError):
+            pass
+    m = build_matrix(d, n, fwhm, radius)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + f".{os.getpid()}.tmp.npz")
+        np.savez(tmp, data=m.data, indices=m.indices, indptr=m.indptr, shape=np.array(m.shape))
+        os.replace(tmp, path)
+    except OSError:
+        pass  # a read-only home only costs the rebuild next time
+    return m
+
+
+def reference_sample(atlas: np.ndarray, directions: np.ndarray, fwhm: float, radius: float | None = None) -> np.ndarray:
+    """Pure-numpy footprint integral by brute force over every texel (slow; for tests).
+
+    atlas: (6*N*N, C) texel values in atlas order; directions: (M, 3) unit vectors; returns (M, C) float64.
+    """
+    atlas = np.asarray(atlas, dtype=np.float64)
+    n = int(round(np.sqrt(atlas.shape[0] / 6)))
+    d, n, fwhm, radius = _validate(directions, n, fwhm, radius)
+    texels = atlas_directions(n)
+    omega = atlas_solid_angles(n)
+    out = np.empty((len(d), atlas.shape[1]))
+    for start in range(0, len(d), 64):
+        cosang = np.clip(d[start : start + 64] @ texels.T, -1.0, 1.0)
+        angle = np.arccos(cosang)
+        w = np.where(angle <= radius, gaussian_weight(angle, fwhm), 0.0) * omega
+        out[start : start + 64] = (w @ atlas) / w.sum(axis=1, keepdims=True)
+    return out

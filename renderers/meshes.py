@@ -1,0 +1,107 @@
+"""Mesh worlds from files through trimesh (OBJ, PLY, GLB/GLTF, STL): metres, +z up.
+
+Each geometry node becomes a named `SceneObject`: its position is the node's translation, its vertices the
+rest of the node transform. Vertex colours and textures are sRGB and map to G, B, UV by `channels`;
+meshes without colour are mid-grey.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .channels import rgb_to_gbu, srgb_to_linear
+from .scene import MAX_TEXTURE_SIDE, MeshData, SceneObject
+
+MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl")
+DEFAULT_GREY = 0.5
+#: glTF is +y up (its specification): (X, Y, Z) glTF -> (X, -Z, Y) world. Other formats are taken as +z up.
+GLTF_TO_WORLD = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
+
+
+def _colours_and_texture(geom, name: str):
+    """(V, 3) linear G, B, UV vertex colours, and (uv, texture) or (None, None)."""
+    n = len(geom.vertices)
+    visual = getattr(geom, "visual", None)
+    kind = getattr(visual, "kind", None)
+    if kind == "texture":
+        material = visual.material
+        image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
+        factor = getattr(material, "baseColorFactor", None)
+        base = np.ones(3) if factor is None else np.asarray(factor, dtype=np.float64)[:3] / (
+            255.0 if np.asarray(factor).dtype.kind in "iu" else 1.0)
+        colours = np.repeat(rgb_to_gbu(srgb_to_linear(base))[None, :], n, axis=0)
+        if image is not None and visual.uv is not None and len(visual.uv) == n:
+            img = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
+            if max(img.shape[:2]) > MAX_TEXTURE_SIDE:
+                raise ValueError(f"texture of object {name!r} is {img.shape[1]}x{img.shape[0]} pixels; the largest "
+                                 f"side allowed is {MAX_TEXTURE_SIDE}")
+            return colours, np.asarray(visual.uv, dtype=np.float32), rgb_to_gbu(srgb_to_linear(img))
+        return colours, None, None
+    if kind == "vertex" or kind == "face":
+        rgba = np.asarray(visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
+        return rgb_to_gbu(srgb_to_linear(rgba)), None, None
+    return np.full((n, 3), DEFAULT_GREY, dtype=np.float32), None, None
+
+
+def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
+    """Named objects of a mesh file. Raises FileNotFoundError or ValueError naming the file and the problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"mesh file not found: {path}")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise ValueError(f"unsupported mesh format {path.suffix!r} ({path}); allowed: {', '.join(MESH_SUFFIXES)}")
+    import trimesh
+
+    try:
+        loaded = trimesh.load(str(path), force="scene", process=False)
+    except Exception as exc:  # trimesh raises many types for corrupt files
+        raise ValueError(f"cannot read mesh file {path}: {type(exc).__name__}: {exc}") from exc
+    objects: dict[str, SceneObject] = {}
+    for node in loaded.graph.nodes_geometry:
+        transform, geom_name = loaded.graph[node]
+        geom = loaded.geometry[geom_name]
+        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
+            continue
+        name = str(node)
+        try:
+            colours, uv, texture = _colours_and_texture(geom, name)
+            t = np.asarray(transform, dtype=np.float64)
+            if path.suffix.lower() in (".glb", ".gltf"):
+                t = GLTF_TO_WORLD @ t
+            local = np.asarray(geom.vertices, dtype=np.float64) @ t[:3, :3].T
+            mesh = MeshData(local.astype(np.float32), np.asarray(geom.faces), colours, uv, texture)
+            mesh.validate(name)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from exc
+        objects[name] = SceneObject(mesh, position=tuple(t[:3, 3]))
+    if not objects:
+        raise ValueError(f"mesh file {path} contains no triangles (empty or not a triangle mesh)")
+    return objects
+
+
+def save_glb(objects: dict[str, SceneObject], path: str | Path) -> Path:
+    """Write named objects to a GLB file (+y up as glTF requires; vertex colours sRGB; node = position)."""
+    import trimesh
+
+    scene = trimesh.Scene()
+    for name, obj in objects.items():
+        m = obj.mesh
+        # invert the G, B mapping approximately for viewers: R = G, G = G, B = B (UV is implied by B)
+        lin = np.stack([m.colours[:, 0], m.colours[:, 0], m.colours[:, 1]], axis=1)
+        srgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * np.power(lin, 1 / 2.4) - 0.055)
+        rgba = np.concatenate([np.clip(srgb, 0, 1) * 255, np.full((len(lin), 1), 255)], axis=1).astype(np.uint8)
+        c, s = np.cos(obj.yaw), np.sin(obj.yaw)
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) * obj.scale
+        local = m.vertices.astype(np.float64) @ rot.T
+        tm = trimesh.Trimesh(local, m.faces, vertex_colors=rgba, process=False)
+        transform = np.eye(4)
+        transform[:3, 3] = obj.position
+        transform = GLTF_TO_WORLD.T @ transform
+        scene.add_geometry(tm, node_name=name, geom_name=name, transform=transform)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = scene.export(file_type="glb")
+    path.write_bytes(data)
+    return path

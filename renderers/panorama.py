@@ -1,0 +1,130 @@
+"""A distant panorama at infinity from an equirectangular image (OpenCV: PNG, JPEG, TIFF, EXR).
+
+Image convention: the centre column looks along azimuth 0 (+x), azimuth grows to the left (counter-
+clockwise seen from above), the top row is the zenith. 8- and 16-bit images are sRGB-encoded and decoded at
+full precision; float images (EXR, float TIFF) are linear radiance and keep their range (scaled by
+`exposure`, clipped at the LEDs' maximum). An alpha channel makes pixels transparent (the sky shows through);
+an optional single-channel `uv` image is the explicit UV layer, otherwise UV = uv_ratio * blue.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .channels import DEFAULT_UV_RATIO, rgb_to_gbu, srgb_to_linear
+
+#: Largest accepted image side in pixels (OpenCV and GL textures both handle it; larger is refused).
+MAX_IMAGE_SIDE = 16384
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".tif", ".tiff", ".hdr")
+
+
+def read_image(path: str | Path) -> tuple[np.ndarray, bool]:
+    """(H, W, C) float64 values (integer images scaled to [0, 1]) and whether the image is float (linear)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"panorama image not found: {path}")
+    if path.suffix.lower() not in IMAGE_SUFFIXES:
+        raise ValueError(f"unsupported panorama format {path.suffix!r} ({path}); allowed: {', '.join(IMAGE_SUFFIXES)}")
+    if path.suffix.lower() == ".exr":
+        os.environ.setdefault("OPENCV_IO_ENABLE_OPENEXR", "1")
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+    if img is None or img.size == 0:
+        raise ValueError(f"cannot decode image {path} (corrupt, empty or unsupported by OpenCV)")
+    if max(img.shape[:2]) > MAX_IMAGE_SIDE:
+        raise ValueError(f"image {path} is {img.shape[1]}x{img.shape[0]} pixels; the largest side allowed is "
+                         f"{MAX_IMAGE_SIDE}")
+    if img.ndim == 2:
+        img = img[:, :, None]
+    # OpenCV gives BGR(A): reorder to RGB(A).
+    if img.shape[2] >= 3:
+        img = img[:, :, [2, 1, 0, *range(3, img.shape[2])]]
+    is_float = img.dtype.kind == "f"
+    if img.dtype == np.uint8:
+        img = img / 255.0
+    elif img.dtype == np.uint16:
+        img = img / 65535.0
+    elif not is_float:
+        raise ValueError(f"image {path} has unsupported sample type {img.dtype}")
+    img = np.asarray(img, dtype=np.float64)
+    if not np.all(np.isfinite(img)):
+        raise ValueError(f"image {path} contains NaN or infinite values")
+    return img, is_float
+
+
+def equirect_lookup(image: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of an (H, W, C) equirectangular image at (N, 3) unit directions -> (N, C) float32."""
+    import cv2
+
+    h, w = image.shape[:2]
+    az = np.arctan2(d[:, 1], d[:, 0])
+    el = np.arcsin(np.clip(d[:, 2], -1.0, 1.0))
+    mx = ((0.5 - az / (2 * np.pi)) * w - 0.5).astype(np.float32)
+    my = np.clip((0.5 - el / np.pi) * h - 0.5, 0, h - 1).astype(np.float32)
+    src = np.ascontiguousarray(image, dtype=np.float32)
+    # cv2.remap needs maps smaller than SHRT_MAX on each side: lay the points out in rows of 1024
+    n, cols = len(d), 1024
+    rows = -(-n // cols)
+    pad = rows * cols - n
+    mx = np.concatenate([mx, np.zeros(pad, np.float32)]).reshape(rows, cols)
+    my = np.concatenate([my, np.zeros(pad, np.float32)]).reshape(rows, cols)
+    r = cv2.remap(src, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+    out = r.reshape(rows * cols, image.shape[2])[:n]
+    return out
+
+
+@dataclass
+class Panorama:
+    """Far-field panorama layer from an equirectangular image file or an (H, W, 3|4) array (sRGB in [0, 1])."""
+
+    source: object
+    uv: object = None
+    exposure: float = 1.0
+    uv_ratio: float = DEFAULT_UV_RATIO
+    max_width: int = 4096
+    yaw_rate = 0.0
+    time_varying = False
+    _gbua: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        if not (np.isfinite(self.exposure) and self.exposure > 0):
+            raise ValueError(f"panorama exposure must be a positive number, got {self.exposure!r}")
+        if isinstance(self.source, (str, Path)):
+            img, is_float = read_image(self.source)
+        else:
+            img, is_float = np.asarray(self.source, dtype=np.float64), False
+            if img.ndim != 3 or img.shape[2] not in (3, 4) or not np.all(np.isfinite(img)):
+                raise ValueError(f"panorama array must be finite (H, W, 3 or 4), got shape {img.shape}")
+        if img.shape[2] not in (3, 4):
+            raise ValueError(f"panorama {self.source} must be RGB or RGBA, got {img.shape[2]} channel(s)")
+        h, w = img.shape[:2]
+        if w < 8 or h < 4:
+            raise ValueError(f"panorama {self.source} is too small ({w}x{h} pixels)")
+        rgb = img[:, :, :3] * self.exposure if is_float else srgb_to_linear(img[:, :, :3])
+        uv = None
+        if self.uv is not None:
+            uv_img = read_image(self.uv)[0] if isinstance(self.uv, (str, Path)) else np.asarray(self.uv, float)
+            if uv_img.shape[:2] != (h, w):
+                raise ValueError(f"UV layer {self.uv} is {uv_img.shape[1]}x{uv_img.shape[0]}, "
+                                 f"the panorama {w}x{h}: they must match")
+            uv = uv_img.reshape(h, w, -1)[:, :, 0]
+        gbu = rgb_to_gbu(rgb, uv, self.uv_ratio)
+        alpha = img[:, :, 3:4] if img.shape[2] == 4 else np.ones((h, w, 1))
+        gbua = np.concatenate([np.clip(gbu, 0.0, 1.0), alpha], axis=2).astype(np.float32)
+        if w > self.max_width:  # area-average down to what the cube map can resolve
+            import cv2
+
+            gbua = cv2.resize(gbua, (self.max_width, max(2, self.max_width * h // w)), interpolation=cv2.INTER_AREA)
+        self._gbua = gbua
+
+    def evaluate(self, d, t=0.0):
+        v = equirect_lookup(self._gbua, d)
+        out = np.zeros((len(d), 5), dtype=np.float32)
+        out[:, :3] = v[:, :3]
+        out[:, 4] = v[:, 3]
+        return out

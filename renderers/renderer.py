@@ -1,0 +1,361 @@
+"""`Renderer`: a scene and an eye pose in, one LED frame out, through a cube map rendered off-screen.
+
+Per frame: six 90° views from the eye into one (6N x N) 16-bit atlas (far field as background, then the
+meshes, each view drawing only the chunks inside its frustum), one read-back into a preallocated array,
+the sparse footprint matrix (texels -> LEDs) and the 16-bit conversion. The cube is aligned with the dome
+(yawed with the ant), so the matrix is fixed and cached; far-field content lives in a world-aligned cube
+texture sampled by the background pass.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from scipy.sparse import _sparsetools
+
+from antarium.geometry.constants import N_PANELS, N_PIXELS, UV_PER_PANEL
+from antarium.pose import Pose
+
+from . import cubemap, footprint, shaders
+from .gl import create_context
+from .meshbuffers import MeshBuffers
+from .output import FrameConverter, polariser_angles
+from .scene import Scene, check_channel_gain, check_contrast, check_lowpass
+
+#: LED pitch of the dome (degrees); the default footprint width and face size derive from it.
+LED_PITCH_DEG = 1.5
+#: Largest texel (at a face centre) as a fraction of the LED pitch: 2 atan(1/N) <= 0.4 * 1.5 deg -> N = 192.
+TEXEL_FRACTION = 0.4
+
+
+def default_face_size(pitch_deg: float = LED_PITCH_DEG, fraction: float = TEXEL_FRACTION) -> int:
+    """Smallest multiple of 32 whose largest texel is at most `fraction` of the LED pitch."""
+    n = 1.0 / math.tan(math.radians(fraction * pitch_deg) / 2)
+    return int(math.ceil(n / 32.0) * 32)
+
+
+DEFAULT_FACE_SIZE = default_face_size()
+
+
+def _rot_z(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def lowpass_fwhm(cutoff_deg: float) -> float:
+    """FWHM (rad) of the Gaussian whose response is 1/2 at spatial period `cutoff_deg`."""
+    sigma = math.sqrt(math.log(2.0) / 2.0) / math.pi * math.radians(cutoff_deg)
+    return sigma * math.sqrt(8.0 * math.log(2.0))
+
+
+def _check_pose(pose) -> Pose:
+    if isinstance(pose, Pose):
+        return pose
+    try:
+        values = [float(v) for v in pose]
+    except (TypeError, ValueError):
+        raise ValueError(f"pose must be an antarium.pose.Pose or (x, y, z, heading), got {pose!r}") from None
+    if len(values) != 4:
+        raise ValueError(f"pose must have 4 values (x, y, z in m, heading in rad), got {pose!r}")
+    return Pose(*values)
+
+
+class Renderer:
+    """Off-screen cube-map renderer for the dome.
+
+    dome: `antarium.geometry.Dome` (default: `load_dome()`); face_size: cube face side in texels (default
+    from the LED pitch); footprint_deg: FWHM of each LED's acceptance; brightness: global drive scale
+    in [0, 1]; near, far: clip planes (m); far_face_size: side of the far-field cube texture; clock: an
+    `antarium.clock` clock for drifting stimuli when `render` gets no time.
+    """
+
+    def __init__(self, dome=None, face_size: int | None = None, footprint_deg: float = LED_PITCH_DEG,
+                 brightness: float = 1.0, near: float = 1e-3, far: float = 1e3, far_face_size: int | None = None,
+                 chunk_size: float = 2.0, clock=None):
+        if dome is None:
+            from antarium.geometry import load_dome
+
+            dome = load_dome()
+        n = DEFAULT_FACE_SIZE if face_size is None else face_size
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 16 <= n <= 2048:
+            raise ValueError(f"face_size must be an integer in 16..2048, got {face_size!r}")
+        if not (np.isfinite(footprint_deg) and 0 < footprint_deg < 45):
+            raise ValueError(f"footprint_deg must be in (0, 45), got {footprint_deg!r}")
+        if not (0 < near < far and np.isfinite(far)):
+            raise ValueError(f"clip planes must satisfy 0 < near < far, got near={near!r}, far={far!r}")
+        self.dome = dome
+        self.face_size = int(n)
+        self.far_face_size = int(far_face_size or n)
+        self.footprint_deg = float(footprint_deg)
+        self.near, self.far = float(near), float(far)
+        self.chunk_size = float(chunk_size)
+        if clock is None:
+            from antarium.clock import MonotonicClock
+
+            clock = MonotonicClock()
+        self.clock = clock
+        self._directions = np.ascontiguousarray(dome.directions, dtype=np.float64)
+        uv = np.asarray(dome.uv_index)
+        self._uv_dirs = self._directions[uv]
+        self._uv_axes = np.asarray(dome.panel_axes)[np.asarray(dome.panel)[uv]]
+        self._convert = FrameConverter(np.asarray(dome.gain), brightness)
+
+        self.ctx = create_context()
+        self._setup_gl()
+        self._texels = np.empty((6 * n * n, 4), dtype=np.uint16)
+        self._texels_f = np.empty((6 * n * n, 4), dtype=np.float32)
+        self._radiance = np.empty((N_PIXELS, 4), dtype=np.float32)
+        self._matrix_fwhm = None
+        self._matrix = None
+        self.scene: Scene | None = None
+        self._meshes: MeshBuffers | None = None
+        self._t0 = 0.0
+        self._last_q = np.eye(3)
+        self.last_timings = {"render": 0.0, "sample": 0.0, "convert": 0.0}
+        self._update_matrix(None)
+
+    # ----------------------------------------------------------------------------------------- GL set-up
+    def _setup_gl(self) -> None:
+        import moderngl
+
+        ctx, n = self.ctx, self.face_size
+        self._atlas = ctx.texture((n, 6 * n), 4, dtype="nu2")
+        self._depth = ctx.depth_renderbuffer((n, 6 * n))
+        self._fbo = ctx.framebuffer([self._atlas], self._depth)
+        self._bg_prog = ctx.program(vertex_shader=shaders.FULLSCREEN_VS, fragment_shader=shaders.BACKGROUND_FS)
+        self._bg_prog["far_tex"].value = 0
+        self._bg_prog["face_size"].value = float(n)
+        self._bg_vao = ctx.vertex_array(self._bg_prog, [])
+        self._mesh_prog = ctx.program(vertex_shader=shaders.MESH_VS, fragment_shader=shaders.MESH_FS)
+        self._mesh_prog["textures"].value = 1
+        self._far_tex = None
+        self._proj = cubemap.projection_matrix(self.near, self.far)
+        self._mgl = moderngl
+
+    def _make_far_texture(self, scene: Scene, t: float = 0.0, supersample: int = 2):
+        """World-aligned float16 cube texture of the far field, box-filtered over supersample^2 points."""
+        nf = self.far_face_size
+        m = nf * supersample
+        d = cubemap.gl_cube_directions(m).reshape(-1, 3)
+        v = scene.evaluate_far(d, t).reshape(6, nf, supersample, nf, supersample, 4).mean(axis=(2, 4))
+        data = np.ascontiguousarray(v, dtype=np.float16)
+        tex = self.ctx.texture_cube((nf, nf), 4, data.tobytes(), dtype="f2")
+        tex.filter = (self._mgl.LINEAR, self._mgl.LINEAR)
+        return tex
+
+    def _update_matrix(self, lowpass_deg) -> None:
+        fwhm = math.radians(self.footprint_deg)
+        if lowpass_deg is not None:
+            fwhm = math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
+        if fwhm != self._matrix_fwhm:
+            self._matrix = footprint.cached_matrix(self._directions, self.face_size, fwhm)
+            self._matrix_fwhm = fwhm
+
+    # ------------------------------------------------------------------------------------------ scenes
+    def set_scene(self, scene) -> Scene:
+        """Load a `Scene`, a scene name, a spec dict or a file path. On any error the previous scene stays."""
+        from .library import build_scene
+
+        new = scene if isinstance(scene, Scene) else build_scene(scene)
+        far_tex = meshes = None
+        try:
+            far_tex = self._make_far_texture(new)
+            meshes = MeshBuffers(self.ctx, self._mesh_prog, new, self.chunk_size)
+            self._update_matrix(new.lowpass_deg)
+        except BaseException:
+            for res in (far_tex, meshes):
+                if res is not None:
+                    res.release()
+            self._update_matrix(self.scene.lowpass_deg if self.scene else None)
+            raise
+        old_tex, old_meshes = self._far_tex, self._meshes
+        self._far_tex, self._meshes, self.scene = far_tex, meshes, new
+        self._convert.configure(channel_gain=new.channel_gain, swap_green_blue=new.swap_green_blue,
+                                contrast=new.contrast)
+        self._t0 = self.clock.now()
+        for res in (old_tex, old_meshes):
+            if res is not None:
+                res.release()
+        return new
+
+    def _require_scene(self) -> Scene:
+        if self.scene is None:
+            raise RuntimeError("no scene loaded: call set_scene() first")
+        return self.scene
+
+    # ----------------------------------------------------------------------------------------- edits
+    def rotate_scene(self, angle: float, pivot=None) -> None:
+        """Rotate the whole scene about the vertical by `angle` (rad, absolute, counter-clockwise) through
+        `pivot` (x, y) m (default: unchanged). Takes effect on the next frame; nothing is re-uploaded."""
+        scene = self._require_scene()
+        if not np.isfinite(angle):
+            raise ValueError(f"scene rotation must be finite, got {angle!r}")
+        if pivot is not None:
+            p = np.asarray(pivot, dtype=np.float64)
+            if p.shape != (2,) or not np.all(np.isfinite(p)):
+                raise ValueError(f"rotation pivot must be (x, y) in metres, got {pivot!r}")
+            scene.pivot = (float(p[0]), float(p[1]))
+        scene.rotation = float(angle)
+
+    def move_object(self, name: str, position=None, yaw: float | None = None) -> None:
+        """Move a named object to `position` (3,) m and/or turn it to `yaw` (rad)."""
+        scene = self._require_scene()
+        obj = self._object(name)
+        from .scene import SceneObject
+
+        moved = SceneObject(obj.mesh, obj.position if position is None else position,
+                            obj.yaw if yaw is None else yaw, obj.scale)
+        self._meshes.update_object(name, moved)
+        scene.objects[name] = moved
+
+    def remove_object(self, name: str) -> None:
+        """Remove a named object from the scene (instantly: its chunks are no longer drawn)."""
+        self._object(name)
+        self._meshes.hide(name)
+        del self.scene.objects[name]
+
+    def add_object(self, name: str, obj) -> None:
+        """Add (or replace) a named `SceneObject`; the mesh buffers are rebuilt (previous kept on error)."""
+        scene = self._require_scene()
+        from .scene import SceneObject
+
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"object name must be a non-empty string, got {name!r}")
+        if not isinstance(obj, SceneObject):
+            raise ValueError(f"object {name!r} must be a SceneObject, got {type(obj).__name__}")
+        obj.mesh.validate(name)
+        objects = dict(scene.objects)
+        objects[name] = obj
+        trial = Scene(far=scene.far, objects=objects, name=scene.name)
+        meshes = MeshBuffers(self.ctx, self._mesh_prog, trial, self.chunk_size)
+        self._meshes.release()
+        self._meshes = meshes
+        scene.objects = objects
+
+    def scale_channel(self, channel: str, factor: float) -> None:
+        """Scale one channel ('green', 'blue' or 'uv'); factor 0 removes it."""
+        from .channels import CHANNELS
+
+        scene = self._require_scene()
+        if channel not in CHANNELS:
+            raise ValueError(f"unknown channel {channel!r}; allowed: {', '.join(CHANNELS)}")
+        gains = list(scene.channel_gain)
+        gains[CHANNELS.index(channel)] = factor
+        scene.channel_gain = check_channel_gain(gains)
+        self._convert.configure(channel_gain=scene.channel_gain)
+
+    def swap_green_blue(self, swap: bool = True) -> None:
+        scene = self._require_scene()
+        scene.swap_green_blue = bool(swap)
+        self._convert.configure(swap_green_blue=scene.swap_green_blue)
+
+    def set_lowpass(self, cutoff_deg: float | None) -> None:
+        """Angular low-pass: spatial periods shorter than `cutoff_deg` are attenuated below 1/2 (None: off)."""
+        scene = self._require_scene()
+        check_lowpass(cutoff_deg)
+        self._update_matrix(cutoff_deg)
+        scene.lowpass_deg = cutoff_deg
+
+    def set_contrast(self, contrast: float) -> None:
+        """Scale every channel's deviations from its mean over the dome (1: unchanged, 0: uniform)."""
+        scene = self._require_scene()
+        check_contrast(contrast)
+        scene.contrast = float(contrast)
+        self._convert.configure(contrast=scene.contrast)
+
+    def set_brightness(self, brightness: float) -> None:
+        self._convert.configure(brightness=brightness)
+
+    def _object(self, name: str):
+        scene = self._require_scene()
+        if name not in scene.objects:
+            known = ", ".join(sorted(scene.objects)) or "none"
+            raise ValueError(f"no object named {name!r} in scene {scene.name!r}; objects: {known}")
+        return scene.objects[name]
+
+    # ------------------------------------------------------------------------------------------ frames
+    def view_rotation(self, pose: Pose) -> np.ndarray:
+        """(3, 3) dome frame -> world frame for this pose and the scene's rotation."""
+        return _rot_z(pose.heading - self._require_scene().rotation)
+
+    def render(self, pose, out: np.ndarray | None = None, t: float | None = None) -> np.ndarray:
+        """The LED frame (20350, 2) uint16 the dome shows for an eye at `pose` at time `t` (s since set_scene).
+
+        `out` is a preallocated (20350, 2) uint16 array to write into (allocated when None).
+        """
+        scene = self._require_scene()
+        pose = _check_pose(pose)
+        if out is None:
+            out = np.empty((N_PIXELS, 2), dtype=np.uint16)
+        elif out.shape != (N_PIXELS, 2) or out.dtype != np.uint16 or not out.flags.c_contiguous:
+            raise ValueError(f"out must be a C-contiguous ({N_PIXELS}, 2) uint16 array, got {out.shape} {out.dtype}")
+        if t is None:
+            t = self.clock.now() - self._t0
+        t0 = time.perf_counter()
+        q = self.view_rotation(pose)
+        self._last_q = q
+        c = np.array([*scene.pivot, 0.0])
+        eye = c + _rot_z(-scene.rotation) @ (np.array([pose.x, pose.y, pose.z]) - c)
+        if scene.far_time_varying:
+            old = self._far_tex
+            self._far_tex = self._make_far_texture(scene, t, supersample=1)
+            old.release()
+        q_far = _rot_z(-scene.yaw_rate * t) @ q
+        self._draw(q, q_far, eye)
+        self._fbo.read_into(self._texels, components=4, dtype="nu2")
+        t1 = time.perf_counter()
+        np.copyto(self._texels_f, self._texels)
+        r = self._radiance
+        r.fill(0.0)
+        m = self._matrix
+        _sparsetools.csr_matvecs(m.shape[0], m.shape[1], 4, m.indptr, m.indices, m.data,
+                                 self._texels_f.ravel(), r.ravel())
+        t2 = time.perf_counter()
+        self._convert(r, out)
+        t3 = time.perf_counter()
+        self.last_timings = {"render": t1 - t0, "sample": t2 - t1, "convert": t3 - t2}
+        return out
+
+    def _draw(self, q: np.ndarray, q_far: np.ndarray, eye: np.ndarray) -> None:
+        ctx, n = self.ctx, self.face_size
+        self._fbo.use()
+        self._fbo.viewport = (0, 0, n, 6 * n)
+        ctx.disable(self._mgl.DEPTH_TEST | self._mgl.CULL_FACE)
+        self._fbo.clear(depth=1.0)
+        # background: one pass over the whole atlas; face k's (right, up, forward) in world coordinates
+        basis = np.einsum("kij,lj->kil", cubemap.FACES, q_far)  # (6, 3 axes, 3 world)
+        self._bg_prog["face_to_world"].write(basis[:, [1, 2, 0], :].astype("f4").tobytes())
+        self._far_tex.use(0)
+        self._bg_vao.render(self._mgl.TRIANGLES, vertices=3)
+        if self._meshes is not None and self._meshes.n_chunks:
+            ctx.enable(self._mgl.DEPTH_TEST)
+            views = cubemap.face_view_matrices(q, eye)
+            self._meshes.draw(self._fbo, views, self._proj, q, eye, n)
+
+    def polariser_angles(self) -> np.ndarray:
+        """(55, 9) float64 polariser angles (rad, [0, pi)) from the sky's e-vectors at the UV pixels for the
+        last rendered pose; zeros when the scene has no sky."""
+        scene = self._require_scene()
+        sky = scene.sky
+        if sky is None:
+            return np.zeros((N_PANELS, UV_PER_PANEL))
+        from .sky import e_vector
+
+        q = self._last_q
+        world = self._uv_dirs @ q.T
+        e_dome = e_vector(world, sky.sun) @ q
+        return polariser_angles(self._uv_dirs, e_dome, self._uv_axes).reshape(N_PANELS, UV_PER_PANEL)
+
+    def read_cube_map(self) -> np.ndarray:
+        """(6, N, N, 4) float32 linear [G, B, UV, polarised UV] of the last rendered atlas (rows bottom-up)."""
+        n = self.face_size
+        return (self._texels.astype(np.float32) / 65535.0).reshape(6, n, n, 4)
+
+    def release(self) -> None:
+        for res in (self._far_tex, self._meshes):
+            if res is not None:
+                res.release()
+        self.ctx.release()
+

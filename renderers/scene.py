@@ -1,0 +1,173 @@
+"""Scenes as plain data: far-field layers at infinity, named mesh objects, and the experimenter's edits.
+
+Nothing here touches GL; `Renderer.set_scene` turns a `Scene` into GPU buffers. Units: metres, radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .channels import CHANNELS
+
+#: Largest texture side accepted on a mesh (larger textures are refused with a clear error).
+MAX_TEXTURE_SIDE = 8192
+
+
+@dataclass
+class MeshData:
+    """A triangle mesh in object coordinates (metres, +z up) with linear G, B, UV vertex radiances.
+
+    vertices (V, 3) float32; faces (F, 3) uint32; colours (V, 3) float32 in [0, 1];
+    uv (V, 2) float32 texture coordinates and texture (H, W, 3) float32 linear G, B, UV, or both None.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    colours: np.ndarray
+    uv: np.ndarray | None = None
+    texture: np.ndarray | None = None
+
+    def validate(self, name: str) -> MeshData:
+        """Check shapes and values; raise ValueError naming the object. Returns self (arrays normalised)."""
+        v = np.asarray(self.vertices, dtype=np.float32)
+        f = np.asarray(self.faces)
+        if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+            raise ValueError(f"mesh {name!r}: vertices must be a non-empty (V, 3) array, got shape {v.shape}")
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+            raise ValueError(f"mesh {name!r}: has no triangles (faces shape {f.shape})")
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"mesh {name!r}: vertices contain NaN or infinite values")
+        if f.dtype.kind not in "iu" or f.min() < 0 or f.max() >= len(v):
+            raise ValueError(f"mesh {name!r}: face indices must be integers in 0..{len(v) - 1}")
+        c = np.asarray(self.colours, dtype=np.float32)
+        if c.shape != (len(v), 3) or not np.all(np.isfinite(c)):
+            raise ValueError(f"mesh {name!r}: colours must be a finite ({len(v)}, 3) array, got {c.shape}")
+        if (self.uv is None) != (self.texture is None):
+            raise ValueError(f"mesh {name!r}: texture coordinates and texture go together")
+        if self.texture is not None:
+            t = np.asarray(self.texture, dtype=np.float32)
+            if t.ndim != 3 or t.shape[2] != 3 or min(t.shape[:2]) < 1:
+                raise ValueError(f"mesh {name!r}: texture must be (H, W, 3), got {t.shape}")
+            if max(t.shape[:2]) > MAX_TEXTURE_SIDE:
+                raise ValueError(f"mesh {name!r}: texture of {t.shape[1]}x{t.shape[0]} pixels is larger than "
+                                 f"{MAX_TEXTURE_SIDE} pixels on a side")
+            uv = np.asarray(self.uv, dtype=np.float32)
+            if uv.shape != (len(v), 2) or not np.all(np.isfinite(uv)):
+                raise ValueError(f"mesh {name!r}: texture coordinates must be a finite ({len(v)}, 2) array")
+            self.uv, self.texture = uv, t
+        self.vertices, self.faces, self.colours = v, f.astype(np.uint32), np.clip(c, 0.0, 1.0)
+        return self
+
+    @property
+    def n_triangles(self) -> int:
+        return len(self.faces)
+
+
+@dataclass
+class SceneObject:
+    """A named mesh placed in the world: position (3,) m, yaw about +z (rad), uniform scale."""
+
+    mesh: MeshData
+    position: tuple = (0.0, 0.0, 0.0)
+    yaw: float = 0.0
+    scale: float = 1.0
+
+    def __post_init__(self):
+        p = np.asarray(self.position, dtype=np.float64)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise ValueError(f"object position must be 3 finite numbers (m), got {self.position!r}")
+        if not np.isfinite(self.yaw):
+            raise ValueError(f"object yaw must be finite, got {self.yaw!r}")
+        if not (np.isfinite(self.scale) and self.scale > 0):
+            raise ValueError(f"object scale must be a positive number, got {self.scale!r}")
+        self.position = tuple(float(x) for x in p)
+
+    def world_vertices(self) -> np.ndarray:
+        """(V, 3) float32 vertices in world coordinates."""
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        v = self.mesh.vertices.astype(np.float64) * self.scale
+        return (v @ rot.T + np.asarray(self.position)).astype(np.float32)
+
+
+@dataclass
+class Scene:
+    """A world: `far` layers at infinity (first opaque, later ones composited over it by their alpha) and
+    named `objects`. Edits: `rotation` of the whole scene about the vertical through `pivot` (x, y) m;
+    `channel_gain` (G, B, UV); `swap_green_blue`; `lowpass_deg` (angular low-pass cut-off period, degrees)
+    and `contrast` (scaling of deviations from the frame's mean, per channel).
+    """
+
+    far: list = field(default_factory=list)
+    objects: dict = field(default_factory=dict)
+    name: str = "scene"
+    rotation: float = 0.0
+    pivot: tuple = (0.0, 0.0)
+    channel_gain: tuple = (1.0, 1.0, 1.0)
+    swap_green_blue: bool = False
+    lowpass_deg: float | None = None
+    contrast: float = 1.0
+
+    def __post_init__(self):
+        if not self.far:
+            raise ValueError(f"scene {self.name!r} needs at least one far-field layer (sky, panorama, stimulus)")
+        for name, obj in self.objects.items():
+            if not isinstance(obj, SceneObject):
+                raise ValueError(f"scene object {name!r} must be a SceneObject, got {type(obj).__name__}")
+            obj.mesh.validate(name)
+        check_channel_gain(self.channel_gain)
+        check_lowpass(self.lowpass_deg)
+        check_contrast(self.contrast)
+
+    @property
+    def n_triangles(self) -> int:
+        return sum(o.mesh.n_triangles for o in self.objects.values())
+
+    @property
+    def sky(self):
+        """The first `Sky` layer (polarisation source), or None."""
+        from .sky import Sky
+
+        return next((layer for layer in self.far if isinstance(layer, Sky)), None)
+
+    @property
+    def yaw_rate(self) -> float:
+        """Rotation rate (rad/s) of the far field about the vertical, when all its motion is such a rotation."""
+        rates = {float(layer.yaw_rate) for layer in self.far}
+        return rates.pop() if len(rates) == 1 else 0.0
+
+    @property
+    def far_time_varying(self) -> bool:
+        rates = {float(layer.yaw_rate) for layer in self.far}
+        return any(layer.time_varying for layer in self.far) or len(rates) > 1
+
+    def evaluate_far(self, d: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """(N, 4) float32 [G, B, UV, polarised UV] of the far field at (N, 3) world directions, time t (s).
+
+        When the far field only rotates (`yaw_rate`), this is its state at t = 0; the renderer rotates it.
+        """
+        out = self.far[0].evaluate(d, t)[:, :4].copy()
+        for layer in self.far[1:]:
+            v = layer.evaluate(d, t)
+            a = v[:, 4:5]
+            out = out * (1.0 - a) + v[:, :4] * a
+        return out
+
+
+def check_channel_gain(gain) -> tuple:
+    g = np.asarray(gain, dtype=np.float64)
+    if g.shape != (3,) or not np.all(np.isfinite(g)) or np.any(g < 0):
+        raise ValueError(f"channel gains must be 3 non-negative numbers for {CHANNELS}, got {gain!r}")
+    return tuple(float(x) for x in g)
+
+
+def check_lowpass(cutoff_deg) -> None:
+    if cutoff_deg is not None and not (np.isfinite(cutoff_deg) and 0 < cutoff_deg <= 180):
+        raise ValueError(f"low-pass cut-off must be a period in (0, 180] degrees or None, got {cutoff_deg!r}")
+
+
+def check_contrast(contrast) -> None:
+    if not (np.isfinite(contrast) and contrast >= 0):
+        raise ValueError(f"contrast must be a non-negative number (1 = unchanged), got {contrast!r}")

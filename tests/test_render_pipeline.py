@@ -1,0 +1,171 @@
+"""Renderer correctness against the geometry and numpy references (real EGL context, llvmpipe here)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from antarium.geometry import load_dome
+from antarium.pose import Pose
+from antarium.renderers import cubemap, footprint
+from antarium.renderers.library import build_scene
+from antarium.renderers.renderer import Renderer
+from antarium.renderers.stimuli import Bar
+
+FACE = 128  # smaller than the default to keep tests quick; the maths does not depend on the size
+FWHM = math.radians(1.5)
+
+
+@pytest.fixture(scope="module")
+def dome():
+    return load_dome()
+
+
+@pytest.fixture(scope="module")
+def renderer(dome):
+    r = Renderer(dome, face_size=FACE)
+    yield r
+    r.release()
+
+
+def radiance(frame: np.ndarray, dome) -> np.ndarray:
+    """Undo gain: (20350, 2) drive -> linear radiance per LED column, in [0, 1]."""
+    return frame.astype(np.float64) / (65535.0 * dome.gain[:, None])
+
+
+def test_single_bar_lights_exactly_the_leds_it_covers(renderer, dome):
+    renderer.set_scene({"scene": "bars", "azimuth_deg": 30, "width_deg": 10, "colour": [1, 0, 0],
+                        "background": 0.0})
+    frame = renderer.render(Pose(0, 0, 0.01, 0.0))
+    green = radiance(frame, dome)[~dome.is_uv, 0]
+    d = dome.directions[~dome.is_uv]
+    az = dome.azimuth[~dome.is_uv]
+    # angular distance to the two meridian planes bounding the bar
+    edges = np.radians([25.0, 35.0])
+    normals = np.stack([-np.sin(edges), np.cos(edges), np.zeros(2)], axis=1)
+    dist = np.degrees(np.arcsin(np.abs(d @ normals.T))).min(axis=1)
+    inside = Bar(azimuth=math.radians(30), width=math.radians(10)).covers(d)
+    front = np.cos(az - math.radians(30)) > 0
+    radius = 1.5 + cubemap.largest_texel_deg(FACE)  # footprint + the far texture's bilinear filter
+    assert np.all(green[inside & (dist > radius)] > 0.99)
+    assert np.all(green[~inside & (dist > radius)] < 1e-3)
+    ok = front & (dist > 0.3)
+    assert np.array_equal(green[ok] > 0.5, inside[ok])
+    assert inside.sum() > 300
+
+
+def test_rotating_the_scene_by_90_deg_permutes_leds_as_the_geometry_predicts(renderer, dome):
+    # a seamless drum of 9 periods: a 90 deg rotation shifts its phase by a quarter period
+    renderer.set_scene({"scene": "grating", "period_deg": 40, "contrast": 0.8, "colour": [1, 0, 0]})
+    before = radiance(renderer.render(Pose(0, 0, 0.01, 0.0)), dome)[:, 0].copy()
+    renderer.rotate_scene(math.radians(90))
+    after = radiance(renderer.render(Pose(0, 0, 0.01, 0.0)), dome)[:, 0]
+    # what LED i shows now, LED j showed before where d_j = Rz(-90) d_i
+    c, s = 0.0, -1.0
+    source = dome.directions @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T
+    from scipy.spatial import cKDTree
+
+    dist, j = cKDTree(dome.directions).query(source)
+    # below 60 deg elevation the drum's local period stays >= 20 deg, so a 0.25 deg offset changes little
+    close = (np.degrees(dist) < 0.25) & ~dome.is_uv & ~dome.is_uv[j] & (np.abs(dome.elevation) < np.radians(60))
+    assert close.sum() > 1000
+    err = np.abs(after[close] - before[j[close]])
+    assert err.max() < 0.04 and err.mean() < 0.008
+
+
+def test_gl_output_matches_the_numpy_reference(renderer, dome):
+    scene = build_scene({"scene": "checkerboard", "size_deg": 20, "colour_a": [0.1, 0.6, 0.3],
+                         "colour_b": [0.7, 0.2, 0.6]})  # G + B < 1: no cap
+    renderer.set_scene(scene)
+    frame = renderer.render(Pose(0, 0, 0.01, math.radians(17)))
+    atlas = renderer.read_cube_map().reshape(-1, 4)
+    pick = np.random.default_rng(1).choice(np.flatnonzero(~dome.is_uv), 400, replace=False)
+    # (1) sparse-matrix sampling == brute-force footprint integral of the same cube map
+    ref = footprint.reference_sample(atlas, dome.directions[pick], FWHM)
+    got = radiance(frame, dome)[pick]
+    assert np.abs(got - ref[:, :2]).max() < 2e-3
+    # (3) end to end: LEDs == numpy far field integrated over each LED's footprint
+    q = renderer.view_rotation(Pose(0, 0, 0.01, math.radians(17)))
+    expect = scene.evaluate_far(cubemap.atlas_directions(FACE) @ q.T)[:, :3]
+    ref_np = footprint.reference_sample(expect, dome.directions[pick], FWHM)
+    assert np.abs(got - ref_np[:, :2]).mean() < 0.015  # the far texture adds its bilinear filter
+
+
+def test_gl_cube_map_matches_the_far_field_in_numpy(renderer):
+    scene = build_scene({"scene": "sky", "sun_azimuth_deg": 60, "sun_elevation_deg": 35})
+    renderer.set_scene(scene)
+    pose = Pose(0, 0, 0.01, math.radians(-40))
+    renderer.render(pose)
+    atlas = renderer.read_cube_map().reshape(-1, 4)
+    world = cubemap.atlas_directions(FACE) @ renderer.view_rotation(pose).T
+    expect = scene.evaluate_far(world)
+    agree = np.isclose(atlas, expect, atol=0.01).all(axis=1)
+    assert agree.mean() > 0.99  # the rest: the horizon line and the sun's disc, blended by the texture filter
+
+
+def test_uv_pixels_carry_the_skys_degree_of_polarisation(renderer, dome):
+    from antarium.renderers.sky import degree_of_polarisation, sun_direction
+
+    renderer.set_scene({"scene": "sky", "sun_azimuth_deg": 0, "sun_elevation_deg": 60, "dop_max": 0.7})
+    frame = renderer.render(Pose(0, 0, 0.01, 0.0)).astype(np.float64)
+    uv = dome.uv_index
+    up = dome.elevation[uv] > math.radians(5)
+    total = frame[uv, 0] + frame[uv, 1]
+    dop = frame[uv, 1] / total
+    expect = degree_of_polarisation(dome.directions[uv], sun_direction(0.0, math.radians(60)), 0.7)
+    far_from_sun = np.degrees(np.arccos(dome.directions[uv] @ sun_direction(0.0, math.radians(60)))) > 5
+    sel = up & far_from_sun
+    assert sel.sum() > 200
+    assert np.abs(dop[sel] - expect[sel]).max() < 0.03
+
+
+def test_polariser_angles_reproduce_the_skys_e_vectors(renderer, dome):
+    from antarium.renderers.sky import e_vector
+
+    renderer.set_scene({"scene": "sky", "sun_azimuth_deg": 40, "sun_elevation_deg": 30})
+    heading = math.radians(25)
+    renderer.render(Pose(0, 0, 0.01, heading))
+    psi = renderer.polariser_angles()
+    assert psi.shape == (55, 9) and np.all((psi >= 0) & (psi < np.pi))
+    uv = dome.uv_index
+    d = dome.directions[uv]
+    axes = dome.panel_axes[dome.panel[uv]]
+    p = psi.ravel()
+    u = np.cos(p)[:, None] * axes[:, 0] + np.sin(p)[:, None] * axes[:, 1]
+    u_perp = u - np.einsum("ij,ij->i", u, d)[:, None] * d  # what leaves the polariser along -d
+    u_perp /= np.linalg.norm(u_perp, axis=1, keepdims=True)
+    q = renderer.view_rotation(Pose(0, 0, 0.01, heading))
+    e = e_vector(d @ q.T, renderer.scene.sky.sun) @ q
+    ok = np.linalg.norm(e, axis=1) > 0.5
+    assert np.all(np.abs(np.einsum("ij,ij->i", u_perp[ok], e[ok])) > 0.999)
+
+
+def test_frame_contract(renderer, dome):
+    renderer.set_scene("habitat")
+    out = np.zeros((20350, 2), np.uint16)
+    res = renderer.render(Pose(0.3, -0.2, 0.01, 1.0), out=out)
+    assert res is out and out.dtype == np.uint16
+    assert np.all(out.astype(np.int64).sum(axis=1) <= 65535)
+    assert out[~dome.is_uv].max() > 0
+    assert set(renderer.last_timings) == {"render", "sample", "convert"}
+
+
+def test_failed_scene_load_keeps_the_previous_scene(renderer, tmp_path):
+    renderer.set_scene({"scene": "grating", "period_deg": 30})
+    before = renderer.render(Pose(0, 0, 0.01, 0.0)).copy()
+    bad = tmp_path / "broken.glb"
+    bad.write_bytes(b"glTF not really")
+    for spec in (str(tmp_path / "missing.obj"), str(bad), {"scene": "grating", "period_deg": -5},
+                 {"scene": "nonsense"}, str(tmp_path / "x.xyz")):
+        with pytest.raises((ValueError, FileNotFoundError)):
+            renderer.set_scene(spec)
+        assert np.array_equal(renderer.render(Pose(0, 0, 0.01, 0.0)), before)
+
+
+@pytest.mark.parametrize("bad", [(0, 0, math.nan, 0), (0, math.inf, 0, 0), (0, 0, 0), "pose"])
+def test_bad_pose_is_refused(renderer, bad):
+    renderer.set_scene("uniform")
+    with pytest.raises(ValueError, match="pose"):
+        renderer.render(bad)
