@@ -31,7 +31,14 @@ from .config import OP_BRIGHTNESS, OP_DOT_CORRECTION, decode_config
 from .control import OP_HELLO, OP_LATCH, OP_STATUS_REQUEST, decode_system
 from .errors import ProtocolError, UnknownTypeError
 from .header import CLASS_CONTROL, CLASS_VIDEO, parse_control_header, split_td
-from .led_driver import FAULT_NAMES, FAULT_NONE, detected_faults, emitted, supply_current_a
+from .led_driver import (
+    FAULT_NAMES,
+    FAULT_NONE,
+    detected_faults,
+    emitted,
+    flicker_frequency_hz,
+    supply_current_a,
+)
 from .panel import Panel
 from .panel_link import (
     FAULT_BITMAP_BYTES,
@@ -294,6 +301,10 @@ class Emulator:
             shown.flags.writeable = False
             self._shown = shown
         return self._shown
+
+    def flicker_frequency_hz(self) -> np.ndarray:
+        """(20350, 2) effective PWM flicker frequency of every LED as it is driven now (Hz; 0 = dark)."""
+        return flicker_frequency_hz(self.led_values())
 
     # ---- settings reached through the panels ----
     def set_dot_correction(self, panel: int, percent: np.ndarray) -> None:

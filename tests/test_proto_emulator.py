@@ -216,8 +216,8 @@ class TestLedDriver:
     def test_flicker_reported_for_what_the_dome_shows(self, emu):
         for d in datagrams(0) + [latch(0)]:
             emu.handle_datagram(d)
-        f = led_driver.flicker_frequency_hz(emu.led_values())
-        assert (f[:, 0] > 9000).all() and (f[:, 1] == 0).all()
+        f = emu.flicker_frequency_hz()
+        assert f.shape == (20350, 2) and (f[:, 0] > 9000).all() and (f[:, 1] == 0).all()
 
 
 class TestActuators:
@@ -319,3 +319,14 @@ def test_corrupted_panel_links_lose_frames_but_never_mix_them():
     s = emu.stats()
     assert s["rejected_manchester"] + s["rejected_crc"] > 0 and s["internal_errors"] == 0
     assert s["panel_misses"] > 0
+
+
+def test_restarted_host_loses_at_most_one_frame(emu):
+    for k in (40, 41):  # the old host got to sequence 41
+        for d in datagrams(k) + [latch(k)]:
+            emu.handle_datagram(d)
+    for k in (0, 1):  # a new host starts again at 0: "older" than 41, dropped once, then back in step
+        for d in datagrams(100 + k, seq=k) + [latch(k)]:
+            emu.handle_datagram(d)
+    assert (shown_tags(emu) == 101).all()
+    assert emu.counters["frames_dropped"] == 1
