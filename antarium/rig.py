@@ -181,17 +181,25 @@ class Rig:
         params = {k: v for k, v in (("x", x), ("y", y), ("heading_deg", heading_deg)) if v is not None}
         return self.call("reset_origin", **params)
 
-    def scene_edit(self, **edit: Any) -> dict:
-        return self.call("scene_edit", edit=edit)
+    def scene_edit(self, op: str, **args: Any) -> dict:
+        """Edit the current scene: op "move_object" (name, position [m], yaw_deg), "remove_object" (name),
+        "scale_channel" (channel, factor), "swap_green_blue" (swap), "set_lowpass" (cutoff_deg),
+        "set_contrast" (contrast), "set_brightness" (brightness)."""
+        return self.call("scene_edit", op=op, args=args)
 
-    def sky(self, **sky: Any) -> dict:
-        return self.call("sky", sky=sky)
+    def sky(self, sun_azimuth_deg: float | None = None, sun_elevation_deg: float | None = None,
+            dop_max: float | None = None, sun_radiance: float | None = None) -> dict:
+        """Move the sun and/or change the sky's maximum degree of polarisation (scene with a sky)."""
+        params = {k: v for k, v in (("sun_azimuth_deg", sun_azimuth_deg), ("sun_elevation_deg", sun_elevation_deg),
+                                    ("dop_max", dop_max), ("sun_radiance", sun_radiance)) if v is not None}
+        return self.call("sky", **params)
 
-    def polarisers(self, angles_deg) -> dict:
-        """Set the 55 x 9 polariser e-vector angles (degrees) directly."""
+    def polarisers(self, angles_deg=None) -> dict:
+        """Hold the 55 x 9 polariser e-vector angles (degrees), or None to follow the scene's sky again."""
         import numpy as np
 
-        return self.call("polarisers", angles_deg=np.asarray(angles_deg, dtype=float).tolist())
+        value = None if angles_deg is None else np.asarray(angles_deg, dtype=float).tolist()
+        return self.call("polarisers", angles_deg=value)
 
     def start_trial(self, name: str, **metadata: Any) -> str:
         """Start recording a trial; returns the log file's path (on the server's computer)."""
