@@ -18,6 +18,8 @@ COMMANDS: dict[str, str] = {
     "layout": "antarium.commands.layout",
     "demo": "antarium.commands.demo",
     "bench": "antarium.commands.bench",
+    "render": "antarium.commands.render",
+    "scene": "antarium.commands.scene",
     "emulate": "antarium.commands.emulate",
     "trackball": "antarium.commands.trackball",
     "ant": "antarium.commands.ant",

@@ -13,6 +13,7 @@ TARGETS: dict[str, str] = {
     "ant": "antarium.ant.bench:run",
     "trackball": "antarium.trackball.bench:run",
     "protocol": "antarium.firmware_proto.bench:run",
+    "render": "antarium.renderers.bench:run",
 }
 
 DOME_RATE_HZ = 190.0
