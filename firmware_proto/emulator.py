@@ -53,7 +53,7 @@ from .panel_link import (
     ST_VIDEO,
     SerialFrame,
 )
-from .polariser import OP_POLARISER, decode_polarisers
+from .polariser import CODES_PER_PI, OP_POLARISER, decode_polarisers
 from .replies import (
     CAPABILITIES,
     COUNTER_NAMES,
@@ -168,6 +168,7 @@ class Emulator:
         self.status_holding = np.zeros((N_PANELS, N_ACTUATORS), bool)
         self.status_faults: list[tuple[int, int, str]] = []
         self._panel_faults: dict[int, list[tuple[int, int, str]]] = {}
+        self._snapshot: dict[str, np.ndarray] | None = None
 
     # ---- datagrams ----
     def handle_datagram(self, payload, reply: Callable[[bytes], None] | None = None) -> list[bytes]:
@@ -348,9 +349,24 @@ class Emulator:
         self._changed()
 
     # ---- upstream ----
+    def sensor_snapshot(self) -> dict[str, np.ndarray]:
+        """What the panels' sensors read at the present STATUS_POLL (computed once per request, for all panels):
+        temperature in 0.01 degC, LED-supply current in mA, holding bits, big-endian angle codes."""
+        if self._snapshot is None:
+            t = self.clock.now()
+            angles = self.actuators.polariser_angle(t)
+            self._snapshot = {
+                "temperature_cc": np.clip(np.rint(self.thermal.advance(t) * 100), -32768, 32767).astype(np.int64),
+                "current_ma": np.clip(np.rint(self.panel_current_a * 1000), 0, 0xFFFF).astype(np.int64),
+                "holding_bits": self.actuators.holding(t).astype(np.int64) @ (1 << np.arange(N_ACTUATORS)),
+                "codes": (np.rint(angles * (CODES_PER_PI / np.pi)).astype(np.int64) % CODES_PER_PI).astype(">u2"),
+            }
+        return self._snapshot
+
     def _status_replies(self, tag: int) -> list[bytes]:
         t = self.clock.now()
         self._update_power(t)
+        self._snapshot = None
         faults: list[tuple[int, int, str]] = []
         for p in range(N_PANELS):
             answers = self._to_panel(p, ST_STATUS_POLL, b"")
@@ -361,6 +377,7 @@ class Emulator:
         for p in range(N_PANELS):
             faults += self._panel_faults.get(p, [])
         self.status_faults = faults
+        self._snapshot = None
         return [
             encode_counters(tag, self.counters),
             encode_temperatures(tag, self.status_temperature_c, self.status_current_a),

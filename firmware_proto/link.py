@@ -40,6 +40,11 @@ def open_link(interface: str, **kwargs) -> Link:
 class Link(ABC):
     """What every back-end offers; a back-end implements `_transmit` and `_receive`."""
 
+    #: `telemetry(wait_s=0)` sends a new STATUS_REQUEST at most this often (seconds); a request with wait_s > 0
+    #: always goes out. Answering one costs the distributor about 2 ms, so a frame loop polling every frame
+    #: must not ask every frame.
+    status_interval_s = 0.0
+
     def __init__(self) -> None:
         self._seq = 0
         self._frame_buf = np.empty((N_PANELS, VIDEO_PAYLOAD_SIZE), np.uint8)
@@ -47,6 +52,7 @@ class Link(ABC):
         self._tag = 0
         self._status: dict = {}
         self._last_reply_t: float | None = None
+        self._last_request_t: float | None = None
         self.counters = {"frames_sent": 0, "datagrams_sent": 0, "datagrams_failed": 0,
                          "replies_received": 0, "replies_rejected": 0}
         self.closed = False
@@ -125,13 +131,19 @@ class Link(ABC):
         return self._status.get("version")
 
     def telemetry(self, wait_s: float = 0.0) -> dict:
-        """Latest upstream status, JSON-serialisable: sends a STATUS_REQUEST and collects replies for up to
-        `wait_s` seconds (0: only what has already arrived). Keys: "link" (this side's counters), "connected"
-        (an answer ever arrived) and, once the distributor has answered: "age_s" (since the last reply),
-        "counters", "temperature_c", "current_a", "faults", "fault_total", "polariser_codes", "polariser_angles",
-        "holding", and "version" after `hello`."""
-        self._tag = (self._tag + 1) % 256
-        self.send(encode_status_request(self._tag))
+        """Latest upstream status, JSON-serialisable.
+
+        Sends a STATUS_REQUEST (with wait_s = 0 at most every `status_interval_s`) and collects replies for up to
+        `wait_s` seconds (0: only what has already arrived; never blocks). Keys: "link" (this side's counters),
+        "connected" (an answer ever arrived) and, once the distributor has answered: "age_s" (since the last
+        reply), "counters", "temperature_c", "current_a", "faults", "fault_total", "polariser_codes",
+        "polariser_angles", "holding", and "version" after `hello`.
+        """
+        now = time.monotonic()
+        if wait_s > 0 or self._last_request_t is None or now - self._last_request_t >= self.status_interval_s:
+            self._tag = (self._tag + 1) % 256
+            self.send(encode_status_request(self._tag))
+            self._last_request_t = now
         self._drain(wait_s, until=set(STATUS_OPCODES), tag=self._tag)
         out = {**self._status, "link": dict(self.counters), "connected": self._last_reply_t is not None}
         if self._last_reply_t is not None:

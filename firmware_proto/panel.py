@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from antarium.geometry.constants import N_ACTUATORS, PANELS_PER_PENTAGON
+from antarium.geometry.constants import PANELS_PER_PENTAGON
 
 from .errors import ProtocolError
 from .header import FLAG_IMMEDIATE, SEQ_MODULO, seq_newer
@@ -31,7 +31,7 @@ from .panel_link import (
     ST_VIDEO,
     SerialFrame,
 )
-from .polariser import CODES_PER_PI, codes_to_angles
+from .polariser import codes_to_angles
 
 if TYPE_CHECKING:
     from .emulator import Emulator
@@ -102,21 +102,16 @@ class Panel:
 
     def status_data(self) -> bytes:
         """PANEL_STATUS data: temperature, supply current, holding bits, open/short bitmaps, actuator codes."""
-        dome, p = self.dome, self.index
-        t = dome.clock.now()
-        temperature = float(dome.thermal.advance(t)[p])
-        angles = dome.actuators.polariser_angle(t)[p]
-        codes = (np.rint(angles * (CODES_PER_PI / np.pi)).astype(np.int64) % CODES_PER_PI).astype(">u2")
-        holding = dome.actuators.holding(t)[p]
+        snap, p = self.dome.sensor_snapshot(), self.index
         head = PANEL_STATUS_HEAD.pack(
-            temperature_cc=int(np.clip(round(temperature * 100), -32768, 32767)),
-            current_ma=int(np.clip(round(dome.panel_current_a[p] * 1000), 0, 0xFFFF)),
-            holding=int(np.dot(holding.astype(np.int64), 1 << np.arange(N_ACTUATORS))),
+            temperature_cc=int(snap["temperature_cc"][p]),
+            current_ma=int(snap["current_ma"][p]),
+            holding=int(snap["holding_bits"][p]),
         )
-        detected = dome.detected[p]
+        detected = self.dome.detected[p]
         return (
             head
             + np.packbits(detected == FAULT_OPEN).tobytes()
             + np.packbits(detected == FAULT_SHORT).tobytes()
-            + codes.tobytes()
+            + snap["codes"][p].tobytes()
         )

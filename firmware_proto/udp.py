@@ -21,6 +21,8 @@ MAX_DATAGRAM = 65535
 class UdpLink(Link):
     """A link over UDP to `host`:`port`; sends HELLO on open (the VERSION answer shows up in `telemetry`)."""
 
+    status_interval_s = 0.05
+
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> None:
         super().__init__()
         if not isinstance(port, int) or not 0 < port < 65536:

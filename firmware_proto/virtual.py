@@ -11,13 +11,15 @@ from .link import Link
 
 
 class VirtualLink(Link):
-    """A link to an in-process `Emulator` (`emulator`, or a new one built with `clock` and `line`)."""
+    """A link to an in-process `Emulator` (`emulator`, or a new one built with `clock` and `line`); like the
+    udp link it says HELLO on open."""
 
     def __init__(self, emulator: Emulator | None = None, clock: Clock | None = None, line: str = "fast",
                  **emulator_kwargs) -> None:
         super().__init__()
         self.emulator = emulator if emulator is not None else Emulator(clock=clock, line=line, **emulator_kwargs)
         self._inbox: deque[bytes] = deque()
+        self.hello()
 
     def _transmit(self, data) -> bool:
         if self.closed:

@@ -66,6 +66,15 @@ class TestEveryBackend:
         assert np.array(t["polariser_angles"]).shape == (55, 9) and t["faults"] == []
         assert t["age_s"] < WAIT_S
 
+    def test_polling_telemetry_does_not_flood_the_board(self, dome):
+        link, emulator = dome
+        link.status_interval_s = 10.0
+        for _ in range(5):
+            link.telemetry()  # wait_s = 0: at most one request per interval
+        t = link.telemetry(wait_s=WAIT_S)  # waiting always asks
+        assert t["counters"]["status_requests"] == 2 and link.counters["datagrams_sent"] == 3  # with HELLO
+        assert emulator.counters["status_requests"] == 2
+
     def test_hello_reports_version_and_capabilities(self, dome):
         link, _ = dome
         v = link.hello(wait_s=WAIT_S)
