@@ -56,6 +56,7 @@ class Link(ABC):
         self.counters = {"frames_sent": 0, "datagrams_sent": 0, "datagrams_failed": 0,
                          "replies_received": 0, "replies_rejected": 0}
         self.closed = False
+        self.last_timings: dict[str, float] = {}
 
     # ---- back-end seam ----
     @abstractmethod
@@ -77,14 +78,19 @@ class Link(ABC):
 
     def send_frame(self, frame: np.ndarray) -> int:
         """Send LED frame (20350, 2) uint16 as 55 VIDEO datagrams and its LATCH; returns its 7-bit sequence.
+        `last_timings` then holds the seconds spent to "encode" and "send" (for the virtual link "send" includes
+        the emulator's work).
 
         Raises ValueError on a bad frame (nothing sent); never raises for transport problems (counted).
         """
         seq = self._seq
+        t0 = time.perf_counter()
         rows = encode_frame(frame, seq, out=self._frame_buf)
+        t1 = time.perf_counter()
         for row in rows:
             self.send(row.data)
         self.send(encode_latch(seq))
+        self.last_timings = {"encode": t1 - t0, "send": time.perf_counter() - t1}
         self._seq = (seq + 1) % SEQ_MODULO
         self.counters["frames_sent"] += 1
         return seq

@@ -55,6 +55,7 @@ class TestEveryBackend:
         t = link.telemetry(wait_s=WAIT_S)
         assert t["connected"] and t["counters"]["frames_latched"] == 10 and t["counters"]["frames_dropped"] == 0
         assert t["link"]["frames_sent"] == 10 and t["link"]["datagrams_failed"] == 0
+        assert set(link.last_timings) == {"encode", "send"} and min(link.last_timings.values()) > 0
         assert np.array_equal(emulator.led_values(), pattern(10))
         json.dumps(t)  # JSON-serialisable
 
