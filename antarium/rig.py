@@ -147,9 +147,10 @@ class Rig:
                        "(server gone, or the command was refused by the bus's access control)")
 
     # -- commands --------------------------------------------------------------------------------------
-    def load_scene(self, scene: str | Path) -> dict:
-        """Show `scene` (a scene file, or a built-in name such as "default"); on failure the old one stays."""
-        return self.call("load_scene", scene=str(scene))
+    def load_scene(self, scene: str | Path | dict) -> dict:
+        """Show `scene`: a built-in name ("habitat", "horizon", ...), a mesh or panorama file, or a spec
+        {"scene": name, **parameters}. On failure the current scene stays on the dome."""
+        return self.call("load_scene", scene=scene if isinstance(scene, dict) else str(scene))
 
     def closed_loop(self, on: bool = True) -> dict:
         """Closed loop (the ball moves the ant through the world) or open loop (pose under script control)."""
@@ -271,3 +272,33 @@ class Rig:
         if not isinstance(seconds, (int, float)) or seconds < 0 or not math.isfinite(seconds):
             raise ValueError(f"wait needs a finite number of seconds >= 0, got {seconds!r}")
         time.sleep(seconds)
+
+
+# -- helpers for experiment scripts ----------------------------------------------------------------------
+def add_script_arguments(parser) -> None:
+    """The options every experiment script shares: which rig, where it is, and whether to start one here."""
+    parser.add_argument("--rig", default="rig1", help="rig name (default rig1)")
+    parser.add_argument("--config", default=None, help="rig config (TOML) telling where the server listens")
+    parser.add_argument("--start-server", action="store_true",
+                        help="start the rig's server in this process first (the embedded default without --config)")
+    parser.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the server and replies")
+
+
+@contextlib.contextmanager
+def script_rig(args) -> Iterator[Rig]:
+    """A connected `Rig` for parsed `add_script_arguments` options (starting the server here if asked)."""
+    from antarium.config import load_config
+
+    config = load_config(args.config)
+    server = None
+    if args.start_server:
+        from antarium.server import Server
+
+        config["rig"]["name"] = args.rig
+        server = Server(config).start_thread(timeout_s=args.timeout)
+    try:
+        with Rig(args.rig, config=config, timeout_s=args.timeout) as rig:
+            yield rig
+    finally:
+        if server is not None:
+            server.stop()

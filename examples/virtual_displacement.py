@@ -1,0 +1,91 @@
+"""Virtual displacement: the ant walks in closed loop, then is moved instantly to another place in its world.
+
+The classic displacement experiment without catching the ant: after `--before` seconds at the start the ant
+is put at (`--to-x`, `--to-y`) with the same heading mapping, and walks on for `--after` seconds. The trial
+log holds the path; the plot shows it in the world, with the jump dashed.
+
+    antarium serve &
+    python examples/virtual_displacement.py --to-x 4 --to-y -3 --out displacement
+    python examples/virtual_displacement.py --start-server --short --out displacement
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from antarium.rig import add_script_arguments, script_rig
+
+
+def plot(updates, out: Path) -> Path:
+    """The world path; the displacement is the one step far longer than walking allows."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    xy = np.array([(u.pose.x, u.pose.y) for u in updates])
+    steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    jump = int(np.argmax(steps)) + 1 if len(steps) else len(xy)
+    index = np.arange(len(xy))
+    before, after = index < jump, index >= jump
+    fig, ax = plt.subplots(figsize=(5.5, 5))
+    ax.plot(*xy[before].T, color="tab:orange", label="before displacement")
+    ax.plot(*xy[after].T, color="tab:green", label="after displacement")
+    if before.any() and after.any():
+        a, b = xy[before][-1], xy[after][0]
+        ax.plot([a[0], b[0]], [a[1], b[1]], "k--", lw=0.8, label="virtual displacement")
+    ax.plot(*xy[0], "ko", ms=4)
+    ax.set_xlabel("world x (m)")
+    ax.set_ylabel("world y (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(loc="best", fontsize=8)
+    target = out / "virtual_displacement_path.png"
+    fig.tight_layout()
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
+    return target
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    add_script_arguments(parser)
+    parser.add_argument("--to-x", type=float, default=4.0, help="x of the new place (m)")
+    parser.add_argument("--to-y", type=float, default=-3.0, help="y of the new place (m)")
+    parser.add_argument("--before", type=float, default=30.0, help="seconds before the displacement")
+    parser.add_argument("--after", type=float, default=30.0, help="seconds after it")
+    parser.add_argument("--out", default="displacement-output", help="folder for the plot")
+    parser.add_argument("--short", action="store_true", help="quick run: 1.5 s before and after")
+    args = parser.parse_args(argv)
+    if args.short:
+        args.before = args.after = 1.5
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    updates, lock = [], threading.Lock()
+
+    def keep(update):
+        with lock:
+            updates.append(update)
+
+    with script_rig(args) as rig:
+        rig.load_scene("habitat")
+        rig.closed_loop(True)
+        rig.reset_origin(0.0, 0.0, 0.0)
+        rig.on_pose(keep)
+        with rig.trial("virtual-displacement", to=[args.to_x, args.to_y]) as log:
+            rig.wait(args.before)
+            state = rig.set_pose(args.to_x, args.to_y)
+            rig.wait(args.after)
+        print(f"displaced to ({state['pose']['x']:.2f}, {state['pose']['y']:.2f}) m; trial log: {log}")
+    with lock:
+        done = list(updates)
+    print(f"plot: {plot(done, out)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,78 @@
+"""The experiment scripts in examples/, each run in its short mode against one embedded server."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+from antarium import bus
+from antarium.trial_log import read_table
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+def _load(name):
+    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def rig_config(tmp_path_factory):
+    from antarium.config import load_config
+    from antarium.server import Server
+
+    folder = tmp_path_factory.mktemp("examples")
+    toml = folder / "rig.toml"
+    toml.write_text(f"""
+[rig]
+name = "texamples"
+[bus]
+listen = ["{bus.free_tcp_endpoint()}"]
+[render]
+face_size = 64
+[link]
+interface = "virtual"
+[log]
+dir = "{folder / 'logs'}"
+flush_s = 0.2
+""")
+    server = Server(load_config(toml), echo=lambda line: None).start_thread()
+    yield toml, folder
+    server.stop()
+
+
+def _args(rig_config, out):
+    toml, _ = rig_config
+    return ["--config", str(toml), "--rig", "texamples", "--short", "--out", str(out)]
+
+
+def test_proof_of_concept(rig_config, tmp_path, capsys):
+    assert _load("proof_of_concept").main(_args(rig_config, tmp_path)) == 0
+    text = capsys.readouterr().out
+    assert (tmp_path / "proof_of_concept_paths.png").stat().st_size > 10_000
+    for condition in ("familiar", "nest", "unfamiliar", "unstructured"):
+        assert f"{condition}: " in text and "1 rotations" in text
+    logs = sorted((rig_config[1] / "logs").glob("*poc-*.h5"))
+    assert len(logs) == 4
+    events = list(read_table(logs[0], "events")["kind"])
+    assert events.count("scene_rotated") >= 1
+
+
+def test_open_loop_panoramas(rig_config, tmp_path, capsys):
+    assert _load("open_loop_panoramas").main(_args(rig_config, tmp_path)) == 0
+    log = next((rig_config[1] / "logs").glob("*open-loop-panoramas.h5"))
+    scenes = read_table(log, "scenes")
+    assert [Path(n).name for n in scenes["name"]][-3:] == ["one_landmark.png", "two_landmarks.png", "skyline.png"]
+    assert all(len(h) == 64 for h in scenes["sha256"][-3:])
+    frames = read_table(log, "frames")
+    assert not frames["closed_loop"].any()
+
+
+def test_virtual_displacement(rig_config, tmp_path, capsys):
+    assert _load("virtual_displacement").main(_args(rig_config, tmp_path)) == 0
+    assert "displaced to (4.00, -3.00) m" in capsys.readouterr().out
+    log = next((rig_config[1] / "logs").glob("*virtual-displacement.h5"))
+    frames = read_table(log, "frames")
+    assert frames["x"][0] < 1.0 and frames["x"][-1] > 3.9
