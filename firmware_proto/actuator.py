@@ -51,7 +51,8 @@ class AircoreBank:
 
     def polariser_angle(self, t: float) -> np.ndarray:
         """Present e-vector angle of every polariser, rad in [0, pi)."""
-        return np.mod(self.rotor_angle(t), np.pi)
+        a = np.mod(self.rotor_angle(t), np.pi)
+        return np.where(a < np.pi, a, 0.0)  # np.mod may round a tiny negative angle up to pi
 
     def command_rotor(self, t: float, rotor_target, mask=None) -> None:
         """Point the field of the actuators in `mask` (all if None) at `rotor_target` (rad) at time t."""

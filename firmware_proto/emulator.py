@@ -34,6 +34,7 @@ from .header import CLASS_CONTROL, CLASS_VIDEO, parse_control_header, split_td
 from .led_driver import (
     FAULT_NAMES,
     FAULT_NONE,
+    FAULT_OPEN,
     detected_faults,
     emitted,
     flicker_frequency_hz,
@@ -171,8 +172,8 @@ class Emulator:
         self._snapshot: dict[str, np.ndarray] | None = None
 
     # ---- datagrams ----
-    def handle_datagram(self, payload, reply: Callable[[bytes], None] | None = None) -> list[bytes]:
-        """Process one UDP payload; returns the reply datagrams (also passed to `reply`). Never raises."""
+    def handle_datagram(self, payload) -> list[bytes]:
+        """Process one UDP payload (bytes-like); returns the reply datagrams to send back. Never raises."""
         self.counters["datagrams_received"] += 1
         try:
             replies = self._dispatch(payload)
@@ -185,9 +186,6 @@ class Emulator:
             self.last_error = f"{type(exc).__name__}: {exc}"
             return []
         self.counters["datagrams_accepted"] += 1
-        if reply is not None:
-            for r in replies:
-                reply(r)
         return replies
 
     def _dispatch(self, payload) -> list[bytes]:
@@ -200,7 +198,6 @@ class Emulator:
             panel, _, _ = parse_video(payload)
             link = self.links[panel // PANELS_PER_PENTAGON]
             link.send(SerialFrame(ST_VIDEO, panel % PANELS_PER_PENTAGON, payload[1], payload[2:]))
-            self._flush()
             return []
         if cls != CLASS_CONTROL:
             raise UnknownTypeError(f"message class {cls} not accepted by the distributor: allowed 0 (video), 1")
@@ -288,7 +285,7 @@ class Emulator:
     def _update_power(self, t: float) -> None:
         drive = self._drive()
         if self.faults.any():
-            drive = np.where(self.faults == 1, 0, drive)  # an open LED draws nothing; a short still does
+            drive = np.where(self.faults == FAULT_OPEN, 0, drive)  # an open LED draws nothing; a short still does
         self.panel_current_a = supply_current_a(drive, CHIPS_PER_PANEL)
         coils = self.actuators.supply_current_a(t).sum(axis=1)
         self.thermal.set_power(t, LED_SUPPLY_V * self.panel_current_a + COIL_VOLTAGE_V * coils)

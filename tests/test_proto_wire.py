@@ -89,7 +89,7 @@ class TestLumaChroma:
         assert (np.abs(s.astype(np.int64) - share) <= lum / 510 + 0.5).all()
         assert (s.astype(np.int64) + o == lum).all()
 
-    @settings(max_examples=2000, deadline=None)
+    @settings(max_examples=500, deadline=None)
     @given(st.integers(0, 65535), st.data())
     def test_error_bound_property(self, lum, data):
         share = data.draw(st.integers(0, lum))
