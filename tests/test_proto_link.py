@@ -155,3 +155,29 @@ def test_udp_link_survives_the_emulator_being_killed_and_restarted():
         proc.send_signal(signal.SIGTERM)
         out, _ = proc.communicate(timeout=10)
     assert "statistics" in out and "frames_latched" in out
+
+
+def test_emulate_command_runs_for_a_bounded_time_and_prints_statistics(capsys):
+    from antarium.cli import main
+
+    assert main(["emulate", "--port", "0", "--seconds", "0.3", "--fault", "1:2:open", "--line", "bits"]) == 0
+    out = capsys.readouterr().out
+    assert "listening on udp://127.0.0.1:" in out and "(line: bits)" in out
+    assert "statistics" in out and "datagrams_received" in out
+
+
+@pytest.mark.parametrize("spec, match", [("1:2", "PANEL:LED:KIND"), ("1:2:melted", "allowed"), ("99:2:open", "range")])
+def test_emulate_command_refuses_bad_faults(capsys, spec, match):
+    from antarium.cli import main
+
+    assert main(["emulate", "--port", "0", "--seconds", "0.1", "--fault", spec]) == 2
+    assert match in capsys.readouterr().err
+
+
+def test_emulate_command_reports_a_busy_port(capsys):
+    from antarium.cli import main
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        assert main(["emulate", "--port", str(s.getsockname()[1]), "--seconds", "0.1"]) == 2
+    assert "cannot listen" in capsys.readouterr().err
