@@ -167,7 +167,6 @@ class Emulator:
         self.status_current_a = self.panel_current_a.copy()
         self.status_codes = np.zeros((N_PANELS, N_ACTUATORS), np.uint16)
         self.status_holding = np.zeros((N_PANELS, N_ACTUATORS), bool)
-        self.status_faults: list[tuple[int, int, str]] = []
         self._panel_faults: dict[int, list[tuple[int, int, str]]] = {}
         self._snapshot: dict[str, np.ndarray] | None = None
 
@@ -364,16 +363,13 @@ class Emulator:
         t = self.clock.now()
         self._update_power(t)
         self._snapshot = None
-        faults: list[tuple[int, int, str]] = []
         for p in range(N_PANELS):
             answers = self._to_panel(p, ST_STATUS_POLL, b"")
             back = self.links[p // PANELS_PER_PENTAGON].upstream(answers[0]) if answers else None
             if back is None:
                 continue  # lost: keep the last known status of this panel
             self._read_panel_status(p, back.data)
-        for p in range(N_PANELS):
-            faults += self._panel_faults.get(p, [])
-        self.status_faults = faults
+        faults = [f for p in range(N_PANELS) for f in self._panel_faults.get(p, [])]
         self._snapshot = None
         return [
             encode_counters(tag, self.counters),
