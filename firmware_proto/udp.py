@@ -41,22 +41,23 @@ class UdpLink(Link):
         self.hello()
 
     def _transmit(self, data) -> bool:
-        if self.closed:
-            return False
-        try:
-            self.sock.send(data)
-            return True
-        except ConnectionRefusedError:
-            self.counters["peer_refused"] += 1
-        except BlockingIOError:
-            self.counters["send_buffer_full"] += 1
-        except OSError:
-            self.counters["socket_errors"] += 1
+        # A ConnectionRefusedError reports an earlier datagram's ICMP port unreachable and consumes it; this
+        # datagram was not sent, so it gets one more try (it goes out if the peer is back, e.g. restarted).
+        for _attempt in range(2):
+            try:
+                self.sock.send(data)
+                return True
+            except ConnectionRefusedError:
+                self.counters["peer_refused"] += 1
+            except BlockingIOError:
+                self.counters["send_buffer_full"] += 1
+                return False
+            except OSError:
+                self.counters["socket_errors"] += 1
+                return False
         return False
 
     def _receive(self, timeout_s: float) -> bytes | None:
-        if self.closed:
-            return None
         while True:
             try:
                 return self.sock.recv(MAX_DATAGRAM)
