@@ -152,7 +152,7 @@ POSE_STRUCT = struct.Struct("<BBHIdddddd")  # 56 bytes
 
 #: stats: version u8, reserved u8, reserved u16, frame u32, late_frames u32, reserved u32, t f64 (s),
 #: latency, render, sample, encode, send, pacing_error f64 (s; latency NaN when no new sample)
-STATS_STRUCT = struct.Struct("<BBHIIIddddddd")  # 80 bytes
+STATS_STRUCT = struct.Struct("<BBHIIIddddddd")  # 72 bytes
 
 
 class StreamError(ValueError):

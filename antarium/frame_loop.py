@@ -135,6 +135,9 @@ class FrameLoop:
         self.polariser_override = None
         self.rejected_frames = 0
         self._last_reject_event_t = -math.inf
+        self._last_late_event_t = -math.inf
+        self._late_since_event = 0
+        self._worst_overrun = 0.0
         self.telemetry: dict[str, Any] = {}
         self._next_telemetry_t = -math.inf
         self._failed_datagrams = 0
@@ -358,7 +361,12 @@ class FrameLoop:
         if self.log is not None:
             self.log.add_frame(rec.log_row())
         if late:
-            self.event("late_frame", frame=rec.frame, overrun=t_sent - slot_end, skipped=skipped)
+            self._late_since_event += 1
+            self._worst_overrun = max(self._worst_overrun, t_sent - slot_end)
+            if t_sent - self._last_late_event_t >= 1.0:  # at most one event a second, summing up
+                self.event("late_frames", count=self._late_since_event, total=self.late_frames,
+                           worst_overrun=self._worst_overrun, skipped_total=self.skipped_frames)
+                self._last_late_event_t, self._late_since_event, self._worst_overrun = t_sent, 0, 0.0
         if self.on_frame is not None:
             self.on_frame(rec)
         return rec
