@@ -12,7 +12,7 @@ from importlib import import_module
 
 import numpy as np
 
-from antarium.geometry.constants import LEDS_PER_PANEL, N_PANELS, N_PIXELS
+from antarium.geometry.constants import LEDS_PER_PANEL, N_ACTUATORS, N_PANELS, N_PIXELS
 
 from .config import check_percent, encode_brightness, encode_dot_correction
 from .control import encode_hello, encode_latch, encode_status_request
@@ -96,16 +96,18 @@ class Link(ABC):
         return seq
 
     def send_polarisers(self, angles, force: bool = False) -> bool:
-        """Send (55, 9) polariser e-vector angles (rad, [0, pi)) in one datagram; skipped (False) when their
-        16-bit codes equal the last ones sent, unless `force`. Raises ValueError on bad angles."""
+        """Send (55, 9) polariser e-vector angles (rad, [0, pi)) in one datagram; returns whether it went out.
+        Skipped (False) when their 16-bit codes equal the last ones sent, unless `force`. Raises ValueError on
+        bad angles."""
         a = np.asarray(angles, dtype=np.float64)
-        if a.shape != (N_PANELS, 9):
-            raise ValueError(f"polariser angles must have shape ({N_PANELS}, 9), got {a.shape}")
+        if a.shape != (N_PANELS, N_ACTUATORS):
+            raise ValueError(f"polariser angles must have shape ({N_PANELS}, {N_ACTUATORS}), got {a.shape}")
         codes = angles_to_codes(a)
         if not force and self._last_polariser_codes is not None and np.array_equal(codes, self._last_polariser_codes):
             return False
         ok = self.send(encode_polarisers(a))
-        self._last_polariser_codes = codes
+        if ok:  # a failed send is retried by the next call, even with the same angles
+            self._last_polariser_codes = codes
         return ok
 
     def send_config(self, dot_correction=None, brightness: int | None = None) -> None:
