@@ -228,6 +228,13 @@ class TestReplies:
         f = replies.decode_reply(replies.encode_actuators(1, codes, hold)).fields
         assert f["angle_codes"] == codes.tolist() and f["holding"] == hold.tolist()
 
+    def test_reply_sizes_match_the_spec(self):
+        z = np.zeros((55, 9))
+        assert len(replies.encode_counters(0, {})) == 84
+        assert len(replies.encode_temperatures(0, np.zeros(55), np.zeros(55))) == 224
+        assert len(replies.encode_actuators(0, z.astype(np.uint16), z.astype(bool))) == 1056
+        assert len(replies.encode_faults(0, [])) == 6
+
     def test_many_faults_are_counted_but_listed_up_to_360(self):
         faults = [(p, k, "open") for p in range(2) for k in range(300)]
         b = replies.encode_faults(0, faults)
