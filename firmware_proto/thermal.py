@@ -3,8 +3,8 @@
     P = LED_SUPPLY_V * I_led + COIL_VOLTAGE_V * I_coils         (W)
     C dT/dt = P - (T - AMBIENT_C) / R                             (exact exponential step, any dt)
 
-With every LED of a panel at full scale (7.4 A + 47 x 30 mA at 4.2 V, 37 W) a panel settles 44 K above ambient,
-with a time constant of R * C = 300 s.
+With every LED of a panel at full scale (7.4 A + 47 x 30 mA at 4.2 V, 37 W) and its actuators idle (1.5 W) a panel
+settles 46 K above ambient, with a time constant of R * C = 300 s.
 """
 
 from __future__ import annotations
