@@ -1,10 +1,11 @@
-"""From sampled radiance to the LED frame and polariser angles (pure numpy, preallocated buffers).
+"""From sampled radiance to the LED frame and the polariser angles.
 
-Sampled radiance per LED is (N, 4) [G, B, UV, polarised UV] in 16-bit units (65535 = full drive at gain 1).
-GB pixel: (G, B) * gain * brightness * channel gains; if G + B exceeds 65535 both are scaled down by the same
-factor (hue kept; a pixel never draws more than one LED's current). UV pixel: total UV radiance I with
-polarised share P: plain LED = I - P, polarised LED = P, so their sum is I <= 65535 and the degree of
-polarisation is P / I.
+Sampled radiance per LED is a pair in [0, 1] (1 = full drive at gain 1): [green, blue] for a GB pixel,
+[UV, polarised UV] for a UV pixel. GB pixel: (G, B) * 65535 * gain * brightness * channel gain; if G + B
+exceeds 65535 both are scaled by the same factor (hue kept; a pixel never draws more than one LED's current).
+UV pixel: total UV radiance I with polarised share P: plain LED = I - P, polarised LED = P, so their sum is
+I <= 65535 and the degree of polarisation is P / I. Channel gains and the green/blue swap act on the LED
+channels (a swapped frame's green LEDs show the scene's blue, scaled by the green gain).
 """
 
 from __future__ import annotations
@@ -17,21 +18,21 @@ FULL = 65535.0
 
 
 class FrameConverter:
-    """Converts (20350, 4) float32 sampled radiance into a (20350, 2) uint16 LED frame without allocating."""
+    """Converts (20350, 2) float32 pair radiances into a (20350, 2) uint16 LED frame without allocating."""
 
     def __init__(self, gain: np.ndarray, brightness: float = 1.0):
-        gain = np.asarray(gain, dtype=np.float32)
-        if gain.shape != (N_PANELS * PIXELS_PER_PANEL,):
-            raise ValueError(f"per-LED gain must have shape ({N_PANELS * PIXELS_PER_PANEL},), got {gain.shape}")
-        self._gain = gain.reshape(N_PANELS, PIXELS_PER_PANEL)
+        gain = np.asarray(gain, dtype=np.float64)
+        n = N_PANELS * PIXELS_PER_PANEL
+        if gain.shape != (n,):
+            raise ValueError(f"per-LED gain must have shape ({n},), got {gain.shape}")
+        self._led_gain = gain
+        self.is_uv = (np.arange(n) % PIXELS_PER_PANEL) >= GB_PER_PANEL
         self.brightness = 1.0
         self.channel_gain = (1.0, 1.0, 1.0)
         self.swap_green_blue = False
         self.contrast = 1.0
-        self._f = np.empty((N_PANELS, PIXELS_PER_PANEL, 2), dtype=np.float32)
-        self._s = np.empty((N_PANELS, GB_PER_PANEL), dtype=np.float32)
-        self._uv_before = np.empty(N_PANELS * PIXELS_PER_PANEL, dtype=np.float32)
-        self._ratio = np.empty(N_PANELS * PIXELS_PER_PANEL, dtype=np.float32)
+        self._gain = np.empty((n, 2), dtype=np.float32)
+        self._uv_before = np.empty((N_PANELS, PIXELS_PER_PANEL - GB_PER_PANEL), dtype=np.float32)
         self.configure(brightness=brightness)
 
     def configure(self, brightness=None, channel_gain=None, swap_green_blue=None, contrast=None) -> None:
@@ -45,48 +46,36 @@ class FrameConverter:
             self.swap_green_blue = bool(swap_green_blue)
         if contrast is not None:
             self.contrast = float(contrast)
-        g = self._gain * self.brightness
+        g = FULL * self._led_gain * self.brightness
         cg = self.channel_gain
-        self._g_gb = np.stack([g[:, :GB_PER_PANEL] * cg[0], g[:, :GB_PER_PANEL] * cg[1]], axis=-1).astype(np.float32)
-        self._g_uv = (g[:, GB_PER_PANEL:] * cg[2]).astype(np.float32)
+        self._gain[:, 0] = np.where(self.is_uv, g * cg[2], g * cg[0])
+        self._gain[:, 1] = np.where(self.is_uv, g * cg[2], g * cg[1])
 
-    def __call__(self, radiance: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """radiance: (20350, 4) float32 (modified in place when contrast != 1); out: (20350, 2) uint16."""
-        r = radiance.reshape(N_PANELS, PIXELS_PER_PANEL, 4)
+    def __call__(self, pairs: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """pairs: (20350, 2) float32 (modified in place when contrast != 1); out: (20350, 2) uint16."""
+        from .kernels import convert_pairs
+
         if self.contrast != 1.0:
-            self._apply_contrast(radiance)
-        f = self._f
-        src = r[:, :GB_PER_PANEL, 1::-1] if self.swap_green_blue else r[:, :GB_PER_PANEL, 0:2]
-        gb = f[:, :GB_PER_PANEL]
-        np.multiply(src, self._g_gb, out=gb)
-        # keep G + B <= 65535 by scaling both (hue preserved)
-        s = self._s
-        np.add(gb[..., 0], gb[..., 1], out=s)
-        np.maximum(s, FULL, out=s)
-        np.divide(FULL, s, out=s)
-        gb *= s[..., None]
-        uv = f[:, GB_PER_PANEL:]
-        total, pol = r[:, GB_PER_PANEL:, 2], r[:, GB_PER_PANEL:, 3]
-        np.minimum(pol, total, out=uv[..., 1])
-        np.subtract(total, uv[..., 1], out=uv[..., 0])
-        uv *= self._g_uv[..., None]
-        np.clip(f, 0.0, FULL, out=f)
-        # truncation (not rounding) keeps every pair's sum <= 65535
-        np.copyto(out.reshape(N_PANELS, PIXELS_PER_PANEL, 2), f, casting="unsafe")
+            self._apply_contrast(pairs)
+        convert_pairs(pairs, self._gain, self.is_uv, self.swap_green_blue, out)
         return out
 
-    def _apply_contrast(self, radiance: np.ndarray) -> None:
-        """Scale deviations of G, B, UV from their means over all LEDs; the polarised share keeps its degree."""
-        rgb = radiance[:, :3]
-        np.copyto(self._uv_before, radiance[:, 2])
-        m = rgb.mean(axis=0)
-        rgb -= m
-        rgb *= np.float32(self.contrast)
-        rgb += m
-        np.maximum(rgb, 0.0, out=rgb)
-        self._ratio.fill(0.0)
-        np.divide(radiance[:, 2], self._uv_before, out=self._ratio, where=self._uv_before > 0)
-        radiance[:, 3] *= self._ratio
+    def _apply_contrast(self, pairs: np.ndarray) -> None:
+        """Scale deviations of G, B (over GB pixels) and UV (over UV pixels) from their means; the polarised
+        share keeps its degree of polarisation."""
+        c = np.float32(self.contrast)
+        p = pairs.reshape(N_PANELS, PIXELS_PER_PANEL, 2)
+        gb, uv = p[:, :GB_PER_PANEL], p[:, GB_PER_PANEL:]
+        m = gb.mean(axis=(0, 1))
+        gb -= m
+        gb *= c
+        gb += m
+        np.maximum(gb, 0.0, out=gb)
+        np.copyto(self._uv_before, uv[..., 0])
+        m_uv = uv[..., 0].mean()
+        uv[..., 0] = np.maximum(m_uv + c * (uv[..., 0] - m_uv), 0.0)
+        uv[..., 1] *= np.divide(uv[..., 0], self._uv_before, out=np.zeros_like(self._uv_before),
+                                where=self._uv_before > 0)
 
 
 def polariser_angles(directions: np.ndarray, e_vectors: np.ndarray, panel_axes: np.ndarray) -> np.ndarray:

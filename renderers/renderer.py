@@ -2,9 +2,10 @@
 
 Per frame: six 90° views from the eye into one (6N x N) 16-bit atlas (far field as background, then the
 meshes, each view drawing only the chunks inside its frustum), one read-back into a preallocated array,
-the sparse footprint matrix (texels -> LEDs) and the 16-bit conversion. The cube is aligned with the dome
-(yawed with the ant), so the matrix is fixed and cached; far-field content lives in a world-aligned cube
-texture sampled by the background pass.
+the sparse footprint matrix (texels -> LEDs, a compiled loop) and the 16-bit conversion. The cube is aligned
+with the dome (yawed with the ant), so the matrix is fixed and cached; far-field content lives in a
+world-aligned cube texture sampled by the background pass. Scenes without meshes take the fast path of
+`farfield`: no GL per frame, a table lookup per LED.
 """
 
 from __future__ import annotations
@@ -13,12 +14,12 @@ import math
 import time
 
 import numpy as np
-from scipy.sparse import _sparsetools
 
 from antarium.geometry.constants import N_PANELS, N_PIXELS, UV_PER_PANEL
 from antarium.pose import Pose
 
 from . import cubemap, footprint, shaders
+from .farfield import FarFieldTable
 from .gl import create_context
 from .meshbuffers import MeshBuffers
 from .output import FrameConverter, polariser_angles
@@ -67,13 +68,14 @@ class Renderer:
 
     dome: `antarium.geometry.Dome` (default: `load_dome()`); face_size: cube face side in texels (default
     from the LED pitch); footprint_deg: FWHM of each LED's acceptance; brightness: global drive scale
-    in [0, 1]; near, far: clip planes (m); far_face_size: side of the far-field cube texture; clock: an
-    `antarium.clock` clock for drifting stimuli when `render` gets no time.
+    in [0, 1]; near, far: clip planes (m); far_face_size: side of the far-field cube texture; chunk_size:
+    cell (m) of the culling grid of large meshes; clock: an `antarium.clock` clock for drifting stimuli
+    when `render` gets no time; fast_far_field: use the table lookup for scenes without meshes.
     """
 
     def __init__(self, dome=None, face_size: int | None = None, footprint_deg: float = LED_PITCH_DEG,
                  brightness: float = 1.0, near: float = 1e-3, far: float = 1e3, far_face_size: int | None = None,
-                 chunk_size: float = 2.0, clock=None):
+                 chunk_size: float = 2.0, clock=None, fast_far_field: bool = True):
         if dome is None:
             from antarium.geometry import load_dome
 
@@ -91,6 +93,7 @@ class Renderer:
         self.footprint_deg = float(footprint_deg)
         self.near, self.far = float(near), float(far)
         self.chunk_size = float(chunk_size)
+        self.fast_far_field = bool(fast_far_field)
         if clock is None:
             from antarium.clock import MonotonicClock
 
@@ -101,16 +104,17 @@ class Renderer:
         self._uv_dirs = self._directions[uv]
         self._uv_axes = np.asarray(dome.panel_axes)[np.asarray(dome.panel)[uv]]
         self._convert = FrameConverter(np.asarray(dome.gain), brightness)
+        self._channel = np.where(self._convert.is_uv, 2, 0).astype(np.int64)
 
         self.ctx = create_context()
         self._setup_gl()
         self._texels = np.empty((6 * n * n, 4), dtype=np.uint16)
-        self._texels_f = np.empty((6 * n * n, 4), dtype=np.float32)
-        self._radiance = np.empty((N_PIXELS, 4), dtype=np.float32)
+        self._pairs = np.empty((N_PIXELS, 2), dtype=np.float32)
         self._matrix_fwhm = None
         self._matrix = None
         self.scene: Scene | None = None
         self._meshes: MeshBuffers | None = None
+        self._table = None
         self._t0 = 0.0
         self._last_q = np.eye(3)
         self.last_timings = {"render": 0.0, "sample": 0.0, "convert": 0.0}
@@ -150,8 +154,16 @@ class Renderer:
         if lowpass_deg is not None:
             fwhm = math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
         if fwhm != self._matrix_fwhm:
-            self._matrix = footprint.cached_matrix(self._directions, self.face_size, fwhm)
-            self._matrix_fwhm = fwhm
+            m = footprint.cached_matrix(self._directions, self.face_size, fwhm)
+            # weights in radiance per 16-bit texel unit, for the compiled sampling loop
+            self._kernel_matrix = (m.indptr.astype(np.int64), m.indices.astype(np.int32),
+                                   (m.data / 65535.0).astype(np.float32))
+            self._matrix, self._matrix_fwhm = m, fwhm
+
+    @property
+    def footprint_fwhm(self) -> float:
+        """Current footprint FWHM (rad): the LED acceptance widened by any angular low-pass."""
+        return self._matrix_fwhm
 
     # ------------------------------------------------------------------------------------------ scenes
     def set_scene(self, scene) -> Scene:
@@ -159,11 +171,14 @@ class Renderer:
         from .library import build_scene
 
         new = scene if isinstance(scene, Scene) else build_scene(scene)
-        far_tex = meshes = None
+        far_tex = meshes = table = None
         try:
-            far_tex = self._make_far_texture(new)
-            meshes = MeshBuffers(self.ctx, self._mesh_prog, new, self.chunk_size)
             self._update_matrix(new.lowpass_deg)
+            if self._far_only(new):
+                table = FarFieldTable(new, self._directions, self._matrix_fwhm)
+            else:
+                far_tex = self._make_far_texture(new)
+                meshes = MeshBuffers(self.ctx, self._mesh_prog, new, self.chunk_size)
         except BaseException:
             for res in (far_tex, meshes):
                 if res is not None:
@@ -171,7 +186,7 @@ class Renderer:
             self._update_matrix(self.scene.lowpass_deg if self.scene else None)
             raise
         old_tex, old_meshes = self._far_tex, self._meshes
-        self._far_tex, self._meshes, self.scene = far_tex, meshes, new
+        self._far_tex, self._meshes, self._table, self.scene = far_tex, meshes, table, new
         self._convert.configure(channel_gain=new.channel_gain, swap_green_blue=new.swap_green_blue,
                                 contrast=new.contrast)
         self._t0 = self.clock.now()
@@ -179,6 +194,16 @@ class Renderer:
             if res is not None:
                 res.release()
         return new
+
+    def _far_only(self, scene: Scene) -> bool:
+        return self.fast_far_field and not scene.objects and not scene.far_time_varying
+
+    def _ensure_gl_scene(self) -> None:
+        """GL resources for a scene that so far took the fast path (e.g. a cube-map picture is wanted)."""
+        if self._far_tex is None:
+            self._far_tex = self._make_far_texture(self.scene)
+        if self._meshes is None:
+            self._meshes = MeshBuffers(self.ctx, self._mesh_prog, self.scene, self.chunk_size)
 
     def _require_scene(self) -> Scene:
         if self.scene is None:
@@ -214,7 +239,7 @@ class Renderer:
         """Remove a named object from the scene (instantly: its chunks are no longer drawn)."""
         self._object(name)
         self._meshes.hide(name)
-        del self.scene.objects[name]
+        del self.scene.objects[name]  # the scene keeps the general path (its buffers stay valid)
 
     def add_object(self, name: str, obj) -> None:
         """Add (or replace) a named `SceneObject`; the mesh buffers are rebuilt (previous kept on error)."""
@@ -230,8 +255,11 @@ class Renderer:
         objects[name] = obj
         trial = Scene(far=scene.far, objects=objects, name=scene.name)
         meshes = MeshBuffers(self.ctx, self._mesh_prog, trial, self.chunk_size)
-        self._meshes.release()
-        self._meshes = meshes
+        if self._far_tex is None:
+            self._far_tex = self._make_far_texture(scene)
+        if self._meshes is not None:
+            self._meshes.release()
+        self._meshes, self._table = meshes, None
         scene.objects = objects
 
     def scale_channel(self, channel: str, factor: float) -> None:
@@ -256,6 +284,8 @@ class Renderer:
         scene = self._require_scene()
         check_lowpass(cutoff_deg)
         self._update_matrix(cutoff_deg)
+        if self._table is not None:
+            self._table = FarFieldTable(scene, self._directions, self._matrix_fwhm)
         scene.lowpass_deg = cutoff_deg
 
     def set_contrast(self, contrast: float) -> None:
@@ -296,6 +326,26 @@ class Renderer:
         t0 = time.perf_counter()
         q = self.view_rotation(pose)
         self._last_q = q
+        pairs = self._pairs
+        if self._table is not None:
+            t1 = time.perf_counter()
+            self._table.lookup(pose.heading - scene.rotation - scene.yaw_rate * t, pairs)
+        else:
+            self._render_cube(scene, pose, q, t)
+            t1 = time.perf_counter()
+            from .kernels import sample_pairs
+
+            indptr, indices, weights = self._kernel_matrix
+            sample_pairs(indptr, indices, weights, self._texels, self._channel, pairs)
+        t2 = time.perf_counter()
+        self._convert(pairs, out)
+        t3 = time.perf_counter()
+        self.last_timings = {"render": t1 - t0, "sample": t2 - t1, "convert": t3 - t2}
+        return out
+
+    def _render_cube(self, scene: Scene, pose: Pose, q: np.ndarray, t: float) -> None:
+        """Draw the six faces for `pose` and read the atlas back into self._texels."""
+        self._ensure_gl_scene()
         c = np.array([*scene.pivot, 0.0])
         eye = c + _rot_z(-scene.rotation) @ (np.array([pose.x, pose.y, pose.z]) - c)
         if scene.far_time_varying:
@@ -305,18 +355,6 @@ class Renderer:
         q_far = _rot_z(-scene.yaw_rate * t) @ q
         self._draw(q, q_far, eye)
         self._fbo.read_into(self._texels, components=4, dtype="nu2")
-        t1 = time.perf_counter()
-        np.copyto(self._texels_f, self._texels)
-        r = self._radiance
-        r.fill(0.0)
-        m = self._matrix
-        _sparsetools.csr_matvecs(m.shape[0], m.shape[1], 4, m.indptr, m.indices, m.data,
-                                 self._texels_f.ravel(), r.ravel())
-        t2 = time.perf_counter()
-        self._convert(r, out)
-        t3 = time.perf_counter()
-        self.last_timings = {"render": t1 - t0, "sample": t2 - t1, "convert": t3 - t2}
-        return out
 
     def _draw(self, q: np.ndarray, q_far: np.ndarray, eye: np.ndarray) -> None:
         ctx, n = self.ctx, self.face_size
@@ -348,8 +386,13 @@ class Renderer:
         e_dome = e_vector(world, sky.sun) @ q
         return polariser_angles(self._uv_dirs, e_dome, self._uv_axes).reshape(N_PANELS, UV_PER_PANEL)
 
-    def read_cube_map(self) -> np.ndarray:
-        """(6, N, N, 4) float32 linear [G, B, UV, polarised UV] of the last rendered atlas (rows bottom-up)."""
+    def cube_map(self, pose, t: float | None = None) -> np.ndarray:
+        """(6, N, N, 4) float32 linear [G, B, UV, polarised UV] atlas for `pose` (rows bottom-up, faces in
+        `cubemap.FACES` order), rendered through GL whatever path `render` takes."""
+        scene = self._require_scene()
+        pose = _check_pose(pose)
+        t = self.clock.now() - self._t0 if t is None else t
+        self._render_cube(scene, pose, self.view_rotation(pose), t)
         n = self.face_size
         return (self._texels.astype(np.float32) / 65535.0).reshape(6, n, n, 4)
 

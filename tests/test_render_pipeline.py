@@ -25,6 +25,15 @@ def dome():
 
 @pytest.fixture(scope="module")
 def renderer(dome):
+    """Every scene through GL (the far-field fast path is compared against it separately)."""
+    r = Renderer(dome, face_size=FACE, fast_far_field=False)
+    yield r
+    r.release()
+
+
+@pytest.fixture(scope="module")
+def fast(dome):
+    """The default configuration: scenes without meshes take the far-field table."""
     r = Renderer(dome, face_size=FACE)
     yield r
     r.release()
@@ -80,7 +89,7 @@ def test_gl_output_matches_the_numpy_reference(renderer, dome):
                          "colour_b": [0.7, 0.2, 0.6]})  # G + B < 1: no cap
     renderer.set_scene(scene)
     frame = renderer.render(Pose(0, 0, 0.01, math.radians(17)))
-    atlas = renderer.read_cube_map().reshape(-1, 4)
+    atlas = renderer.cube_map(Pose(0, 0, 0.01, math.radians(17))).reshape(-1, 4)
     pick = np.random.default_rng(1).choice(np.flatnonzero(~dome.is_uv), 400, replace=False)
     # (1) sparse-matrix sampling == brute-force footprint integral of the same cube map
     ref = footprint.reference_sample(atlas, dome.directions[pick], FWHM)
@@ -97,8 +106,7 @@ def test_gl_cube_map_matches_the_far_field_in_numpy(renderer):
     scene = build_scene({"scene": "sky", "sun_azimuth_deg": 60, "sun_elevation_deg": 35})
     renderer.set_scene(scene)
     pose = Pose(0, 0, 0.01, math.radians(-40))
-    renderer.render(pose)
-    atlas = renderer.read_cube_map().reshape(-1, 4)
+    atlas = renderer.cube_map(pose).reshape(-1, 4)
     world = cubemap.atlas_directions(FACE) @ renderer.view_rotation(pose).T
     expect = scene.evaluate_far(world)
     agree = np.isclose(atlas, expect, atol=0.01).all(axis=1)
@@ -169,3 +177,20 @@ def test_bad_pose_is_refused(renderer, bad):
     renderer.set_scene("uniform")
     with pytest.raises(ValueError, match="pose"):
         renderer.render(bad)
+
+
+@pytest.mark.parametrize("spec", [
+    {"scene": "sky", "sun_azimuth_deg": 200, "sun_elevation_deg": 50},
+    {"scene": "grating", "period_deg": 30, "orientation_deg": 90, "colour": [0.5, 0.3, 0.2]},
+    {"scene": "bars", "bars": [{"azimuth_deg": -60, "width_deg": 8}, {"azimuth_deg": 100, "width_deg": 20,
+                                                                       "top_deg": 30}], "colour": 0.4},
+])
+def test_far_field_fast_path_matches_the_gl_path(renderer, fast, dome, spec):
+    pose = Pose(1.0, 2.0, 0.01, math.radians(33))
+    renderer.set_scene(spec)
+    gl = radiance(renderer.render(pose), dome)
+    fast.set_scene(spec)
+    assert fast._table is not None
+    quick = radiance(fast.render(pose), dome)
+    err = np.abs(quick - gl)
+    assert err.mean() < 0.003 and np.percentile(err, 99) < 0.03

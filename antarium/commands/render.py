@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         path = save_png(led_map(frame, dome, width=args.width), args.out)
         print(f"LED map written to {path}")
         if args.cube:
-            print(f"cube map written to {save_png(atlas_image(renderer.read_cube_map()), args.cube)}")
+            print(f"cube map written to {save_png(atlas_image(renderer.cube_map(pose, t=args.time)), args.cube)}")
         t = renderer.last_timings
         print(f"scene {renderer.scene.name!r}, {renderer.scene.n_triangles} triangles; frame: render "
               f"{t['render'] * 1e3:.2f} ms, sample {t['sample'] * 1e3:.2f} ms, convert {t['convert'] * 1e3:.2f} ms")
