@@ -65,7 +65,7 @@ class AntcarParams:
     place_amplitude_deg: float = 30.0
     k_v: float = 0.02                 # m per decision at full throttle
     sat_min: float = 0.25             # minimum throttle of sat(1 - lambda_max)
-    k_phi: float = 4.0                # steering gain, rad per unit lambda_diff
+    k_phi: float = 2.0                # steering gain, rad per unit lambda_diff
     phi_max: float = 1.0              # steering limit (rad)
     turn_length: float = 0.02         # m: turn = step * tan(phi) / turn_length (Antcar's wheelbase, eq. 10)
     threshold: float = 0.2            # place-MBON lambda below which the place is recognised (p)

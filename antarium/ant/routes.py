@@ -101,7 +101,7 @@ class Route:
 
 
 def curved_route(seed: int, length: float = 10.0, start=(0.0, 0.0), heading: float | None = None,
-                 spacing: float = 0.05, curvature: float = 0.5, correlation: float = 1.0) -> Route:
+                 spacing: float = 0.05, curvature: float = 0.3, correlation: float = 2.0) -> Route:
     """A smooth random route of `length` metres from `start`.
 
     The curvature (1/m) is an Ornstein-Uhlenbeck process in arc length with standard deviation `curvature` and

@@ -47,9 +47,8 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
     if eye.params.n_pn != model.n_pn:
         raise ValueError(f"the model expects {model.n_pn} PNs but the eye gives {eye.params.n_pn}")
     with contextlib.ExitStack() as stack:
-        renderer = Renderer(dome, **(renderer_kwargs or {}))
-        if hasattr(renderer, "close"):
-            stack.callback(renderer.close)
+        renderer = Renderer(dome, clock=clock, **(renderer_kwargs or {}))
+        stack.callback(renderer.release)
         renderer.set_scene(scene)
         link = open_link("virtual", clock=clock)
         stack.callback(link.close)

@@ -1,0 +1,84 @@
+"""The virtual ant in the real closed loop: habitat -> Renderer -> frame loop -> virtual link -> emulated panels
+-> eye -> model -> legs -> ball rotations -> frame loop (real EGL rendering, simulated clock)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from antarium.ant.agent import follow_route, learning_walk
+from antarium.ant.models import make_model
+from antarium.ant.routes import curved_route
+from antarium.ant.world import virtual_rig
+from antarium.trial_log import read_table
+
+FACE = 64  # 1.8 deg texels: finer than the eye's 4.4 deg acceptance, and fast on llvmpipe
+ROUTE = curved_route(4, length=0.8, start=(0.5, -0.3))
+
+
+@pytest.fixture(scope="module")
+def trained():
+    """An Antcar model that learned ROUTE (1 cm spacing) in the habitat."""
+    model = make_model("antcar", 800)
+    with virtual_rig(model, renderer_kwargs={"face_size": FACE}) as ant:
+        views = learning_walk(ant, ROUTE, 0.01)
+    assert 81 <= views <= 82
+    return model
+
+
+def _release(model, tether="free_yaw", decisions=60, **kw):
+    with virtual_rig(model, tether=tether, renderer_kwargs={"face_size": FACE}, **kw) as ant:
+        return follow_route(ant, ROUTE, decisions, arrive_radius=0.05, start_offset=(0.04, math.radians(25)))
+
+
+def test_antcar_closed_loop_converges_onto_the_route(trained):
+    result = _release(trained)
+    xy, heading = result.track.arrays()
+    _, d, route_heading = ROUTE.project(xy)
+    theta = np.degrees(np.remainder(heading - route_heading + math.pi, math.tau) - math.pi)
+    # Released 4 cm left of the route and turned 25 deg left: within a few steps it walks along the route
+    # (lambda_L - lambda_R steers it right), and its lateral error stays within the release offset + 2 cm
+    # all the way to the route's end, where it arrives.
+    assert abs(theta[0]) == pytest.approx(25.0)
+    assert np.all(np.abs(theta[3:]) < 8.0)
+    assert np.abs(d).max() < 0.06
+    assert result.summary.arrived and result.summary.errors == 0
+    assert result.summary.angular_median_deg < 5.0
+
+
+def test_an_untrained_ant_released_the_same_way_walks_off_the_route():
+    result = _release(make_model("antcar", 800), decisions=40)
+    xy, heading = result.track.arrays()
+    _, d, route_heading = ROUTE.project(xy)
+    theta = np.degrees(np.remainder(heading - route_heading + math.pi, math.tau) - math.pi)
+    # lambda_L = lambda_R = 1 (all novel): no steering, and the lowest throttle; it keeps walking off.
+    assert np.all(np.abs(theta) > 20.0)
+    assert np.all(np.diff(np.abs(d)) > 0) and not result.summary.arrived
+    assert result.track.traces[-1]["lambda_max"] == 1.0
+
+
+def test_both_tether_modes_walk_the_same_path(trained):
+    free = _release(trained, "free_yaw", decisions=12).track.arrays()
+    fixed = _release(trained, "fixed", decisions=12).track.arrays()
+    assert np.abs(free[0] - fixed[0]).max() < 0.01
+    assert np.degrees(np.abs(np.remainder(free[1] - fixed[1] + math.pi, math.tau) - math.pi)).max() < 5
+
+
+def test_the_ant_sees_what_the_panels_show_and_leaves_a_trial_log(trained, tmp_path):
+    with virtual_rig(trained, renderer_kwargs={"face_size": FACE}, log_path=tmp_path / "ant.h5") as ant:
+        ant.place(*ROUTE.start, 0.0)
+        ant.frame()
+        rendered = ant.loop._frame_buf.copy()
+        np.testing.assert_array_equal(ant.read_leds(), ant.loop.link.emulator.led_values())
+        seen = ant.look().pns()[0]
+        assert np.corrcoef(seen, ant.eye.look(rendered).pns()[0])[0, 1] > 0.99
+        for panel in range(20, 35):  # dim panels in the emulator only: the renderer's frame is unchanged
+            ant.loop.link.emulator.set_brightness(panel, 0)
+        ant.frame()
+        assert np.corrcoef(ant.look().pns()[0], ant.eye.look(ant.loop._frame_buf).pns()[0])[0, 1] < 0.95
+        follow_route(ant, ROUTE, 5)
+    frames = read_table(tmp_path / "ant.h5", "frames")
+    events = read_table(tmp_path / "ant.h5", "events")
+    assert len(frames["frame"]) == 7
+    kinds = [k.decode() if isinstance(k, bytes) else k for k in events["kind"]]
+    assert kinds.count("ant_decision") == 5
