@@ -6,7 +6,8 @@ Latch rule (see docs/protocol.md): a panel keeps at most one pending image, tagg
 sequence. A VIDEO frame is accepted unless its sequence is not newer than the last LATCH the panel saw, or older
 than the pending image (both count as "stale"); a newer one replaces the pending image ("superseded"). On
 LATCH s the panel shows its pending image if and only if that image is frame s; otherwise it keeps showing its
-previous image (a "miss"). Pending images older than s are discarded; one newer than s stays pending.
+previous image (a "miss"). A pending image of frame s + 1 (it overtook this latch) stays pending; any other is
+discarded.
 """
 
 from __future__ import annotations
@@ -95,7 +96,7 @@ class Panel:
             self.dome.queue_latched(self.index, self.pending)
             self.pending = None
             return True
-        if not seq_newer(self.pending_seq, seq):
+        if self.pending_seq != (seq + 1) % SEQ_MODULO:  # only the next frame, having overtaken this latch, waits
             self.dome.counters["superseded"] += 1
             self.pending = None
         return False
