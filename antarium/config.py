@@ -32,6 +32,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
         "ball_radius": 0.05,  # metres
         "stats_every": 19,  # publish frame statistics every N frames
         "pose_every": 1,  # publish the pose every N frames
+        "realtime_priority": 0,  # 1..99: run the frame loop (and the spawned emulator) SCHED_FIFO; 0: off
     },
     "locomotion": {"source": "scripted"},  # other keys are passed to the source as keyword arguments
     "link": {
@@ -78,6 +79,7 @@ _RANGES = {
     ("loop", "eye_height"): (0.0, 1000.0),
     ("loop", "stats_every"): (1, 100000),
     ("loop", "pose_every"): (1, 100000),
+    ("loop", "realtime_priority"): (0, 99),
     ("link", "port"): (0, 65535),
     ("render", "face_size"): (0, 2048),
     ("log", "flush_s"): (0.01, 1.0),

@@ -135,6 +135,9 @@ class FrameLoop:
         self.polariser_override = None
         self.rejected_frames = 0
         self._last_reject_event_t = -math.inf
+        self.faults: dict[str, int] = {}
+        self._source_failing = False
+        self._last_fault_event_t: dict[str, float] = {}
         self._last_late_event_t = -math.inf
         self._late_since_event = 0
         self._worst_overrun = 0.0
@@ -252,10 +255,15 @@ class FrameLoop:
 
     def _check_health(self, now: float) -> None:
         if self.source is not None:
-            connected = bool(self.source.status().get("connected", True))
+            try:
+                status = self.source.status()
+            except Exception as exc:  # noqa: BLE001 - a failing status is a failing source
+                self.fault("locomotion", now, exc)
+                status = {"connected": False, "error": f"{type(exc).__name__}: {exc}"}
+            connected = bool(status.get("connected", True)) and not self._source_failing
             if connected != self.locomotion_connected:
                 self.locomotion_connected = connected
-                self.event("locomotion_back" if connected else "locomotion_lost", status=self.source.status())
+                self.event("locomotion_back" if connected else "locomotion_lost", status=status)
         if self.link is not None and now >= self._next_telemetry_t:
             self._next_telemetry_t = now + TELEMETRY_EVERY_S
             self.telemetry = self.link.telemetry()
@@ -277,6 +285,29 @@ class FrameLoop:
                 if not ok:
                     self.link_outages += 1
                 self.event("link_back" if ok else "link_outage", error="" if ok else self.last_link_error)
+
+    def _read_source(self, t: float) -> list:
+        """The source's new samples; a source that raises is reported as disconnected, never stops the loop."""
+        if self.source is None:
+            return []
+        try:
+            samples = self.source.read()
+            self._source_failing = False
+            return samples
+        except Exception as exc:  # a driver bug must not end the trial
+            self._source_failing = True
+            self.fault("locomotion", t, exc)
+            if self.locomotion_connected:
+                self.locomotion_connected = False
+                self.event("locomotion_lost", status={"error": f"{type(exc).__name__}: {exc}"})
+            return []
+
+    def fault(self, part: str, t: float, exc: Exception) -> None:
+        """Count an exception of a part (render, locomotion, bus); an event at most once a second per part."""
+        self.faults[part] = self.faults.get(part, 0) + 1
+        if t - self._last_fault_event_t.get(part, -math.inf) >= 1.0:
+            self._last_fault_event_t[part] = t
+            self.event(f"{part}_error", error=f"{type(exc).__name__}: {exc}", count=self.faults[part])
 
     def _frame_rejected(self, t: float, reason: str) -> None:
         self.rejected_frames += 1
@@ -309,7 +340,7 @@ class FrameLoop:
             self._t_first = t_start
         if self.frame % HEALTH_EVERY == 0:
             self._check_health(t_start)
-        samples = self.source.read() if self.source is not None else []
+        samples = self._read_source(t_start)
         newest = samples[-1] if samples else None
         if samples:
             self.samples_used += len(samples)
@@ -320,11 +351,14 @@ class FrameLoop:
         pose = self.pose
         render = sample = convert = encode = send = math.nan
         if self.renderer is not None:
-            self._frame_buf = self.renderer.render(pose, out=self._frame_buf)
-            timings = getattr(self.renderer, "last_timings", None) or {}
-            render = timings.get("render", math.nan)
-            sample = timings.get("sample", math.nan)
-            convert = timings.get("convert", math.nan)
+            try:
+                self._frame_buf = self.renderer.render(pose, out=self._frame_buf)
+                timings = getattr(self.renderer, "last_timings", None) or {}
+                render = timings.get("render", math.nan)
+                sample = timings.get("sample", math.nan)
+                convert = timings.get("convert", math.nan)
+            except Exception as exc:  # the dome keeps the previous frame; the loop, the log and the bus go on
+                self.fault("render", t_start, exc)
         if self.link is not None and self._frame_buf is not None:
             t0 = clock.now()
             if self.renderer is not None and hasattr(self.renderer, "polariser_angles"):
@@ -408,7 +442,7 @@ class FrameLoop:
                                "skipped_frames": self.skipped_frames, "target_rate_hz": self.rate_hz,
                                "frame_rate_hz": None, "locomotion_connected": self.locomotion_connected,
                                "link_ok": self.link_ok, "link_outages": self.link_outages,
-                               "rejected_frames": self.rejected_frames}
+                               "rejected_frames": self.rejected_frames, "faults": dict(self.faults)}
         if n >= 2:
             t = window[:, 0]
             span = float(np.nanmax(t) - np.nanmin(t))

@@ -222,13 +222,16 @@ class Server:
 
     def _on_frame(self, rec: FrameRecord) -> None:
         loop_cfg = self.config["loop"]
-        if self._pose_pub is not None and rec.frame % loop_cfg["pose_every"] == 0:
-            self._pose_pub.put(bus.encode_pose(rec.frame, rec.t_start, rec.pose, rec.scene_rotation,
-                                               rec.closed_loop, rec.fixed_tether))
-        if self._stats_pub is not None and rec.frame % loop_cfg["stats_every"] == 0:
-            self._stats_pub.put(bus.encode_stats(rec.frame, self.loop.late_frames, rec.t_start, rec.latency,
-                                                 _nan0(rec.render) + _nan0(rec.sample) + _nan0(rec.convert),
-                                                 rec.sample, rec.encode, rec.send, rec.pacing_error))
+        try:
+            if self._pose_pub is not None and rec.frame % loop_cfg["pose_every"] == 0:
+                self._pose_pub.put(bus.encode_pose(rec.frame, rec.t_start, rec.pose, rec.scene_rotation,
+                                                   rec.closed_loop, rec.fixed_tether))
+            if self._stats_pub is not None and rec.frame % loop_cfg["stats_every"] == 0:
+                self._stats_pub.put(bus.encode_stats(rec.frame, self.loop.late_frames, rec.t_start, rec.latency,
+                                                     _nan0(rec.render) + _nan0(rec.sample) + _nan0(rec.convert),
+                                                     rec.sample, rec.encode, rec.send, rec.pacing_error))
+        except Exception as exc:  # the bus must never stop the stimulus  # noqa: BLE001
+            self.loop.fault("bus", rec.t_sent, exc)
 
     def _status_loop(self) -> None:
         while not self._stopping.wait(1.0):
@@ -479,6 +482,8 @@ class Server:
         `frames` frames ran, or `seconds` passed since the first frame."""
         try:
             loop_cfg = self.config["loop"]
+            if loop_cfg["realtime_priority"]:
+                self._set_realtime(loop_cfg["realtime_priority"])
             self.link = self._open_link()
             self.renderer = self._renderer_factory(self.config["render"], self.clock) if self._renderer_factory \
                 else None
@@ -514,6 +519,15 @@ class Server:
             return self.loop.run(until=until, frames=frames)
         finally:
             self._shutdown()
+
+    def _set_realtime(self, priority: int) -> None:
+        """SCHED_FIFO for this (the frame loop's) thread; processes it starts inherit it. Warns if not allowed."""
+        import os
+
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        except (AttributeError, PermissionError, OSError) as exc:
+            self.echo(f"antarium serve: realtime priority {priority} not granted ({exc}); running without it")
 
     def start_thread(self, timeout_s: float = 60.0) -> Server:
         """Run the server in a thread of its own; returns when it runs (or raises why it could not start)."""

@@ -174,3 +174,38 @@ def test_latency_measures_newest_sample_to_last_datagram():
     rec = loop.step()
     assert rec.latency == pytest.approx(0.001)
     assert rec.sample_seq == 1
+
+
+class FailingSource(SwitchableSource):
+    """A source whose driver raises while `failing` (a bug in a back-end)."""
+
+    failing = False
+
+    def read(self):
+        if self.failing:
+            raise RuntimeError("driver bug")
+        return super().read()
+
+
+def test_a_raising_source_or_renderer_never_stops_the_loop():
+    clock = SimulatedClock()
+    kinds = []
+    src = FailingSource(clock)
+    renderer = SlowRenderer(clock, 0.0)
+    loop = make_loop(clock, source=src, renderer=renderer, link=RecordingLink(),
+                     on_event=lambda t, kind, data: kinds.append(kind))
+    loop.run(frames=10)
+    src.failing = True
+    loop.run(frames=40)
+    assert not loop.locomotion_connected and loop.faults["locomotion"] == 40
+    held = loop.pose
+    src.failing = False
+    loop.run(frames=20)
+    assert loop.locomotion_connected and loop.pose.x > held.x
+    assert kinds.count("locomotion_lost") == 1 and kinds.count("locomotion_back") == 1
+    assert kinds.count("locomotion_error") == 1  # at most one a second
+    renderer.render = lambda pose, out=None: 1 / 0
+    sent = loop.link.frames
+    loop.run(frames=5)
+    assert loop.faults["render"] == 5 and loop.link.frames == sent + 5  # the previous frame is sent again
+    assert "render_error" in kinds
