@@ -19,7 +19,7 @@ from antarium.ant.agent import Track, follow_route, learning_walk
 from antarium.ant.eye import EyeParams
 from antarium.ant.metrics import median_mad
 from antarium.ant.models import make_model
-from antarium.ant.plots import plot_paths, plot_traces
+from antarium.ant.plots import plot_paths, plot_traces, scene_top_view
 from antarium.ant.routes import Route, RouteError, curved_route
 from antarium.ant.storage import mbon_bytes, save_model
 from antarium.ant.world import virtual_rig
@@ -29,6 +29,9 @@ from antarium.ant.world import virtual_rig
 LEARN_SPACING_M = {"antcar": 0.01, "ardin": 0.04, "perfect_memory": 0.04}
 #: the ant has arrived within this distance of the route's end (m)
 ARRIVE_RADIUS_M = 0.10
+#: cube-face side the ant's rig renders with: 1.8 deg texels, finer than the eye's 4.4 deg acceptance and
+#: several times faster on a software GL than the dome's default (192)
+FACE_SIZE = 64
 #: the demo's route: short, so that learning and following take seconds
 DEMO_ROUTE_LENGTH_M = 1.5
 DEMO_ROUTE_SEED = 1
@@ -117,18 +120,19 @@ def _follow(ant, route: Route, max_decisions: int, start_offset, progress):
     return result, wall / max(1, result.summary.decisions), 1e3 * acc[0] / max(1, acc[1])
 
 
-def _outputs(out: Path | None, name: str, route: Route, kind: str, track: Track) -> str | None:
+def _outputs(out: Path | None, name: str, route: Route, kind: str, track: Track, top) -> str | None:
     if out is None:
         return None
     plot_traces(out / f"{name}_traces.png", track, title=f"{name}: model signals")
-    return str(plot_paths(out / f"{name}_paths.png", route, {kind: track}, title=f"{name}: learned and followed"))
+    return str(plot_paths(out / f"{name}_paths.png", route, {kind: track}, title=f"{name}: learned and followed",
+                          top=top))
 
 
 def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: str, scene: Any = "habitat",
                      model_params: dict | None = None, tether: str = "free_yaw", learn_spacing: float | None = None,
                      max_decisions: int | None = None, start_offset: tuple[float, float] = (0.0, 0.0),
-                     eye_params: EyeParams | None = None, progress=None,
-                     save: bool = True) -> tuple[TrialOutcome, Track]:
+                     eye_params: EyeParams | None = None, progress=None, save: bool = True,
+                     face_size: int = FACE_SIZE) -> tuple[TrialOutcome, Track]:
     """Learn `route` with a fresh `kind` model by a learning walk, then follow it in closed loop.
 
     Writes `<name>.h5` (trial log of the whole session), `<name>_paths.png`, `<name>_traces.png` and
@@ -140,12 +144,14 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
     log_path = out / f"{name}.h5" if out is not None else None
     spacing = learn_spacing or LEARN_SPACING_M[kind]
     with virtual_rig(model, scene=scene, eye_params=eye_params, tether=tether, log_path=log_path,
-                     log_metadata={"route": route.points.tolist(), "model": kind}) as ant:
+                     log_metadata={"route": route.points.tolist(), "model": kind},
+                     renderer_kwargs={"face_size": face_size}) as ant:
         ant.loop.event("ant_learning_walk", spacing=spacing, route_length=route.length)
         learning_walk(ant, route, spacing, progress=progress)
         result, wall, model_ms = _follow(ant, route, max_decisions or _decision_limit(model, route), start_offset,
                                          progress)
-    picture = _outputs(out, name, route, kind, result.track)
+        top = scene_top_view(ant.loop.renderer.scene)
+    picture = _outputs(out, name, route, kind, result.track, top)
     if out is not None and save:
         save_model(out / f"{name}_model.npz", model, eye_params, route.points)
     outcome = TrialOutcome(kind, name, asdict(result.summary), wall, model_ms, model.learned_views,
@@ -155,15 +161,18 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
 
 def follow_saved(model, eye_params: EyeParams, route: Route, out_dir: str | Path, name: str = "run",
                  scene: Any = "habitat", tether: str = "free_yaw", max_decisions: int | None = None,
-                 start_offset: tuple[float, float] = (0.0, 0.0), progress=None) -> tuple[TrialOutcome, Track]:
+                 start_offset: tuple[float, float] = (0.0, 0.0), progress=None,
+                 face_size: int = FACE_SIZE) -> tuple[TrialOutcome, Track]:
     """Release an already trained model on `route` in closed loop; writes `<name>.h5`, pictures, `<name>.json`."""
     out = Path(out_dir)
     log_path = out / f"{name}.h5"
     with virtual_rig(model, scene=scene, eye_params=eye_params, tether=tether, log_path=log_path,
-                     log_metadata={"route": route.points.tolist(), "model": model.kind}) as ant:
+                     log_metadata={"route": route.points.tolist(), "model": model.kind},
+                     renderer_kwargs={"face_size": face_size}) as ant:
         result, wall, model_ms = _follow(ant, route, max_decisions or _decision_limit(model, route), start_offset,
                                          progress)
-    picture = _outputs(out, name, route, model.kind, result.track)
+        top = scene_top_view(ant.loop.renderer.scene)
+    picture = _outputs(out, name, route, model.kind, result.track, top)
     outcome = TrialOutcome(model.kind, name, asdict(result.summary), wall, model_ms, model.learned_views,
                            mbon_bytes(model), str(log_path), picture)
     (out / f"{name}.json").write_text(json.dumps(asdict(outcome), indent=2, default=float))
@@ -207,8 +216,11 @@ def evaluate(out_dir: str | Path, n_routes: int = 10, length: float = 10.0, kind
 
     Per route and model: a trial log, a picture of the paths, traces; `evaluation.md` / `.json` sum it up.
     """
+    from antarium.renderers import build_scene
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    top = scene_top_view(build_scene(scene))
     outcomes: list[TrialOutcome] = []
     tracks: dict[int, dict[str, Track]] = {}
     for i in range(n_routes):
@@ -223,7 +235,7 @@ def evaluate(out_dir: str | Path, n_routes: int = 10, length: float = 10.0, kind
             outcomes.append(outcome)
             tracks.setdefault(i, {})[kind] = track
             write_outcomes(out, outcomes, {"n_routes": n_routes, "length_m": length, "seed": seed})
-        plot_paths(out / f"route{i:02d}_all.png", route, tracks[i], title=f"route {i}: learned and followed")
+        plot_paths(out / f"route{i:02d}_all.png", route, tracks[i], title=f"route {i}: learned and followed", top=top)
     return write_outcomes(out, outcomes, {"n_routes": n_routes, "length_m": length, "seed": seed})
 
 

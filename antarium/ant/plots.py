@@ -22,24 +22,30 @@ def _figure(size=(7, 7)):
     return plt, plt.figure(figsize=size)
 
 
-def top_view(ax, footprints) -> None:
-    """Draw the world's objects seen from above: `footprints` is a list of (x, y, radius) in metres."""
-    for x, y, r in footprints or ():
-        ax.add_patch(_circle((x, y), r))
+def scene_top_view(scene, min_height: float = 0.01) -> np.ndarray:
+    """(M, 3) x, y, height (m) of the vertices of a `Scene`'s objects above `min_height`, ground left out."""
+    parts = [obj.world_vertices() for name, obj in getattr(scene, "objects", {}).items() if name != "ground"]
+    if not parts:
+        return np.zeros((0, 3))
+    v = np.concatenate(parts).astype(np.float64)
+    return v[v[:, 2] > min_height]
 
 
-def _circle(xy, r):
-    from matplotlib.patches import Circle
-
-    return Circle(xy, r, color="0.6", alpha=0.6, lw=0)
+def _draw_top_view(ax, top: np.ndarray | None, lo, hi) -> None:
+    if top is None or len(top) == 0:
+        return
+    inside = np.all((top[:, :2] >= lo) & (top[:, :2] <= hi), axis=1)
+    t = top[inside]
+    ax.scatter(t[:, 0], t[:, 1], s=2, c=np.minimum(t[:, 2], 1.0), cmap="Greens", vmin=-0.3, vmax=1.0, lw=0,
+               label="objects (top view)")
 
 
 def plot_paths(path: str | Path, route: Route, tracks: dict[str, Track], title: str = "",
-               footprints=None, margin: float = 0.5) -> Path:
-    """The learned route and the followed paths (world frame, metres) over the world's top view; writes a PNG."""
+               top: np.ndarray | None = None, margin: float = 0.5) -> Path:
+    """The learned route and the followed paths (world frame, metres) over the world's top view (`top`, from
+    `scene_top_view`); writes a PNG."""
     plt, fig = _figure()
     ax = fig.add_subplot(111)
-    top_view(ax, footprints)
     ax.plot(*route.points.T, color="tab:red", lw=4, alpha=0.5, label="learned route")
     ax.plot(*route.start, "o", color="tab:red", ms=8, label="start (nest)")
     ax.plot(*route.end, "*", color="tab:red", ms=12, label="end (feeder)")
@@ -57,6 +63,7 @@ def plot_paths(path: str | Path, route: Route, tracks: dict[str, Track], title: 
             ax.plot(*bad.T, "x", color=colour, ms=6)
     lo = np.min([route.points.min(0)] + [t.arrays()[0].min(0) for t in tracks.values() if t.xy], axis=0) - margin
     hi = np.max([route.points.max(0)] + [t.arrays()[0].max(0) for t in tracks.values() if t.xy], axis=0) + margin
+    _draw_top_view(ax, top, lo, hi)
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal")
