@@ -2,7 +2,8 @@
 
 A far field at infinity looks the same from every eye position, so an LED's value depends only on the yaw
 psi between dome and world: v_i = F~(azimuth_i + psi, elevation_i), where F~ is the far field already
-integrated over the LED footprint. F~ is tabulated once per scene on a 0.25° (elevation, azimuth) grid:
+integrated over the LED footprint. F~ is tabulated once per scene on a 0.25° (elevation, azimuth) grid
+(16-bit):
 the field is evaluated on the grid, blurred along each row by a periodic Gaussian of width sigma/cos(el)
 (FFT) and along elevation by a Gaussian of width sigma, the grid continuing over the zenith (rows beyond
 90° are the rows below it, turned by 180°). Per frame: bilinear lookup per LED (`kernels.lookup_pairs`).
@@ -31,7 +32,7 @@ class FarFieldTable:
         margin = 4 * sigma + STEP
         el_lo = el_led.min() - margin
         n_rows = int(math.ceil((math.pi / 2 + margin - el_lo) / STEP))
-        n_cols = int(round(2 * math.pi / STEP))
+        self.n_cols = n_cols = int(round(2 * math.pi / STEP))
         el = el_lo + np.arange(n_rows) * STEP
         az = np.arange(n_cols) * STEP
         flip = el > math.pi / 2  # over the zenith: azimuth + 180 deg, elevation 180 deg - el
@@ -48,20 +49,28 @@ class FarFieldTable:
         transfer = np.exp(-2 * (math.pi * freq[None, :] * sig_az[:, None]) ** 2).astype(np.float32)
         field = np.fft.irfft(np.fft.rfft(field, axis=1) * transfer[:, :, None], n=n_cols, axis=1)
         field = gaussian_filter1d(field.astype(np.float32), sigma / STEP, axis=0, mode="nearest", truncate=3.0)
-        table = np.empty((n_rows, n_cols + 1, 2, 2), dtype=np.float32)
-        table[:, :n_cols] = field.reshape(n_rows, n_cols, 2, 2)
+        # 16-bit fixed point (radiance * 65535), green/blue and UV apart: a quarter of the float table's
+        # bytes, so the per-frame gathers mostly hit the cache
+        table = np.empty((n_rows, n_cols + 1, 4), dtype=np.uint16)
+        table[:, :n_cols] = np.rint(np.clip(field, 0.0, 1.0) * 65535.0)
         table[:, n_cols] = table[:, 0]
-        self.table = table
+        self.table_gb = np.ascontiguousarray(table[..., 0:2])
+        self.table_uv = np.ascontiguousarray(table[..., 2:4])
         pos = (el_led - el_lo) / STEP
         row = np.clip(np.floor(pos), 0, n_rows - 2).astype(np.int64)
         is_uv = (np.arange(len(directions)) % PIXELS_PER_PANEL) >= GB_PER_PANEL
-        self.row = row * 2 + is_uv  # lower row and pair (0: G, B; 1: UV, polarised UV) in one integer
+        self.row = row
         self.row_frac = (pos - row).astype(np.float32)
         self.col0 = np.mod(np.arctan2(directions[:, 1], directions[:, 0]), 2 * math.pi) / STEP
+        order = np.lexsort((self.col0, row))  # sweep the table row by row
+        self.order_gb = order[~is_uv[order]]
+        self.order_uv = order[is_uv[order]]
 
     def lookup(self, psi: float, out: np.ndarray) -> np.ndarray:
         """(20350, 2) float32 pair radiances ([G, B] or [UV, polarised UV]) for yaw `psi` (rad) into `out`."""
         from .kernels import lookup_pairs
 
-        lookup_pairs(self.table, self.row, self.row_frac, self.col0, (psi / STEP) % (2 * math.pi / STEP), out)
+        shift = (psi / STEP) % self.n_cols
+        lookup_pairs(self.table_gb, self.order_gb, self.row, self.row_frac, self.col0, shift, out)
+        lookup_pairs(self.table_uv, self.order_uv, self.row, self.row_frac, self.col0, shift, out)
         return out

@@ -2,25 +2,26 @@
 
 Each LED's values are "pairs": [green, blue] for a GB pixel, [UV, polarised UV] for a UV pixel, so every
 loop touches only the two channels that pixel needs. Compiled once per machine (cached next to this file
-or in NUMBA_CACHE_DIR); no allocation inside.
+or in NUMBA_CACHE_DIR); no allocation inside. Single-threaded on purpose: the GL rasteriser (llvmpipe)
+already uses every core, and a parallel loop competing with it was measured 6x slower on 2 cores.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 FULL = 65535.0
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(cache=True, fastmath=True)
 def sample_pairs(indptr, indices, weights, texels, channel, out):  # pragma: no cover - compiled
     """out[i] = sum_k weights[k] * texels[indices[k], channel[i] : channel[i] + 2] over row i of a CSR matrix.
 
     indptr (n+1,), indices (nnz,) int32; weights (nnz,) float32; texels (T, 4) uint16; channel (n,) int64
     (0 for GB pixels, 2 for UV pixels); out (n, 2) float32.
     """
-    for i in prange(len(indptr) - 1):
+    for i in range(len(indptr) - 1):
         c = channel[i]
         a0 = np.float32(0.0)
         a1 = np.float32(0.0)
@@ -34,24 +35,28 @@ def sample_pairs(indptr, indices, weights, texels, channel, out):  # pragma: no 
 
 
 @njit(cache=True)
-def lookup_pairs(table, row, row_frac, col0, shift, out):  # pragma: no cover - compiled
-    """Bilinear far-field lookup. table (rows, cols + 1, 2, 2) float32 ([G, B] and [UV, polarised UV] pairs,
-    last column = first); row (n,) int64 lower row, row_frac (n,) float32; col0 (n,) float64 column of
-    each LED at yaw 0; shift: columns to add; pair index per LED in `pair` column of row (see FarFieldTable).
-    out (n, 2) float32."""
+def lookup_pairs(table, order, row, row_frac, col0, shift, out):  # pragma: no cover - compiled
+    """Bilinear lookup in a far-field table for the LEDs in `order` (sorted by row: cache friendly).
+
+    table (rows, cols + 1, 2) uint16: a channel pair * 65535 per grid point, the last column repeating the
+    first; row (n,) int64 lower row; row_frac (n,) float32; col0 (n,) float64: column of each LED at yaw 0;
+    shift: columns to add (>= 0); out (n, 2) float32 radiance in [0, 1] (only rows in `order` are written).
+    """
     n_cols = table.shape[1] - 1
-    for i in range(len(row)):
+    scale = np.float32(1.0 / 65535.0)
+    for i in order:
         c = col0[i] + shift
-        ci = np.floor(c)
+        ci = np.int64(c)
         f = np.float32(c - ci)
-        j = np.int64(ci) % n_cols
-        r = row[i] >> 1
-        p = row[i] & 1
+        j = ci % n_cols
+        r = row[i]
         fr = row_frac[i]
         for k in range(2):
-            a = table[r, j, p, k] + f * (table[r, j + 1, p, k] - table[r, j, p, k])
-            b = table[r + 1, j, p, k] + f * (table[r + 1, j + 1, p, k] - table[r + 1, j, p, k])
-            out[i, k] = a + fr * (b - a)
+            a0 = np.float32(table[r, j, k])
+            b0 = np.float32(table[r + 1, j, k])
+            a = a0 + f * (np.float32(table[r, j + 1, k]) - a0)
+            b = b0 + f * (np.float32(table[r + 1, j + 1, k]) - b0)
+            out[i, k] = (a + fr * (b - a)) * scale
 
 
 @njit(cache=True)
@@ -63,22 +68,21 @@ def convert_pairs(pairs, gain, is_uv, swap, out):  # pragma: no cover - compiled
     UV pixel: plain = (UV - polarised) * gain, polarised * gain, polarised clipped to [0, UV].
     Values are truncated, so every pair's sum stays <= 65535.
     """
-    for i in range(len(pairs)):
-        p0 = max(pairs[i, 0], np.float32(0.0))
-        p1 = max(pairs[i, 1], np.float32(0.0))
+    for i in range(pairs.shape[0]):
+        p0 = pairs[i, 0]
+        p1 = pairs[i, 1]
+        if swap and not is_uv[i]:
+            p0, p1 = p1, p0
+        a = max(p0, 0.0) * gain[i, 0]
+        b = max(p1, 0.0) * gain[i, 1]
         if is_uv[i]:
-            total = min(p0 * gain[i, 0], FULL)
-            pol = min(p1 * gain[i, 1], total)
-            out[i, 0] = np.uint16(total - pol)
-            out[i, 1] = np.uint16(pol)
+            a = min(a, FULL)
+            b = min(b, a)
+            a = a - b
         else:
-            if swap:
-                p0, p1 = p1, p0
-            g = p0 * gain[i, 0]
-            b = p1 * gain[i, 1]
-            s = g + b
+            s = a + b
             if s > FULL:
-                g *= FULL / s
+                a *= FULL / s
                 b *= FULL / s
-            out[i, 0] = np.uint16(min(g, FULL))
-            out[i, 1] = np.uint16(min(b, FULL - np.floor(min(g, FULL))))
+        out[i, 0] = np.uint16(a)
+        out[i, 1] = np.uint16(b)
