@@ -433,6 +433,11 @@ class FrameLoop:
         if self._loop_thread is not None:
             self._loop_thread.join(timeout)
 
+    @property
+    def last_frame(self):
+        """The LED frame (20350, 2) uint16 most recently rendered (and sent), or None before the first."""
+        return self._frame_buf
+
     # -- statistics ------------------------------------------------------------------------------------
     def stats(self) -> dict[str, Any]:
         """Frame rate, late frames and latency/stage percentiles (s) over the last frames (JSON-serialisable)."""

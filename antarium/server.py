@@ -134,6 +134,7 @@ class Server:
         self.record = record
         self.trial_paths: list[Path] = []
         self.final_stats: dict[str, Any] = {}
+        self.final_frame = None  # the last LED frame sent, kept after the loop stopped
         self._entities: list = []
         self._pose_pub = self._stats_pub = None
         self._ready = threading.Event()
@@ -557,6 +558,8 @@ class Server:
         self._stopping.set()
         if self.loop is not None:
             self.final_stats = self.loop.stats()
+            if self.loop.last_frame is not None:
+                self.final_frame = self.loop.last_frame.copy()
         if self.trial_log is not None:
             try:
                 self._trial_stop()
