@@ -227,10 +227,10 @@ def evaluate(out_dir: str | Path, n_routes: int = 10, length: float = 10.0, kind
         route = curved_route(seed + i, length=length)
         route.save(out / f"route{i:02d}.csv")
         for kind in kinds:
-            bar = progress_factory(f"route {i} {kind}") if progress_factory else None
+            bar = progress_factory(f"route {i} {kind}") if progress_factory is not None else None
             outcome, track = train_and_follow(kind, route, out, f"route{i:02d}_{kind}", scene=scene,
-                                              progress=bar.update if bar else None, save=False)
-            if bar:
+                                              progress=bar.update if bar is not None else None, save=False)
+            if bar is not None:
                 bar.close()
             outcomes.append(outcome)
             tracks.setdefault(i, {})[kind] = track
