@@ -1,6 +1,7 @@
 """Packaging: the three folders import as subpackages of `antarium` from regular and editable installs;
 `import antarium` stays light; every sub-command has --help."""
 
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -27,10 +28,14 @@ def test_editable_install_maps_the_folders():
 
 
 def test_regular_install_imports_the_subpackages(tmp_path):
+    # build from a copy, so that setuptools' build/ folder never lands in the checkout
+    src = tmp_path / "src"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(".venv", ".git", "build", "*.egg-info", "__pycache__",
+                                                             "demo-output", ".*_cache", ".hypothesis"))
     target = tmp_path / "site"
     subprocess.run(
         [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--target", str(target),
-         str(ROOT)],
+         str(src)],
         check=True, capture_output=True, text=True,
     )
     code = (
