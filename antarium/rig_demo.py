@@ -35,7 +35,7 @@ def run_demo_rig(out: str | Path, seconds: float = 8.0, echo=print, render: dict
     config["bus"]["listen"] = [free_tcp_endpoint()]  # never collide with a running `antarium serve`
     server = Server(config, record="demo", echo=lambda line: None)
     rotate = threading.Timer(seconds / 2, lambda: server.command("rotate_scene", {"deg": 90}))
-    server_ready = threading.Thread(target=lambda: server._ready.wait(60) and rotate.start(), daemon=True)
+    server_ready = threading.Thread(target=lambda: server.wait_ready(120) and rotate.start(), daemon=True)
     server_ready.start()
     try:
         frames = server.run(seconds=seconds)

@@ -530,6 +530,10 @@ class Server:
         except (AttributeError, PermissionError, OSError) as exc:
             self.echo(f"antarium serve: realtime priority {priority} not granted ({exc}); running without it")
 
+    def wait_ready(self, timeout_s: float | None = None) -> bool:
+        """Block until the first frame is about to run (or starting failed); False on timeout."""
+        return self._ready.wait(timeout_s) and self._start_error is None
+
     def start_thread(self, timeout_s: float = 60.0) -> Server:
         """Run the server in a thread of its own; returns when it runs (or raises why it could not start)."""
         self._thread = threading.Thread(target=self._run_quietly, name=f"antarium-server {self.rig}", daemon=True)
