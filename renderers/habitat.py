@@ -168,7 +168,7 @@ def habitat_objects(seed: int = 0, size: float = 24.0, n_trees: int = 5, n_bushe
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise ValueError(f"habitat {name} must be a non-negative integer, got {n!r}")
     rng = np.random.default_rng(seed)
-    objects = {"ground": SceneObject(_ground(rng, size, 64))}
+    objects = {"ground": SceneObject(_ground(rng, size, 48))}
     if n_tussocks:
         objects["tussocks"] = SceneObject(_tussocks(rng, n_tussocks, size))
     if n_stones:

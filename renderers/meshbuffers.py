@@ -1,5 +1,14 @@
 """GPU buffers of a scene's meshes: one vertex/index buffer in world coordinates, split into spatial chunks
-that each of the six views culls against its frustum and draws with one multi-draw-indirect call."""
+with levels of detail. Per frame each of the six views draws, with one multi-draw-indirect call, the chunks
+whose bounding spheres meet its frustum, each at the coarsest level whose error stays under a fraction of a
+texel at the chunk's distance.
+
+Levels of detail are made by vertex clustering: level k >= 1 merges the vertices of a chunk that fall in the
+same cube of side LOD_CELLS[k-1] (metres) into their mean (position and colour) and drops the triangles that
+collapse. A chunk at distance D uses the coarsest level whose cell is below `lod_angle * D`, so no vertex moves
+by more than about that angle as seen from the eye (default: half the largest texel). Textured meshes keep
+level 0 only.
+"""
 
 from __future__ import annotations
 
@@ -9,31 +18,66 @@ import numpy as np
 
 from .cubemap import FACES
 
-#: Objects with more triangles than this are split into chunks on an (x, y) grid.
-CHUNK_MIN_TRIANGLES = 2048
+#: Objects with more triangles than this are split into chunks on a grid of cubes.
+CHUNK_MIN_TRIANGLES = 256
 #: Side (texels) of every layer of the mesh texture array.
 MAX_TEXTURE_ARRAY_SIDE = 1024
+#: Cluster cells (m) of the levels of detail 1, 2, ...
+LOD_CELLS = (0.005, 0.01, 0.02, 0.04, 0.08, 0.16, 0.32)
 _FLOATS_PER_VERTEX = 9  # position 3, colour 3, uv 2, texture layer 1
 
 
 def _chunk_order(mesh, chunk_size: float) -> tuple[np.ndarray, np.ndarray]:
-    """Triangle order grouping triangles by grid cell, and the triangle count of each chunk."""
+    """Triangle order grouping triangles by grid cell, and the chunk index of each (sorted) triangle."""
     if mesh.n_triangles <= CHUNK_MIN_TRIANGLES:
-        return np.arange(mesh.n_triangles), np.array([mesh.n_triangles])
+        return np.arange(mesh.n_triangles), np.zeros(mesh.n_triangles, dtype=np.int64)
     centroid = mesh.vertices[mesh.faces].mean(axis=1)
-    cell = np.floor(centroid[:, :2] / chunk_size).astype(np.int64)
+    cell = np.floor(centroid / chunk_size).astype(np.int64)
     cell -= cell.min(axis=0)
-    key = cell[:, 0] * (cell[:, 1].max() + 1) + cell[:, 1]
+    span = cell.max(axis=0) + 1
+    key = (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
     order = np.argsort(key, kind="stable")
-    _, counts = np.unique(key[order], return_counts=True)
-    return order, counts
+    _, chunk = np.unique(key[order], return_inverse=True)
+    return order, chunk
+
+
+def cluster_vertices(vertices, colours, faces, tri_chunk, cell: float):
+    """One level of detail: vertices merged per (chunk, cube of side `cell`).
+
+    vertices (V, 3), colours (V, 3), faces (F, 3) int, tri_chunk (F,) chunk of each triangle (sorted).
+    Returns new vertices (V', 3) float32, colours (V', 3) float32, faces (F', 3) int64 into them, and
+    tri_chunk (F',), triangles still sorted by chunk; collapsed and duplicate triangles are dropped.
+    """
+    corners = faces.ravel()
+    pos = vertices[corners].astype(np.float64)
+    q = np.floor(pos / cell).astype(np.int64)
+    q -= q.min(axis=0)
+    if q.max() >= 1 << 16:
+        raise ValueError(f"object too large for level-of-detail cells of {cell} m")
+    chunk = np.repeat(tri_chunk, 3).astype(np.int64)
+    key = ((chunk << 16 | q[:, 0]) << 16 | q[:, 1]) << 16 | q[:, 2]
+    uniq, inv = np.unique(key, return_inverse=True)
+    count = np.bincount(inv, minlength=len(uniq)).astype(np.float64)
+    new_v = np.stack([np.bincount(inv, pos[:, k], len(uniq)) for k in range(3)], axis=1) / count[:, None]
+    col = colours[corners].astype(np.float64)
+    new_c = np.stack([np.bincount(inv, col[:, k], len(uniq)) for k in range(3)], axis=1) / count[:, None]
+    tri = inv.reshape(-1, 3)
+    keep = (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
+    tri, tri_chunk = tri[keep], tri_chunk[keep]
+    _, first = np.unique(np.sort(tri, axis=1), axis=0, return_index=True)
+    first.sort()
+    return new_v.astype(np.float32), new_c.astype(np.float32), tri[first], tri_chunk[first]
 
 
 class MeshBuffers:
-    """All objects of a scene on the GPU. Per frame, `draw` culls chunks per face and renders them."""
+    """All objects of a scene on the GPU. Per frame, `draw` culls chunks per face and renders them.
 
-    def __init__(self, ctx, prog, scene, chunk_size: float = 2.0):
+    lod_angle: radians; a chunk at distance D uses level-of-detail cells up to lod_angle * D (0: no LOD).
+    """
+
+    def __init__(self, ctx, prog, scene, chunk_size: float = 2.0, lod_angle: float = 0.0):
         self.ctx, self.prog = ctx, prog
+        self.lod_angle = float(lod_angle)
         self._resources = []
         self.n_chunks = 0
         objects = scene.objects
@@ -43,52 +87,75 @@ class MeshBuffers:
 
         self._mgl = moderngl
         self._textures = self._texture_array(objects)
+        n_levels = 1 + len(LOD_CELLS)
         vert_blocks, idx_blocks = [], []
-        first, count, owner = [], [], []
-        self._ranges = {}  # name -> (vertex start, vertex count, chunk start, chunk stop, triangle order)
-        v0 = i0 = 0
+        first, count = [], []  # per chunk: (n_levels,) index offsets and counts
+        self._ranges = {}  # name -> vertex start, object-space vertices, colours, uv, layer, order, chunks
+        v0 = i0 = c0 = 0
         layer = 0
-        for k, (name, obj) in enumerate(objects.items()):
+        for name, obj in objects.items():
             mesh = obj.mesh
-            order, counts = _chunk_order(mesh, chunk_size)
+            order, tri_chunk = _chunk_order(mesh, chunk_size)
+            n_chunks = int(tri_chunk[-1]) + 1
             tex_layer = -1.0
             if mesh.texture is not None:
                 tex_layer, layer = float(layer), layer + 1
-            vert_blocks.append(self._interleave(obj, tex_layer))
-            idx_blocks.append((mesh.faces[order] + v0).ravel())
-            starts = i0 + 3 * np.concatenate([[0], np.cumsum(counts)[:-1]])
-            c0 = len(first)
-            first.extend(starts.tolist())
-            count.extend((3 * counts).tolist())
-            owner.extend([k] * len(counts))
-            self._ranges[name] = (v0, len(mesh.vertices), c0, len(first), mesh.faces[order], counts, tex_layer)
-            v0 += len(mesh.vertices)
-            i0 += 3 * mesh.n_triangles
-        vertices = np.concatenate(vert_blocks)
-        self._vbo = ctx.buffer(vertices.tobytes())
+            levels = [(mesh.faces[order].astype(np.int64), tri_chunk)]
+            verts, cols = [mesh.vertices], [mesh.colours]
+            base = len(mesh.vertices)
+            if mesh.texture is None:
+                for cell in LOD_CELLS:
+                    v, c, f, tc = cluster_vertices(mesh.vertices, mesh.colours, *levels[0], cell)
+                    levels.append((f + base, tc))
+                    verts.append(v)
+                    cols.append(c)
+                    base += len(v)
+            local = np.concatenate(verts)
+            colours = np.concatenate(cols)
+            uv = mesh.uv if mesh.uv is not None else np.zeros((len(local), 2), np.float32)
+            f_obj = np.zeros((n_chunks, n_levels), dtype=np.int64)
+            n_obj = np.zeros((n_chunks, n_levels), dtype=np.int64)
+            for k in range(n_levels):
+                f, tc = levels[min(k, len(levels) - 1)]
+                per_chunk = np.bincount(tc, minlength=n_chunks)
+                starts = np.concatenate([[0], np.cumsum(per_chunk)[:-1]])
+                if k < len(levels):
+                    idx_blocks.append((f + v0).ravel())
+                    f_obj[:, k] = i0 + 3 * starts
+                    i0 += 3 * len(f)
+                else:  # no finer cells for this object: repeat its last level
+                    f_obj[:, k] = f_obj[:, k - 1]
+                n_obj[:, k] = 3 * per_chunk
+            first.append(f_obj)
+            count.append(n_obj)
+            self._ranges[name] = (v0, local, colours, uv, tex_layer, order, tri_chunk, c0, c0 + n_chunks)
+            vert_blocks.append(self._interleave(obj, local, colours, uv, tex_layer))
+            v0 += len(local)
+            c0 += n_chunks
+        self._vbo = ctx.buffer(np.concatenate(vert_blocks).tobytes())
         self._ibo = ctx.buffer(np.concatenate(idx_blocks).astype(np.uint32).tobytes())
         self._vao = ctx.vertex_array(prog, [(self._vbo, "3f 3f 2f 1f", "in_pos", "in_col", "in_uv", "in_layer")],
                                      self._ibo, index_element_size=4)
-        self.n_chunks = len(first)
-        self._first = np.asarray(first, dtype=np.uint32)
-        self._count = np.asarray(count, dtype=np.uint32)
+        self.n_chunks = c0
+        self._first = np.concatenate(first).astype(np.uint32)
+        self._count = np.concatenate(count).astype(np.uint32)
         self._active = np.ones(self.n_chunks, dtype=bool)
         self._centre = np.zeros((self.n_chunks, 3))
         self._radius = np.zeros(self.n_chunks)
         for name, obj in objects.items():
-            self._bounds(name, obj.world_vertices())
+            self._bounds(name, obj)
         self._indirect = ctx.buffer(reserve=6 * self.n_chunks * 20)
         self._cmds = np.zeros((6 * self.n_chunks, 5), dtype=np.uint32)
         self._cmds[:, 1] = 1
+        self.last_triangles = 0
         self._resources += [self._vao, self._vbo, self._ibo, self._indirect]
 
     @staticmethod
-    def _interleave(obj, tex_layer: float) -> np.ndarray:
-        mesh = obj.mesh
-        v = np.empty((len(mesh.vertices), _FLOATS_PER_VERTEX), dtype=np.float32)
-        v[:, 0:3] = obj.world_vertices()
-        v[:, 3:6] = mesh.colours
-        v[:, 6:8] = 0.0 if mesh.uv is None else mesh.uv
+    def _interleave(obj, local, colours, uv, tex_layer: float) -> np.ndarray:
+        v = np.empty((len(local), _FLOATS_PER_VERTEX), dtype=np.float32)
+        v[:, 0:3] = obj.to_world(local)
+        v[:, 3:6] = colours
+        v[:, 6:8] = uv
         v[:, 8] = tex_layer
         return v
 
@@ -107,26 +174,27 @@ class MeshBuffers:
         self._resources.append(tex)
         return tex
 
-    def _bounds(self, name: str, world: np.ndarray) -> None:
-        """Bounding spheres (world coordinates) of an object's chunks."""
-        _, _, c0, c1, faces, counts, _ = self._ranges[name]
-        tri = world[faces]  # (F, 3, 3), chunk by chunk
-        lo, hi = tri.min(axis=1), tri.max(axis=1)
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        lo = np.minimum.reduceat(lo, starts, axis=0)
-        hi = np.maximum.reduceat(hi, starts, axis=0)
+    def _bounds(self, name: str, obj) -> None:
+        """Bounding spheres (world coordinates) of an object's chunks, from its full-detail triangles."""
+        *_, order, tri_chunk, c0, c1 = self._ranges[name]
+        tri = obj.world_vertices()[obj.mesh.faces[order]]
+        n = c1 - c0
+        lo = np.full((n, 3), np.inf)
+        hi = np.full((n, 3), -np.inf)
+        np.minimum.at(lo, tri_chunk, tri.min(axis=1))
+        np.maximum.at(hi, tri_chunk, tri.max(axis=1))
         self._centre[c0:c1] = (lo + hi) / 2
         self._radius[c0:c1] = np.linalg.norm(hi - lo, axis=1) / 2
 
     def update_object(self, name: str, obj) -> None:
-        """Re-upload a moved object's vertices and recompute its chunks' bounds."""
-        v0, *_, tex_layer = self._ranges[name]
-        block = self._interleave(obj, tex_layer)
+        """Re-upload a moved object's vertices (all levels) and recompute its chunks' bounds."""
+        v0, local, colours, uv, tex_layer, *_ = self._ranges[name]
+        block = self._interleave(obj, local, colours, uv, tex_layer)
         self._vbo.write(block.tobytes(), offset=v0 * _FLOATS_PER_VERTEX * 4)
-        self._bounds(name, block[:, :3])
+        self._bounds(name, obj)
 
     def hide(self, name: str) -> None:
-        _, _, c0, c1, *_ = self._ranges[name]
+        *_, c0, c1 = self._ranges[name]
         self._active[c0:c1] = False
 
     def visible_chunks(self, q: np.ndarray, eye: np.ndarray) -> np.ndarray:
@@ -138,15 +206,29 @@ class MeshBuffers:
         slack = -math.sqrt(2.0) * self._radius[:, None]
         return (f - r >= slack) & (f - u >= slack) & self._active[:, None]
 
+    def levels(self, eye: np.ndarray) -> np.ndarray:
+        """(n_chunks,) level of detail of each chunk for an eye position (m)."""
+        if self.lod_angle <= 0:
+            return np.zeros(self.n_chunks, dtype=np.int64)
+        dist = np.maximum(np.linalg.norm(self._centre - eye, axis=1) - self._radius, 1e-6)
+        allowed = self.lod_angle * dist / LOD_CELLS[0]
+        return np.clip(np.floor(np.log2(np.maximum(allowed, 1e-9))) + 1, 0, len(LOD_CELLS)).astype(np.int64)
+
     def draw(self, fbo, views: np.ndarray, proj: np.ndarray, q: np.ndarray, eye: np.ndarray, n: int) -> int:
         """Draw every face's visible chunks into the atlas; returns the number of chunk draws."""
-        face, chunk = np.nonzero(self.visible_chunks(q, eye).T)
+        level = self.levels(eye)
+        rows = np.arange(self.n_chunks)
+        counts = self._count[rows, level]
+        firsts = self._first[rows, level]
+        vis = self.visible_chunks(q, eye) & (counts > 0)[:, None]
+        face, chunk = np.nonzero(vis.T)
         total = len(chunk)
+        self.last_triangles = int(counts[chunk].sum()) // 3
         if total == 0:
             return 0
         cmds = self._cmds[:total]
-        cmds[:, 0] = self._count[chunk]
-        cmds[:, 2] = self._first[chunk]
+        cmds[:, 0] = counts[chunk]
+        cmds[:, 2] = firsts[chunk]
         self._indirect.write(cmds.tobytes())
         per_face = np.bincount(face, minlength=6)
         offsets = np.concatenate([[0], np.cumsum(per_face)[:-1]])

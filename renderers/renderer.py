@@ -69,13 +69,14 @@ class Renderer:
     dome: `antarium.geometry.Dome` (default: `load_dome()`); face_size: cube face side in texels (default
     from the LED pitch); footprint_deg: FWHM of each LED's acceptance; brightness: global drive scale
     in [0, 1]; near, far: clip planes (m); far_face_size: side of the far-field cube texture; chunk_size:
-    cell (m) of the culling grid of large meshes; clock: an `antarium.clock` clock for drifting stimuli
+    cell (m) of the culling grid of large meshes; lod_texels: level-of-detail error bound in texels (0: full
+    detail always); clock: an `antarium.clock` clock for drifting stimuli
     when `render` gets no time; fast_far_field: use the table lookup for scenes without meshes.
     """
 
     def __init__(self, dome=None, face_size: int | None = None, footprint_deg: float = LED_PITCH_DEG,
                  brightness: float = 1.0, near: float = 1e-3, far: float = 1e3, far_face_size: int | None = None,
-                 chunk_size: float = 2.0, clock=None, fast_far_field: bool = True):
+                 chunk_size: float = 1.0, lod_texels: float = 1.0, clock=None, fast_far_field: bool = True):
         if dome is None:
             from antarium.geometry import load_dome
 
@@ -94,6 +95,10 @@ class Renderer:
         self.near, self.far = float(near), float(far)
         self.chunk_size = float(chunk_size)
         self.fast_far_field = bool(fast_far_field)
+        if not (np.isfinite(lod_texels) and lod_texels >= 0):
+            raise ValueError(f"lod_texels must be a non-negative number, got {lod_texels!r}")
+        #: level-of-detail error bound (rad): a fraction of the largest texel
+        self.lod_angle = math.radians(lod_texels * cubemap.largest_texel_deg(self.face_size))
         if clock is None:
             from antarium.clock import MonotonicClock
 
@@ -178,7 +183,7 @@ class Renderer:
                 table = FarFieldTable(new, self._directions, self._matrix_fwhm)
             else:
                 far_tex = self._make_far_texture(new)
-                meshes = MeshBuffers(self.ctx, self._mesh_prog, new, self.chunk_size)
+                meshes = MeshBuffers(self.ctx, self._mesh_prog, new, self.chunk_size, self.lod_angle)
         except BaseException:
             for res in (far_tex, meshes):
                 if res is not None:
@@ -203,7 +208,7 @@ class Renderer:
         if self._far_tex is None:
             self._far_tex = self._make_far_texture(self.scene)
         if self._meshes is None:
-            self._meshes = MeshBuffers(self.ctx, self._mesh_prog, self.scene, self.chunk_size)
+            self._meshes = MeshBuffers(self.ctx, self._mesh_prog, self.scene, self.chunk_size, self.lod_angle)
 
     def _require_scene(self) -> Scene:
         if self.scene is None:
@@ -254,7 +259,7 @@ class Renderer:
         objects = dict(scene.objects)
         objects[name] = obj
         trial = Scene(far=scene.far, objects=objects, name=scene.name)
-        meshes = MeshBuffers(self.ctx, self._mesh_prog, trial, self.chunk_size)
+        meshes = MeshBuffers(self.ctx, self._mesh_prog, trial, self.chunk_size, self.lod_angle)
         if self._far_tex is None:
             self._far_tex = self._make_far_texture(scene)
         if self._meshes is not None:

@@ -86,9 +86,13 @@ class SceneObject:
 
     def world_vertices(self) -> np.ndarray:
         """(V, 3) float32 vertices in world coordinates."""
+        return self.to_world(self.mesh.vertices)
+
+    def to_world(self, points: np.ndarray) -> np.ndarray:
+        """(P, 3) object-space points (m) -> (P, 3) float32 world coordinates (scale, yaw, then position)."""
         c, s = np.cos(self.yaw), np.sin(self.yaw)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        v = self.mesh.vertices.astype(np.float64) * self.scale
+        v = np.asarray(points, dtype=np.float64) * self.scale
         return (v @ rot.T + np.asarray(self.position)).astype(np.float32)
 
 
