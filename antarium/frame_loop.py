@@ -130,8 +130,8 @@ class FrameLoop:
         self._pending: queue.SimpleQueue = queue.SimpleQueue()
         self._stop = threading.Event()
         self._loop_thread: threading.Thread | None = None
-        self._stats = np.full((STATS_WINDOW, 8), np.nan)  # t_start, latency, render, sample, convert, encode, send,
-        # pacing error
+        # per recent frame: t_start, latency, render, sample, convert, encode, send, pacing error (s)
+        self._stats = np.full((STATS_WINDOW, 8), np.nan)
         self.polariser_override = None
         self.rejected_frames = 0
         self._last_reject_event_t = -math.inf
@@ -408,19 +408,21 @@ class FrameLoop:
     def run(self, until: float | None = None, frames: int | None = None) -> int:
         """Run frames until the clock reads `until` (s), `frames` frames were run, or `stop()`; returns the count."""
         n = 0
-        self._stop.clear()
-        while not self._stop.is_set():
-            if frames is not None and n >= frames:
-                break
-            if until is not None and (self._next_t if self._next_t is not None else self.clock.now()) >= until:
-                break
-            self.step()
-            n += 1
-        self._run_pending()
+        try:
+            while not self._stop.is_set():
+                if frames is not None and n >= frames:
+                    break
+                if until is not None and (self._next_t if self._next_t is not None else self.clock.now()) >= until:
+                    break
+                self.step()
+                n += 1
+        finally:
+            self._stop.clear()
+            self._run_pending()
         return n
 
     def stop(self) -> None:
-        """Make `run` return after the current frame (thread-safe)."""
+        """Make the running (or the next) `run` return after the current frame (thread-safe)."""
         self._stop.set()
 
     def start_thread(self, name: str = "frame-loop") -> threading.Thread:

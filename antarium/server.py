@@ -513,6 +513,8 @@ class Server:
         self._loop_thread = threading.current_thread()
         self._ready.set()
         self.loop.event("server_started", rig=self.rig)
+        if self._stopping.is_set():  # stopped (a signal) while starting
+            self.loop.stop()
         if seconds is not None:
             end = self.clock.now() + seconds
             until = end if until is None else min(until, end)
