@@ -35,11 +35,12 @@ def _shade(vertices: np.ndarray, faces: np.ndarray, srgb: np.ndarray, ambient: f
     return rgb_to_gbu(srgb_to_linear(srgb) * light[:, None])
 
 
-def _mesh(vertices, faces, srgb) -> MeshData:
+def _mesh(vertices, faces, srgb, double_sided: bool = False) -> MeshData:
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     srgb = np.broadcast_to(np.asarray(srgb, dtype=np.float64), vertices.shape)
-    return MeshData(vertices.astype(np.float32), faces.astype(np.uint32), _shade(vertices, faces, srgb))
+    return MeshData(vertices.astype(np.float32), faces.astype(np.uint32), _shade(vertices, faces, srgb),
+                    double_sided=double_sided)
 
 
 def _merge(parts):
@@ -95,7 +96,7 @@ def _tussocks(rng, n: int, size: float, blades: int = 12):
         f = np.concatenate([b + [0, 1, 2], b + [0, 2, 3]])
         col = np.array([0.55, 0.58, 0.30]) * rng.uniform(0.8, 1.15) + rng.uniform(-0.05, 0.05, 3)
         parts.append((v, f, np.clip(col, 0, 1)))
-    return _mesh(*_merge(parts))
+    return _mesh(*_merge(parts), double_sided=True)  # blades are seen from both sides
 
 
 def _stones(rng, n: int, size: float):
@@ -160,7 +161,7 @@ def panorama_image(seed: int = 0, width: int = 2048) -> np.ndarray:
 
 
 def habitat_objects(seed: int = 0, size: float = 24.0, n_trees: int = 5, n_bushes: int = 14,
-                    n_tussocks: int = 800, n_stones: int = 160) -> dict[str, SceneObject]:
+                    n_tussocks: int = 900, n_stones: int = 160) -> dict[str, SceneObject]:
     """Named objects of the habitat: 'ground', 'tussocks', 'stones', 'bush_<i>', 'tree_<i>'."""
     if not (np.isfinite(size) and size >= 20.0):
         raise ValueError(f"habitat size must be at least 20 m, got {size!r}")

@@ -89,7 +89,7 @@ class MeshBuffers:
         self._textures = self._texture_array(objects)
         n_levels = 1 + len(LOD_CELLS)
         vert_blocks, idx_blocks = [], []
-        first, count = [], []  # per chunk: (n_levels,) index offsets and counts
+        first, count, sided = [], [], []  # per chunk: (n_levels,) index offsets and counts; back-face culling
         self._ranges = {}  # name -> vertex start, object-space vertices, colours, uv, layer, order, chunks
         v0 = i0 = c0 = 0
         layer = 0
@@ -128,6 +128,7 @@ class MeshBuffers:
                 n_obj[:, k] = 3 * per_chunk
             first.append(f_obj)
             count.append(n_obj)
+            sided.append(np.full(n_chunks, not mesh.double_sided))
             self._ranges[name] = (v0, local, colours, uv, tex_layer, order, tri_chunk, c0, c0 + n_chunks)
             vert_blocks.append(self._interleave(obj, local, colours, uv, tex_layer))
             v0 += len(local)
@@ -139,6 +140,7 @@ class MeshBuffers:
         self.n_chunks = c0
         self._first = np.concatenate(first).astype(np.uint32)
         self._count = np.concatenate(count).astype(np.uint32)
+        self._single_sided = np.concatenate(sided)
         self._active = np.ones(self.n_chunks, dtype=bool)
         self._centre = np.zeros((self.n_chunks, 3))
         self._radius = np.zeros(self.n_chunks)
@@ -221,7 +223,11 @@ class MeshBuffers:
         counts = self._count[rows, level]
         firsts = self._first[rows, level]
         vis = self.visible_chunks(q, eye) & (counts > 0)[:, None]
+        # commands ordered by (face, culled or not), so each face needs at most two indirect draws
         face, chunk = np.nonzero(vis.T)
+        batch = 2 * face + self._single_sided[chunk]
+        order = np.argsort(batch, kind="stable")
+        chunk, batch = chunk[order], batch[order]
         total = len(chunk)
         self.last_triangles = int(counts[chunk].sum()) // 3
         if total == 0:
@@ -230,15 +236,24 @@ class MeshBuffers:
         cmds[:, 0] = counts[chunk]
         cmds[:, 2] = firsts[chunk]
         self._indirect.write(cmds.tobytes())
-        per_face = np.bincount(face, minlength=6)
-        offsets = np.concatenate([[0], np.cumsum(per_face)[:-1]])
+        per_batch = np.bincount(batch, minlength=12)
+        offsets = np.concatenate([[0], np.cumsum(per_batch)[:-1]])
         self._textures.use(1)
         for k in range(6):
-            if per_face[k]:
-                fbo.viewport = (0, k * n, n, n)
-                self.prog["view_proj"].write((proj @ views[k]).T.astype("f4").tobytes())
-                self._vao.render_indirect(self._indirect, self._mgl.TRIANGLES, count=int(per_face[k]),
-                                          first=int(offsets[k]))
+            if per_batch[2 * k] + per_batch[2 * k + 1] == 0:
+                continue
+            fbo.viewport = (0, k * n, n, n)
+            self.prog["view_proj"].write((proj @ views[k]).T.astype("f4").tobytes())
+            for b in (2 * k, 2 * k + 1):
+                if per_batch[b]:
+                    self.ctx.cull_face = "back"
+                    if b % 2:
+                        self.ctx.enable(self._mgl.CULL_FACE)
+                    else:
+                        self.ctx.disable(self._mgl.CULL_FACE)
+                    self._vao.render_indirect(self._indirect, self._mgl.TRIANGLES, count=int(per_batch[b]),
+                                              first=int(offsets[b]))
+        self.ctx.disable(self._mgl.CULL_FACE)
         return total
 
     def release(self) -> None:

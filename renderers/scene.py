@@ -20,7 +20,9 @@ class MeshData:
     """A triangle mesh in object coordinates (metres, +z up) with linear G, B, UV vertex radiances.
 
     vertices (V, 3) float32; faces (F, 3) uint32; colours (V, 3) float32 in [0, 1];
-    uv (V, 2) float32 texture coordinates and texture (H, W, 3) float32 linear G, B, UV, or both None.
+    uv (V, 2) float32 texture coordinates and texture (H, W, 3) float32 linear G, B, UV, or both None;
+    double_sided: False for closed surfaces wound counter-clockwise seen from outside (their back faces
+    are culled, which saves rasterising them).
     """
 
     vertices: np.ndarray
@@ -28,6 +30,7 @@ class MeshData:
     colours: np.ndarray
     uv: np.ndarray | None = None
     texture: np.ndarray | None = None
+    double_sided: bool = True
 
     def validate(self, name: str) -> MeshData:
         """Check shapes and values; raise ValueError naming the object. Returns self (arrays normalised)."""
