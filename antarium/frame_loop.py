@@ -40,8 +40,8 @@ from antarium.pose import Pose
 TETHERS = ("free_yaw", "fixed")
 #: how many recent frames the statistics (percentiles, frame rate) cover
 STATS_WINDOW = 2048
-#: check the locomotion source's health every this many frames
-HEALTH_EVERY = 10
+#: ask the locomotion source whether it is connected every this many frames
+LOCOMOTION_CHECK_EVERY = 10
 #: ask the distributor for telemetry this often (s); the link is down when the newest reply is older than
 #: LINK_TIMEOUT_S, or when datagrams failed (peer refused: the distributor or emulator is gone)
 TELEMETRY_EVERY_S = 0.1
@@ -143,6 +143,7 @@ class FrameLoop:
         self._worst_overrun = 0.0
         self.telemetry: dict[str, Any] = {}
         self._next_telemetry_t = -math.inf
+        self._last_poll_t: float | None = None
         self._failed_datagrams = 0
         self._t_first: float | None = None
         self._polariser_heading: float | None = None
@@ -253,7 +254,8 @@ class FrameLoop:
             y += gt * (sn * dx + c * dy)
         self.pose = Pose(x, y, self.pose.z, math.remainder(heading, math.tau))
 
-    def _check_health(self, now: float) -> None:
+    def _check_locomotion(self, now: float) -> None:
+        """The source says whether it is connected (a USB trackball unplugged): hold the pose while it is not."""
         if self.source is not None:
             try:
                 status = self.source.status()
@@ -264,27 +266,37 @@ class FrameLoop:
             if connected != self.locomotion_connected:
                 self.locomotion_connected = connected
                 self.event("locomotion_back" if connected else "locomotion_lost", status=status)
-        if self.link is not None and now >= self._next_telemetry_t:
-            self._next_telemetry_t = now + TELEMETRY_EVERY_S
-            self.telemetry = self.link.telemetry()
-            failed = self.telemetry.get("link", {}).get("datagrams_failed", 0)
-            new_failures, self._failed_datagrams = failed - self._failed_datagrams, failed
-            age = self.telemetry.get("age_s")
-            if age is None:  # the distributor has not answered yet: allow it time to come up
-                fresh = now - self._t_first < LINK_STARTUP_S
-            else:
-                fresh = age <= LINK_TIMEOUT_S
-            ok = fresh and new_failures == 0
-            if new_failures:
-                self.last_link_error = f"{new_failures} datagrams failed (peer refused or buffer full)"
-            elif not fresh:
-                self.last_link_error = "no telemetry from the distributor" + (
-                    f" for {age:.2f} s" if age is not None else "")
-            if ok != self.link_ok:
-                self.link_ok = ok
-                if not ok:
-                    self.link_outages += 1
-                self.event("link_back" if ok else "link_outage", error="" if ok else self.last_link_error)
+
+    def _check_link(self, now: float) -> None:
+        """Poll the distributor's telemetry every TELEMETRY_EVERY_S; report outages and recoveries.
+
+        The newest reply can only answer the previous poll, so the link is down when that reply is older than
+        LINK_TIMEOUT_S plus the time since the previous poll (a slow loop polls less often), or datagrams failed.
+        """
+        if self.link is None or now < self._next_telemetry_t:
+            return
+        since_poll = now - self._last_poll_t if self._last_poll_t is not None else 0.0
+        self._last_poll_t = now
+        self._next_telemetry_t = now + TELEMETRY_EVERY_S
+        self.telemetry = self.link.telemetry()
+        failed = self.telemetry.get("link", {}).get("datagrams_failed", 0)
+        new_failures, self._failed_datagrams = failed - self._failed_datagrams, failed
+        age = self.telemetry.get("age_s")
+        if age is None:  # the distributor has not answered yet: allow it time to come up
+            fresh = now - self._t_first < LINK_STARTUP_S
+        else:
+            fresh = age <= LINK_TIMEOUT_S + since_poll
+        ok = fresh and new_failures == 0
+        if new_failures:
+            self.last_link_error = f"{new_failures} datagrams failed (peer refused or buffer full)"
+        elif not fresh:
+            since = f" for {age:.2f} s" if age is not None else ""
+            self.last_link_error = f"no telemetry from the distributor{since}"
+        if ok != self.link_ok:
+            self.link_ok = ok
+            if not ok:
+                self.link_outages += 1
+            self.event("link_back" if ok else "link_outage", error="" if ok else self.last_link_error)
 
     def _read_source(self, t: float) -> list:
         """The source's new samples; a source that raises is reported as disconnected, never stops the loop."""
@@ -338,8 +350,9 @@ class FrameLoop:
         t_start = clock.now()
         if self._t_first is None:
             self._t_first = t_start
-        if self.frame % HEALTH_EVERY == 0:
-            self._check_health(t_start)
+        if self.frame % LOCOMOTION_CHECK_EVERY == 0:
+            self._check_locomotion(t_start)
+        self._check_link(t_start)
         samples = self._read_source(t_start)
         newest = samples[-1] if samples else None
         if samples:
