@@ -65,6 +65,6 @@ def test_metrics_as_the_field_reports_them():
     assert median_mad([1, 2, 3, 4, 100]) == (3.0, 1.0)
     assert list(off_route(r, [[1, 0.1], [1, 0.25]])) == [False, True]
     assert arrived(r, [[1.95, 0.02]], 0.1) and not arrived(r, [[1.5, 0]], 0.1)
-    assert stopping_distance(r, [0.3, 0.4]) == pytest.approx(0.5)
+    assert stopping_distance(r.reversed(), [0.3, 0.4]) == pytest.approx(0.5)  # homing: the nest is the end
     summary = RunSummary.of(r, [[0, 0.01], [1, 0.03], [2, 0.02]], [0, 0, 0], True, 1)
     assert summary.lateral_median == pytest.approx(0.02) and summary.distance == pytest.approx(2.0, abs=1e-3)

@@ -138,14 +138,16 @@ class FollowResult:
 
 def follow_route(ant: VirtualAnt, route: Route, max_decisions: int, arrive_radius: float = 0.1,
                  put_back_distance: float = ARDIN_ERROR_DISTANCE_M, start_offset: tuple[float, float] = (0.0, 0.0),
-                 stop_after: int = 5, progress: Callable[[int], None] | None = None) -> FollowResult:
+                 stop_after: int = 5, end_on_arrival: bool = True,
+                 progress: Callable[[int], None] | None = None) -> FollowResult:
     """Release the ant at the route's start and let it walk in closed loop.
 
     start_offset: (lateral metres, left > 0; heading error rad, CCW > 0) at release.
-    The run ends on arrival within `arrive_radius` of the end, after `stop_after` decisions without moving
-    (e.g. Antcar stopped at the nest), or after `max_decisions`. Ardin's protocol: when the ant is farther than
-    `put_back_distance` from the route, that counts an error and it is put back on the nearest route point,
-    facing along the route.
+    The run ends on arrival within `arrive_radius` of the end (unless `end_on_arrival` is False, e.g. to see
+    a homing ant stop by itself), after `stop_after` decisions without moving (e.g. Antcar stopped at the nest;
+    the stopping distance to the route's end is then reported), or after `max_decisions`. Ardin's protocol:
+    when the ant is farther than `put_back_distance` from the route, that counts an error and it is put back on
+    the nearest route point, facing along the route.
     """
     ant.model.reset()
     (x0, y0), (h0,) = route.at([0.0])[0][0], route.at([0.0])[1]
@@ -165,7 +167,7 @@ def follow_route(ant: VirtualAnt, route: Route, max_decisions: int, arrive_radiu
         ant.loop.event("ant_decision", forward=cmd.forward, turn=cmd.turn, **cmd.trace)
         if progress is not None:
             progress(1)
-        if arrived(route, [(x, y)], arrive_radius):
+        if end_on_arrival and arrived(route, [(x, y)], arrive_radius):
             break
         still = still + 1 if cmd.forward == 0.0 else 0
         if still >= stop_after:

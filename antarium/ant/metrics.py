@@ -2,7 +2,7 @@
 
 - Gattaux et al. 2025: lateral error d (distance to the nearest point of the learned route) and angular error
   theta_e (heading minus the route's heading there), as median +- MAD; the memory metric PI_error (eq. 11-12);
-  the stopping distance to the nest.
+  the stopping distance at the nest.
 - Ardin et al. 2016: errors per route -- each time the agent is more than 20 cm from the route it counts one
   error and is put back on the route (done by the closed-loop runner; see `off_route`).
 """
@@ -53,8 +53,8 @@ def arrived(route: Route, xy, radius: float) -> bool:
 
 
 def stopping_distance(route: Route, xy_stop) -> float:
-    """Distance (m) from where the ant stopped to the nest (the route's first point)."""
-    return float(np.hypot(*(np.asarray(xy_stop, np.float64) - route.start)))
+    """Distance (m) from where the ant stopped to the end of the route it followed (the nest when homing)."""
+    return float(np.hypot(*(np.asarray(xy_stop, np.float64) - route.end)))
 
 
 def pi_error(lambda_diff, theta_e) -> np.ndarray:
