@@ -498,9 +498,11 @@ class Server:
                 on_frame=self._on_frame, on_event=self._publish_event)
             if self.renderer is not None:
                 self._load_scene(self.config["render"]["scene"])
-            if self.source is not None:
-                self.source.start()
             self._open_bus()
+            if self.source is not None:
+                if self.session is not None and hasattr(self.source, "use_session"):
+                    self.source.use_session(self.session)  # a bus source shares the server's session
+                self.source.start()
             if (self.record or self.config["log"]["record"]) and self.trial_log is None:
                 self._trial_start(self.record or "recording", {})
         except BaseException as exc:

@@ -161,3 +161,22 @@ def test_access_control_refuses_an_unlisted_peer(tmp_path):
         assert math.degrees(server.loop.scene_rotation) == pytest.approx(45)
     finally:
         server.stop()
+
+
+def test_locomotion_from_the_bus_drives_the_closed_loop(tmp_path):
+    from antarium.locomotion import BallSample, wire
+
+    config = _config(tmp_path, rig="tloco")
+    config["locomotion"] = {"source": "bus", "timeout_s": 5.0}
+    server = Server(config, renderer_factory=None, link=False).start_thread()
+    try:
+        with bus.open_session(config["bus"], "client") as trackball:
+            pub = trackball.declare_publisher(bus.locomotion_key("tloco"), express=True)
+            assert wait_for(lambda: server.source.received == 0 and server.loop.frame > 5, 5.0)
+            for seq in range(200):  # the ball rolls about -y: the ant walks along the dome's +x
+                pub.put(wire.encode(BallSample(0.0, seq, (0.0, -0.001, 0.0))))
+            assert wait_for(lambda: server.source.received == 200, 5.0)
+            assert wait_for(lambda: server.loop.pose.x == pytest.approx(200 * 0.001 * 0.05), 5.0)
+            assert server.status()["locomotion"]["received"] == 200
+    finally:
+        server.stop()

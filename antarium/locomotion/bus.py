@@ -38,6 +38,12 @@ class BusSource(LocomotionSource):
         self.last_error = ""
         self._last_t: float | None = None
 
+    def use_session(self, session) -> None:
+        """Subscribe through `session` (e.g. the server's own) instead of opening one; call before `start`."""
+        if self._sub is not None:
+            raise RuntimeError("use_session must be called before start()")
+        self._session, self._own_session = session, False
+
     def start(self) -> None:
         from antarium.bus import locomotion_key, open_session
 
