@@ -82,3 +82,25 @@ def test_the_ant_sees_what_the_panels_show_and_leaves_a_trial_log(trained, tmp_p
     assert len(frames["frame"]) == 7
     kinds = [k.decode() if isinstance(k, bytes) else k for k in events["kind"]]
     assert kinds.count("ant_decision") == 5
+
+
+@pytest.mark.parametrize(("scene", "restores"), [("habitat", True), ("horizon", False)])
+def test_after_a_90_degree_scene_rotation_the_ant_restores_its_heading_only_in_a_structured_scene(scene, restores):
+    # The Antarium's proof of concept (Kocsi et al. 2020, Fig. 4) in silico; examples/ant_scene_rotation.py plots it.
+    route = curved_route(6, length=0.6, start=(-1.0, 0.5))
+    model = make_model("antcar", 800)
+    with virtual_rig(model, scene=scene, renderer_kwargs={"face_size": FACE}) as ant:
+        learning_walk(ant, route, 0.01)
+        ant.place(*route.start, float(route.at([0.0])[1][0]))
+        for _ in range(6):
+            ant.decide()
+        yaw_before, world_before = ant.legs.yaw, ant.heading
+        ant.loop.rotate_scene(math.pi / 2)
+        for _ in range(12):
+            ant.decide()
+        turned = math.degrees(math.remainder(ant.legs.yaw - yaw_before, math.tau))
+        lost = math.degrees(math.remainder(ant.heading - world_before, math.tau))
+    if restores:
+        assert turned == pytest.approx(90.0, abs=15.0) and abs(lost) < 15.0
+    else:
+        assert abs(turned) < 1.0 and lost == pytest.approx(-90.0, abs=1.0)
