@@ -2,11 +2,11 @@
 
 A far field at infinity looks the same from every eye position, so an LED's value depends only on the yaw
 psi between dome and world: v_i = F~(azimuth_i + psi, elevation_i), where F~ is the far field already
-integrated over the LED footprint. F~ is tabulated once per scene on a 0.25° (elevation, azimuth) grid
-(16-bit):
-the field is evaluated on the grid, blurred along each row by a periodic Gaussian of width sigma/cos(el)
-(FFT) and along elevation by a Gaussian of width sigma, the grid continuing over the zenith (rows beyond
-90° are the rows below it, turned by 180°). Per frame: bilinear lookup per LED (`kernels.lookup_pairs`).
+integrated over the LED footprint. F~ is tabulated once per scene, in 16 bits, on a 0.25° (elevation,
+azimuth) grid: the field is averaged over each grid cell (sub-samples as fine as its detail needs), blurred
+along each row by a periodic Gaussian of width sigma/cos(el) (FFT) and along elevation by a Gaussian of
+width sigma, the grid continuing over the zenith (rows beyond 90° are the rows below it, turned by 180°).
+Per frame: a bilinear lookup per LED (`kernels.lookup_pairs`).
 """
 
 from __future__ import annotations
@@ -19,6 +19,20 @@ from antarium.geometry.constants import GB_PER_PANEL, PIXELS_PER_PANEL
 
 #: grid step (radians) in elevation and azimuth
 STEP = math.radians(0.25)
+
+
+def _grid_directions(el: np.ndarray, az: np.ndarray) -> np.ndarray:
+    """(rows * cols, 3) unit vectors of an (elevation, azimuth) grid that continues over the zenith (rows
+    above 90° are the rows below it turned by 180°)."""
+    flip = el > math.pi / 2
+    el_true = np.where(flip, math.pi - el, el)
+    az_grid = az[None, :] + np.where(flip, math.pi, 0.0)[:, None]
+    ce = np.cos(el_true)[:, None]
+    d = np.empty((len(el), len(az), 3))
+    d[..., 0] = ce * np.cos(az_grid)
+    d[..., 1] = ce * np.sin(az_grid)
+    d[..., 2] = np.sin(el_true)[:, None]
+    return d.reshape(-1, 3)
 
 
 class FarFieldTable:
@@ -35,15 +49,15 @@ class FarFieldTable:
         self.n_cols = n_cols = int(round(2 * math.pi / STEP))
         el = el_lo + np.arange(n_rows) * STEP
         az = np.arange(n_cols) * STEP
-        flip = el > math.pi / 2  # over the zenith: azimuth + 180 deg, elevation 180 deg - el
-        el_true = np.where(flip, math.pi - el, el)
-        az_grid = az[None, :] + np.where(flip, math.pi, 0.0)[:, None]
-        ce = np.cos(el_true)[:, None]
-        d = np.empty((n_rows, n_cols, 3))
-        d[..., 0] = ce * np.cos(az_grid)
-        d[..., 1] = ce * np.sin(az_grid)
-        d[..., 2] = np.sin(el_true)[:, None]
-        field = scene.evaluate_far(d.reshape(-1, 3), t).reshape(n_rows, n_cols, 4)
+        # the field averaged over each grid cell (s x s sub-samples), so detail finer than the grid cannot alias
+        sub = scene.supersample(STEP)
+        offsets = (np.arange(sub) - (sub - 1) / 2) * (STEP / sub)
+        field = np.zeros((n_rows, n_cols, 4))
+        for de in offsets:
+            for da in offsets:
+                field += scene.evaluate_far(_grid_directions(el + de, az + da), t).reshape(n_rows, n_cols, 4)
+        field /= sub * sub
+        el_true = np.where(el > math.pi / 2, math.pi - el, el)
         freq = np.fft.rfftfreq(n_cols, d=STEP)  # cycles per radian
         sig_az = sigma / np.maximum(np.cos(el_true), 1e-3)
         transfer = np.exp(-2 * (math.pi * freq[None, :] * sig_az[:, None]) ** 2).astype(np.float32)

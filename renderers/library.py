@@ -21,15 +21,17 @@ from .sky import Sky
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl")
 
 
-def _deg(params: dict, key: str, default=None):
-    """Pop `key_deg` from params and return it in radians (default when absent)."""
-    value = params.pop(f"{key}_deg", None)
+def _deg(params: dict, key: str, default=None, suffix: str = "_deg"):
+    """Pop `key` + suffix (degrees, or degrees per second) from params, in radians (default when absent)."""
+    value = params.pop(key + suffix, None)
     if value is None:
         return default
     try:
         value = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{key}_deg must be a number of degrees, got {value!r}") from None
+        raise ValueError(f"{key}{suffix} must be a number of degrees, got {value!r}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{key}{suffix} must be finite, got {value!r}")
     return math.radians(value)
 
 
@@ -80,7 +82,7 @@ def _bars(p):
 def _grating(p):
     kw = {k: p.pop(k) for k in ("waveform", "contrast", "mean", "colour") if k in p}
     g = stimuli.Grating(period=_deg(p, "period", math.radians(20)), orientation=_deg(p, "orientation", 0.0),
-                        speed=_deg(p, "speed", 0.0), phase=_deg(p, "phase", 0.0), **kw)
+                        speed=_deg(p, "speed", 0.0, suffix="_deg_s"), phase=_deg(p, "phase", 0.0), **kw)
     return Scene(far=[g], name="grating")
 
 

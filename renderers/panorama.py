@@ -1,4 +1,4 @@
-"""A distant panorama at infinity from an equirectangular image (OpenCV: PNG, JPEG, TIFF, EXR).
+"""A distant panorama at infinity from an equirectangular image (OpenCV: PNG, JPEG, TIFF, HDR; OpenEXR: EXR).
 
 Image convention: the centre column looks along azimuth 0 (+x), azimuth grows to the left (counter-
 clockwise seen from above), the top row is the zenith. 8- and 16-bit images are sRGB-encoded and decoded at
@@ -9,7 +9,6 @@ an optional single-channel `uv` image is the explicit UV layer, otherwise UV = u
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,6 +21,26 @@ MAX_IMAGE_SIDE = 16384
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".tif", ".tiff", ".hdr")
 
 
+def _read_exr(path: Path) -> np.ndarray:
+    """(H, W, C) float32 BGR(A) pixels of an OpenEXR file (RGB, RGBA or luminance Y)."""
+    import OpenEXR
+
+    try:
+        with OpenEXR.File(str(path)) as f:
+            channels = {name: np.asarray(c.pixels) for name, c in f.channels().items()}
+    except Exception as exc:  # the bindings raise RuntimeError/OSError for corrupt files
+        raise ValueError(f"cannot decode EXR image {path}: {exc}") from exc
+    for key in ("RGBA", "RGB"):
+        if key in channels:
+            rgb = channels[key].astype(np.float32)
+            return rgb[:, :, [2, 1, 0, *range(3, rgb.shape[2])]]
+    if all(k in channels for k in "RGB"):
+        return np.stack([channels[k] for k in "BGR"], axis=2).astype(np.float32)
+    if "Y" in channels:
+        return channels["Y"].astype(np.float32)
+    raise ValueError(f"EXR image {path} has no RGB or Y channels (found: {', '.join(channels)})")
+
+
 def read_image(path: str | Path) -> tuple[np.ndarray, bool]:
     """(H, W, C) float64 values (integer images scaled to [0, 1]) and whether the image is float (linear)."""
     path = Path(path)
@@ -30,12 +49,13 @@ def read_image(path: str | Path) -> tuple[np.ndarray, bool]:
     if path.suffix.lower() not in IMAGE_SUFFIXES:
         raise ValueError(f"unsupported panorama format {path.suffix!r} ({path}); allowed: {', '.join(IMAGE_SUFFIXES)}")
     if path.suffix.lower() == ".exr":
-        os.environ.setdefault("OPENCV_IO_ENABLE_OPENEXR", "1")
-    import cv2
+        img = _read_exr(path)
+    else:
+        import cv2
 
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
-    if img is None or img.size == 0:
-        raise ValueError(f"cannot decode image {path} (corrupt, empty or unsupported by OpenCV)")
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+        if img is None or img.size == 0:
+            raise ValueError(f"cannot decode image {path} (corrupt, empty or unsupported by OpenCV)")
     if max(img.shape[:2]) > MAX_IMAGE_SIDE:
         raise ValueError(f"image {path} is {img.shape[1]}x{img.shape[0]} pixels; the largest side allowed is "
                          f"{MAX_IMAGE_SIDE}")
@@ -121,6 +141,11 @@ class Panorama:
 
             gbua = cv2.resize(gbua, (self.max_width, max(2, self.max_width * h // w)), interpolation=cv2.INTER_AREA)
         self._gbua = gbua
+
+    def supersample(self, step: float) -> int:
+        """Sub-samples per axis so that every image pixel inside a cell of `step` (rad) counts."""
+        pixel = 2 * np.pi / self._gbua.shape[1]
+        return int(min(8, max(1, np.ceil(step / pixel))))
 
     def evaluate(self, d, t=0.0):
         v = equirect_lookup(self._gbua, d)

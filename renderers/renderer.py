@@ -143,9 +143,12 @@ class Renderer:
         self._proj = cubemap.projection_matrix(self.near, self.far)
         self._mgl = moderngl
 
-    def _make_far_texture(self, scene: Scene, t: float = 0.0, supersample: int = 2):
-        """World-aligned float16 cube texture of the far field, box-filtered over supersample^2 points."""
+    def _make_far_texture(self, scene: Scene, t: float = 0.0, supersample: int | None = None):
+        """World-aligned float16 cube texture of the far field, each texel the mean of supersample^2 points
+        (default: as many as the scene's finest detail needs)."""
         nf = self.far_face_size
+        if supersample is None:
+            supersample = scene.supersample(2.0 / nf)
         m = nf * supersample
         d = cubemap.gl_cube_directions(m).reshape(-1, 3)
         v = scene.evaluate_far(d, t).reshape(6, nf, supersample, nf, supersample, 4).mean(axis=(2, 4))

@@ -150,6 +150,10 @@ class Scene:
         rates = {float(layer.yaw_rate) for layer in self.far}
         return any(layer.time_varying for layer in self.far) or len(rates) > 1
 
+    def supersample(self, step: float) -> int:
+        """Sub-samples per axis that averaging the far field over cells of `step` (rad) needs."""
+        return max(layer.supersample(step) for layer in self.far)
+
     def evaluate_far(self, d: np.ndarray, t: float = 0.0) -> np.ndarray:
         """(N, 4) float32 [G, B, UV, polarised UV] of the far field at (N, 3) world directions, time t (s).
 

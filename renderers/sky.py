@@ -80,6 +80,10 @@ class Sky:
         self.ground = tuple(parse_colour(self.ground, "sky ground colour"))
         self._sun = sun_direction(self.sun_azimuth, self.sun_elevation)
 
+    def supersample(self, step: float) -> int:
+        """Sub-samples per axis to average over a cell of `step` (rad): the sun's disc needs a few."""
+        return 2
+
     @property
     def sun(self) -> np.ndarray:
         return self._sun

@@ -8,6 +8,7 @@ rotating the view); `time_varying` is True when the layer must be re-evaluated e
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -31,9 +32,18 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
+def _samples_per(step: float, detail: float) -> int:
+    """Sub-samples per grid step so that features of size `detail` (rad) get >= 2 samples (1..8)."""
+    return int(min(8, max(2, math.ceil(2 * step / detail))))
+
+
 class _Static:
     yaw_rate = 0.0
     time_varying = False
+
+    def supersample(self, step: float) -> int:
+        """Sub-samples per axis needed to average this layer over a grid cell of `step` (rad): sharp edges."""
+        return 2
 
 
 @dataclass
@@ -44,6 +54,9 @@ class Uniform(_Static):
 
     def __post_init__(self):
         self.colour = parse_colour(self.colour, "uniform colour")
+
+    def supersample(self, step):
+        return 1
 
     def evaluate(self, d, t=0.0):
         return _rgba(self.colour, len(d))
@@ -154,6 +167,9 @@ class Grating:
                              f"contrast={self.contrast!r}, mean={self.mean!r}")
         self.colour = parse_colour(self.colour, "grating colour")
 
+    def supersample(self, step):
+        return _samples_per(step, self.period / 2)
+
     @property
     def _is_drum(self) -> bool:
         return float(np.sin(self.orientation)) == 0.0
@@ -195,6 +211,9 @@ class Checkerboard(_Static):
             raise ValueError(f"checkerboard square size must be in (0, 180] degrees, got {self.size!r} rad")
         self.colour_a = parse_colour(self.colour_a, "checkerboard colour_a")
         self.colour_b = parse_colour(self.colour_b, "checkerboard colour_b")
+
+    def supersample(self, step):
+        return _samples_per(step, self.size)
 
     def evaluate(self, d, t=0.0):
         az, el = azimuth_elevation(d)
