@@ -47,17 +47,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from antarium.geometry import load_dome
     from antarium.pose import Pose
+    from antarium.renderers.library import build_scene
     from antarium.renderers.picture import atlas_image, led_map, save_png
     from antarium.renderers.renderer import Renderer
 
     pose = Pose.from_deg(*args.pos, heading_deg=args.heading)
-    spec = parse_scene_spec(args.scene, args.settings)
     if args.width < 64:
         raise ValueError(f"--width must be at least 64 pixels, got {args.width}")
+    scene = build_scene(parse_scene_spec(args.scene, args.settings))  # bad scenes fail before GL starts
     dome = load_dome()
     renderer = Renderer(dome, face_size=args.face_size)
     try:
-        renderer.set_scene(spec)
+        renderer.set_scene(scene)
         frame = renderer.render(pose, t=args.time)
         path = save_png(led_map(frame, dome, width=args.width), args.out)
         print(f"LED map written to {path}")
