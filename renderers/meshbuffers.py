@@ -226,7 +226,9 @@ class MeshBuffers:
         # commands ordered by (face, culled or not), so each face needs at most two indirect draws
         face, chunk = np.nonzero(vis.T)
         batch = 2 * face + self._single_sided[chunk]
-        order = np.argsort(batch, kind="stable")
+        # front to back within each batch, so that hidden fragments fail the depth test early
+        near = np.linalg.norm(self._centre[chunk] - eye, axis=1) - self._radius[chunk]
+        order = np.lexsort((near, batch))
         chunk, batch = chunk[order], batch[order]
         total = len(chunk)
         self.last_triangles = int(counts[chunk].sum()) // 3

@@ -365,20 +365,26 @@ class Renderer:
         self._fbo.read_into(self._texels, components=4, dtype="nu2")
 
     def _draw(self, q: np.ndarray, q_far: np.ndarray, eye: np.ndarray) -> None:
+        """Meshes first, then the far field only where no mesh was drawn (its fragments fail the depth test
+        early, so the background pass costs only the uncovered texels)."""
         ctx, n = self.ctx, self.face_size
         self._fbo.use()
         self._fbo.viewport = (0, 0, n, 6 * n)
-        ctx.disable(self._mgl.DEPTH_TEST | self._mgl.CULL_FACE)
+        ctx.disable(self._mgl.CULL_FACE)
+        ctx.enable(self._mgl.DEPTH_TEST)
+        ctx.depth_func = "<"
         self._fbo.clear(depth=1.0)
-        # background: one pass over the whole atlas; face k's (right, up, forward) in world coordinates
+        if self._meshes is not None and self._meshes.n_chunks:
+            views = cubemap.face_view_matrices(q, eye)
+            self._meshes.draw(self._fbo, views, self._proj, q, eye, n)
+            self._fbo.viewport = (0, 0, n, 6 * n)
+        # background at the far plane: face k's (right, up, forward) in world coordinates
+        ctx.depth_func = "<="
         basis = np.einsum("kij,lj->kil", cubemap.FACES, q_far)  # (6, 3 axes, 3 world)
         self._bg_prog["face_to_world"].write(basis[:, [1, 2, 0], :].astype("f4").tobytes())
         self._far_tex.use(0)
         self._bg_vao.render(self._mgl.TRIANGLES, vertices=3)
-        if self._meshes is not None and self._meshes.n_chunks:
-            ctx.enable(self._mgl.DEPTH_TEST)
-            views = cubemap.face_view_matrices(q, eye)
-            self._meshes.draw(self._fbo, views, self._proj, q, eye, n)
+        ctx.depth_func = "<"
 
     def polariser_angles(self) -> np.ndarray:
         """(55, 9) float64 polariser angles (rad, [0, pi)) from the sky's e-vectors at the UV pixels for the

@@ -1,10 +1,11 @@
 """GLSL sources (OpenGL 3.3 core) of the background (far field) and mesh passes."""
 
+# A triangle covering the viewport, at the far plane (depth 1): drawn with depth test "<=" after the meshes.
 FULLSCREEN_VS = """
 #version 330
 void main() {
     vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
-    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+    gl_Position = vec4(p * 2.0 - 1.0, 1.0, 1.0);
 }
 """
 
