@@ -158,6 +158,8 @@ class Server:
         loco.setdefault("clock", self.clock)
         if name == "scripted":
             loco.setdefault("tether", self.config["loop"]["tether"])
+        if name == "usb" and "trackball" in self.config:
+            loco.setdefault("trackball", self.config["trackball"])  # the driver parses its own section
         try:
             return open_source(name, **loco)
         except TypeError as exc:
@@ -172,7 +174,7 @@ class Server:
 
         cfg = self.config["link"]
         if cfg["interface"] == "virtual":
-            return open_link("virtual")
+            return open_link("virtual", clock=self.clock)
         host, port = cfg["host"], cfg["port"]
         if cfg["spawn_emulator"]:
             self.emulator = EmulatorProcess(host, port)
