@@ -69,6 +69,16 @@ def test_the_eye_reads_what_the_centre_sees_through_the_photometric_gain():
     assert i[1] == pytest.approx(2 * i[0])
 
 
+def test_photoreceptor_compression_is_a_power_of_the_intensity():
+    dirs = np.array([[1.0, 0, 0], [0, 1.0, 0], [-1.0, 0, 0], [0, -1.0, 0]])
+    frame = np.array([[65535, 0], [16384, 0], [0, 0], [4096, 0]], np.uint16)
+    linear = Eye(dirs, params=EyeParams(neighbours=1)).intensities(frame)
+    compressed = Eye(dirs, params=EyeParams(neighbours=1, gamma=0.5)).intensities(frame)
+    np.testing.assert_allclose(compressed, np.sqrt(linear), rtol=1e-6)
+    with pytest.raises(ValueError, match="gamma"):
+        EyeParams(gamma=0.0)
+
+
 def test_sobel_is_zero_on_a_uniform_panorama_and_wraps_in_azimuth():
     assert np.all(sobel_magnitude(np.full((4, 16, 50), 3.0, np.float32)) == 0.0)
     step = np.zeros((16, 50), np.float32)

@@ -37,6 +37,7 @@ class EyeParams:
     fine_per_col: int = 6          # fine azimuth samples per low-resolution column (1.2 deg)
     fine_elevation_deg: float = 1.0
     neighbours: int = 4            # LEDs averaged into each fine sample
+    gamma: float = 1.0             # photoreceptor compression: response = intensity ** gamma (1 = linear)
 
     def __post_init__(self) -> None:
         if self.channel not in CHANNELS:
@@ -46,6 +47,8 @@ class EyeParams:
                 raise ValueError(f"eye {name} must be >= 1, got {getattr(self, name)!r}")
         if not (-90.0 <= self.elevation_min_deg < self.elevation_max_deg <= 90.0):
             raise ValueError("eye elevations must satisfy -90 <= elevation_min_deg < elevation_max_deg <= 90")
+        if not 0 < self.gamma <= 1:
+            raise ValueError(f"eye gamma must be in (0, 1] (1 = linear response), got {self.gamma!r}")
         if self.sigma_deg <= 0 or self.fine_elevation_deg <= 0:
             raise ValueError("eye sigma_deg and fine_elevation_deg must be > 0")
 
@@ -176,8 +179,8 @@ class Eye:
         led_values = np.asarray(led_values)
         if led_values.shape != (self.n_leds, 2):
             raise ValueError(f"LED values must have shape ({self.n_leds}, 2), got {led_values.shape}")
-        vals = led_values[self._pixels][:, self._columns].sum(axis=1, dtype=np.float32)
-        return vals * self._scale
+        vals = led_values[self._pixels][:, self._columns].sum(axis=1, dtype=np.float32) * self._scale
+        return vals if self.params.gamma == 1.0 else np.power(vals, np.float32(self.params.gamma))
 
     def look(self, led_values: np.ndarray, yaw: float = 0.0) -> View:
         """The view of an ant at the dome centre facing azimuth `yaw` (rad, dome frame) from an LED frame."""
