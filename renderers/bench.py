@@ -94,7 +94,7 @@ def run(args) -> int:
     results = []
     try:
         print(f"renderer: face size {renderer.face_size}, footprint {renderer.footprint_deg}°, "
-              f"{renderer._matrix.nnz} texel->LED weights; GL: {describe(renderer.ctx)}")
+              f"{renderer._sampling() and renderer.sampling_weights} texel->LED weights; GL: {describe(renderer.ctx)}")
         print(f"{'workload':<14}{'triangles':>10}{'frames/s':>10}{'x190 Hz':>9}{'goal':>7}{'render ms':>11}"
               f"{'sample ms':>11}{'convert ms':>12}{'CPU ms':>8}")
         for name, make in workloads().items():

@@ -38,6 +38,8 @@ def default_face_size(pitch_deg: float = LED_PITCH_DEG, fraction: float = TEXEL_
 
 
 DEFAULT_FACE_SIZE = default_face_size()
+#: texels across the footprint's FWHM below which a wider footprint samples a coarser mipmap level
+TEXELS_PER_FWHM = 2.5
 
 
 def _rot_z(angle: float) -> np.ndarray:
@@ -115,15 +117,15 @@ class Renderer:
         self._setup_gl()
         self._texels = np.empty((6 * n * n, 4), dtype=np.uint16)
         self._pairs = np.empty((N_PIXELS, 2), dtype=np.float32)
-        self._matrix_fwhm = None
-        self._matrix = None
+        self._fwhm = None
+        self._kernel_matrix = None
         self.scene: Scene | None = None
         self._meshes: MeshBuffers | None = None
         self._table = None
         self._t0 = 0.0
         self._last_q = np.eye(3)
         self.last_timings = {"render": 0.0, "sample": 0.0, "convert": 0.0}
-        self._update_matrix(None)
+        self._set_footprint(None)
 
     # ----------------------------------------------------------------------------------------- GL set-up
     def _setup_gl(self) -> None:
@@ -157,21 +159,39 @@ class Renderer:
         tex.filter = (self._mgl.LINEAR, self._mgl.LINEAR)
         return tex
 
-    def _update_matrix(self, lowpass_deg) -> None:
+    def _set_footprint(self, lowpass_deg) -> None:
+        """The LED acceptance, widened by an angular low-pass; its sampling matrix is made when first needed."""
         fwhm = math.radians(self.footprint_deg)
         if lowpass_deg is not None:
             fwhm = math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
-        if fwhm != self._matrix_fwhm:
-            m = footprint.cached_matrix(self._directions, self.face_size, fwhm)
+        if fwhm != self._fwhm:
+            self._fwhm, self._kernel_matrix = fwhm, None
+
+    def _sampling(self) -> tuple:
+        """(atlas level, CSR arrays) of the footprint matrix, loaded or built on first use.
+
+        Wide footprints (a low-pass) are sampled from a mipmap level of the atlas that still has
+        TEXELS_PER_FWHM texels across the FWHM, which keeps the matrix at tens of weights per LED.
+        """
+        if self._kernel_matrix is None:
+            texel = math.radians(cubemap.largest_texel_deg(self.face_size))
+            level = 0
+            while (self.face_size % (2 << level) == 0 and (self.face_size >> (level + 1)) >= 16
+                   and self._fwhm / (texel * (2 << level)) >= TEXELS_PER_FWHM):
+                level += 1
+            n = self.face_size >> level
+            m = footprint.cached_matrix(self._directions, n, self._fwhm)
+            self.sampling_weights = m.nnz
             # weights in radiance per 16-bit texel unit, for the compiled sampling loop
-            self._kernel_matrix = (m.indptr.astype(np.int64), m.indices.astype(np.int32),
-                                   (m.data / 65535.0).astype(np.float32))
-            self._matrix, self._matrix_fwhm = m, fwhm
+            arrays = (m.indptr.astype(np.int64), m.indices.astype(np.int32), (m.data / 65535.0).astype(np.float32))
+            texels = self._texels if level == 0 else np.empty((6 * n * n, 4), dtype=np.uint16)
+            self._kernel_matrix = (level, texels, *arrays)
+        return self._kernel_matrix
 
     @property
     def footprint_fwhm(self) -> float:
         """Current footprint FWHM (rad): the LED acceptance widened by any angular low-pass."""
-        return self._matrix_fwhm
+        return self._fwhm
 
     # ------------------------------------------------------------------------------------------ scenes
     def set_scene(self, scene) -> Scene:
@@ -181,9 +201,9 @@ class Renderer:
         new = scene if isinstance(scene, Scene) else build_scene(scene)
         far_tex = meshes = table = None
         try:
-            self._update_matrix(new.lowpass_deg)
+            self._set_footprint(new.lowpass_deg)
             if self._far_only(new):
-                table = FarFieldTable(new, self._directions, self._matrix_fwhm)
+                table = FarFieldTable(new, self._directions, self._fwhm)
             else:
                 far_tex = self._make_far_texture(new)
                 meshes = MeshBuffers(self.ctx, self._mesh_prog, new, self.chunk_size, self.lod_angle)
@@ -191,7 +211,7 @@ class Renderer:
             for res in (far_tex, meshes):
                 if res is not None:
                     res.release()
-            self._update_matrix(self.scene.lowpass_deg if self.scene else None)
+            self._set_footprint(self.scene.lowpass_deg if self.scene else None)
             raise
         old_tex, old_meshes = self._far_tex, self._meshes
         self._far_tex, self._meshes, self._table, self.scene = far_tex, meshes, table, new
@@ -291,9 +311,14 @@ class Renderer:
         """Angular low-pass: spatial periods shorter than `cutoff_deg` are attenuated below 1/2 (None: off)."""
         scene = self._require_scene()
         check_lowpass(cutoff_deg)
-        self._update_matrix(cutoff_deg)
+        old = self._fwhm, self._kernel_matrix
+        self._set_footprint(cutoff_deg)
         if self._table is not None:
-            self._table = FarFieldTable(scene, self._directions, self._matrix_fwhm)
+            try:
+                self._table = FarFieldTable(scene, self._directions, self._fwhm)
+            except BaseException:
+                self._fwhm, self._kernel_matrix = old
+                raise
         scene.lowpass_deg = cutoff_deg
 
     def set_contrast(self, contrast: float) -> None:
@@ -339,20 +364,21 @@ class Renderer:
             t1 = time.perf_counter()
             self._table.lookup(pose.heading - scene.rotation - scene.yaw_rate * t, pairs)
         else:
-            self._render_cube(scene, pose, q, t)
+            level, texels, indptr, indices, weights = self._sampling()
+            self._render_cube(scene, pose, q, t, level, texels)
             t1 = time.perf_counter()
             from .kernels import sample_pairs
 
-            indptr, indices, weights = self._kernel_matrix
-            sample_pairs(indptr, indices, weights, self._texels, self._channel, pairs)
+            sample_pairs(indptr, indices, weights, texels, self._channel, pairs)
         t2 = time.perf_counter()
         self._convert(pairs, out)
         t3 = time.perf_counter()
         self.last_timings = {"render": t1 - t0, "sample": t2 - t1, "convert": t3 - t2}
         return out
 
-    def _render_cube(self, scene: Scene, pose: Pose, q: np.ndarray, t: float) -> None:
-        """Draw the six faces for `pose` and read the atlas back into self._texels."""
+    def _render_cube(self, scene: Scene, pose: Pose, q: np.ndarray, t: float, level: int = 0,
+                     texels: np.ndarray | None = None) -> None:
+        """Draw the six faces for `pose` and read the atlas (mipmap `level`) back into `texels`."""
         self._ensure_gl_scene()
         c = np.array([*scene.pivot, 0.0])
         eye = c + _rot_z(-scene.rotation) @ (np.array([pose.x, pose.y, pose.z]) - c)
@@ -362,7 +388,11 @@ class Renderer:
             old.release()
         q_far = _rot_z(-scene.yaw_rate * t) @ q
         self._draw(q, q_far, eye)
-        self._fbo.read_into(self._texels, components=4, dtype="nu2")
+        if level == 0:
+            self._fbo.read_into(self._texels if texels is None else texels, components=4, dtype="nu2")
+        else:
+            self._atlas.build_mipmaps(0, level)
+            self._atlas.read_into(texels, level=level)
 
     def _draw(self, q: np.ndarray, q_far: np.ndarray, eye: np.ndarray) -> None:
         """Meshes first, then the far field only where no mesh was drawn (its fragments fail the depth test

@@ -194,3 +194,18 @@ def test_far_field_fast_path_matches_the_gl_path(renderer, fast, dome, spec):
     quick = radiance(fast.render(pose), dome)
     err = np.abs(quick - gl)
     assert err.mean() < 0.003 and np.percentile(err, 99) < 0.03
+
+
+def test_lowpass_in_the_gl_path_matches_the_far_field_table(renderer, fast, dome):
+    """A wide low-pass samples a coarser mipmap level of the atlas; it must agree with the exact table."""
+    spec = {"scene": "grating", "period_deg": 40, "contrast": 0.8, "colour": [1, 0, 0], "lowpass_deg": 30}
+    pose = Pose(0, 0, 0.01, math.radians(10))
+    renderer.set_scene(spec)
+    gl = radiance(renderer.render(pose), dome)
+    assert renderer._sampling()[0] == 2  # 128 -> 32 texels per face for a 13 deg footprint
+    fast.set_scene(spec)
+    quick = radiance(fast.render(pose), dome)
+    band = (np.abs(dome.elevation) < math.radians(50)) & ~dome.is_uv
+    # a 40 deg period keeps exp(-2 pi^2 sigma^2 / 40^2) = 0.68 of its amplitude under a 30 deg cut-off
+    assert np.ptp(gl[band, 0]) == pytest.approx(0.68 * 0.8, abs=0.05)
+    assert np.abs(gl[band] - quick[band]).mean() < 0.01
