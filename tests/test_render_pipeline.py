@@ -209,3 +209,32 @@ def test_lowpass_in_the_gl_path_matches_the_far_field_table(renderer, fast, dome
     # a 40 deg period keeps exp(-2 pi^2 sigma^2 / 40^2) = 0.68 of its amplitude under a 30 deg cut-off
     assert np.ptp(gl[band, 0]) == pytest.approx(0.68 * 0.8, abs=0.05)
     assert np.abs(gl[band] - quick[band]).mean() < 0.01
+
+
+def test_rayleigh_sky_formula_at_known_points():
+    from antarium.renderers.sky import degree_of_polarisation, e_vector, sun_direction
+
+    zenith_sun = sun_direction(0.0, math.pi / 2)
+    s45 = math.sqrt(0.5)
+    d = np.array([[1.0, 0, 0], [s45, 0, s45], [0, 0, 1.0], [0, 0, -1.0]])
+    dop = degree_of_polarisation(d, zenith_sun, 0.75)
+    # gamma = 90, 45, 0, 180 deg: dop_max sin^2 / (1 + cos^2) = 0.75, 0.75 / 3, 0, 0
+    assert np.allclose(dop, [0.75, 0.25, 0.0, 0.0])
+    e = e_vector(d, zenith_sun)
+    assert np.allclose(e[0], [0, 1, 0])  # looking at the horizon under a zenith sun: horizontal e-vector
+    assert np.allclose(e[2:], 0)  # no e-vector towards or away from the sun
+    # sun on the horizon at azimuth 0, looking at the zenith: e-vector perpendicular to the solar meridian
+    assert np.allclose(np.abs(e_vector(np.array([[0, 0, 1.0]]), sun_direction(0.0, 0.0))), [[0, 1, 0]])
+
+
+def test_missing_egl_names_the_system_packages(monkeypatch):
+    import moderngl
+
+    from antarium.renderers import gl
+
+    def no_egl(**kwargs):
+        raise Exception("libEGL.so.1: cannot open shared object file")
+
+    monkeypatch.setattr(moderngl, "create_context", no_egl)
+    with pytest.raises(RuntimeError, match="libegl1.*libgl1-mesa-dri"):
+        gl.create_context()
