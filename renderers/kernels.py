@@ -34,6 +34,30 @@ def sample_pairs(indptr, indices, weights, texels, channel, out):  # pragma: no 
         out[i, 1] = a1
 
 
+@njit(cache=True, fastmath=True)
+def sample_over_far(indptr, indices, weights, texels, channel, far, out):  # pragma: no cover - compiled
+    """Meshes over a far field: like `sample_pairs`, with texel channel 3 the meshes' coverage (0..1) and
+    `far` (n, 2) the far field already integrated over each LED's footprint, seen where nothing covers it:
+    out = meshes + (1 - coverage) * far. Meshes carry no polarisation (UV pixels: polarised = far share)."""
+    for i in range(len(indptr) - 1):
+        c = channel[i]
+        a0 = np.float32(0.0)
+        a1 = np.float32(0.0)
+        cov = np.float32(0.0)
+        for k in range(indptr[i], indptr[i + 1]):
+            t = indices[k]
+            w = weights[k]
+            a0 += w * np.float32(texels[t, c])
+            a1 += w * np.float32(texels[t, 1])
+            cov += w * np.float32(texels[t, 3])
+        u = max(np.float32(1.0) - cov, np.float32(0.0))
+        out[i, 0] = a0 + u * far[i, 0]
+        if c == 0:
+            out[i, 1] = a1 + u * far[i, 1]
+        else:
+            out[i, 1] = u * far[i, 1]
+
+
 @njit(cache=True)
 def lookup_pairs(table, order, row, row_frac, col0, shift, out):  # pragma: no cover - compiled
     """Bilinear lookup in a far-field table for the LEDs in `order` (sorted by row: cache friendly).

@@ -195,6 +195,11 @@ class MeshBuffers:
         self._vbo.write(block.tobytes(), offset=v0 * _FLOATS_PER_VERTEX * 4)
         self._bounds(name, obj)
 
+    @property
+    def drawable(self) -> bool:
+        """Whether any chunk is left to draw."""
+        return self.n_chunks > 0 and bool(self._active.any())
+
     def hide(self, name: str) -> None:
         *_, c0, c1 = self._ranges[name]
         self._active[c0:c1] = False

@@ -117,6 +117,7 @@ class Renderer:
         self._setup_gl()
         self._texels = np.empty((6 * n * n, 4), dtype=np.uint16)
         self._pairs = np.empty((N_PIXELS, 2), dtype=np.float32)
+        self._far_pairs = np.empty((N_PIXELS, 2), dtype=np.float32)
         self._fwhm = None
         self._kernel_matrix = None
         self.scene: Scene | None = None
@@ -202,10 +203,11 @@ class Renderer:
         far_tex = meshes = table = None
         try:
             self._set_footprint(new.lowpass_deg)
-            if self._far_only(new):
+            if self._table_ok(new):
                 table = FarFieldTable(new, self._directions, self._fwhm)
             else:
                 far_tex = self._make_far_texture(new)
+            if new.objects:
                 meshes = MeshBuffers(self.ctx, self._mesh_prog, new, self.chunk_size, self.lod_angle)
         except BaseException:
             for res in (far_tex, meshes):
@@ -223,15 +225,14 @@ class Renderer:
                 res.release()
         return new
 
-    def _far_only(self, scene: Scene) -> bool:
-        return self.fast_far_field and not scene.objects and not scene.far_time_varying
+    def _table_ok(self, scene: Scene) -> bool:
+        """Whether the far field comes from a `FarFieldTable` (static, or only turning about the vertical)."""
+        return self.fast_far_field and not scene.far_time_varying
 
-    def _ensure_gl_scene(self) -> None:
-        """GL resources for a scene that so far took the fast path (e.g. a cube-map picture is wanted)."""
+    def _ensure_far_texture(self) -> None:
+        """The far field as a cube texture, for a scene whose frames use the table (a cube-map picture)."""
         if self._far_tex is None:
             self._far_tex = self._make_far_texture(self.scene)
-        if self._meshes is None:
-            self._meshes = MeshBuffers(self.ctx, self._mesh_prog, self.scene, self.chunk_size, self.lod_angle)
 
     def _require_scene(self) -> Scene:
         if self.scene is None:
@@ -267,7 +268,7 @@ class Renderer:
         """Remove a named object from the scene (instantly: its chunks are no longer drawn)."""
         self._object(name)
         self._meshes.hide(name)
-        del self.scene.objects[name]  # the scene keeps the general path (its buffers stay valid)
+        del self.scene.objects[name]
 
     def add_object(self, name: str, obj) -> None:
         """Add (or replace) a named `SceneObject`; the mesh buffers are rebuilt (previous kept on error)."""
@@ -283,11 +284,9 @@ class Renderer:
         objects[name] = obj
         trial = Scene(far=scene.far, objects=objects, name=scene.name)
         meshes = MeshBuffers(self.ctx, self._mesh_prog, trial, self.chunk_size, self.lod_angle)
-        if self._far_tex is None:
-            self._far_tex = self._make_far_texture(scene)
         if self._meshes is not None:
             self._meshes.release()
-        self._meshes, self._table = meshes, None
+        self._meshes = meshes
         scene.objects = objects
 
     def scale_channel(self, channel: str, factor: float) -> None:
@@ -360,16 +359,23 @@ class Renderer:
         q = self.view_rotation(pose)
         self._last_q = q
         pairs = self._pairs
-        if self._table is not None:
+        psi = pose.heading - scene.rotation - scene.yaw_rate * t
+        meshes = self._meshes is not None and self._meshes.drawable
+        if self._table is not None and not meshes:
             t1 = time.perf_counter()
-            self._table.lookup(pose.heading - scene.rotation - scene.yaw_rate * t, pairs)
+            self._table.lookup(psi, pairs)
         else:
-            level, texels, indptr, indices, weights = self._sampling()
-            self._render_cube(scene, pose, q, t, level, texels)
-            t1 = time.perf_counter()
-            from .kernels import sample_pairs
+            from .kernels import sample_over_far, sample_pairs
 
-            sample_pairs(indptr, indices, weights, texels, self._channel, pairs)
+            level, texels, indptr, indices, weights = self._sampling()
+            over_table = self._table is not None
+            self._render_cube(scene, pose, q, t, level, texels, background=not over_table)
+            t1 = time.perf_counter()
+            if over_table:
+                self._table.lookup(psi, self._far_pairs)
+                sample_over_far(indptr, indices, weights, texels, self._channel, self._far_pairs, pairs)
+            else:
+                sample_pairs(indptr, indices, weights, texels, self._channel, pairs)
         t2 = time.perf_counter()
         self._convert(pairs, out)
         t3 = time.perf_counter()
@@ -377,24 +383,29 @@ class Renderer:
         return out
 
     def _render_cube(self, scene: Scene, pose: Pose, q: np.ndarray, t: float, level: int = 0,
-                     texels: np.ndarray | None = None) -> None:
-        """Draw the six faces for `pose` and read the atlas (mipmap `level`) back into `texels`."""
-        self._ensure_gl_scene()
+                     texels: np.ndarray | None = None, background: bool = True) -> None:
+        """Draw the six faces for `pose` and read the atlas (mipmap `level`) back into `texels`.
+
+        background: draw the far field behind the meshes (channel 3 = polarised UV); otherwise leave it
+        black and write the meshes' coverage into channel 3, for `kernels.sample_over_far`.
+        """
+        if background:
+            self._ensure_far_texture()
         c = np.array([*scene.pivot, 0.0])
         eye = c + _rot_z(-scene.rotation) @ (np.array([pose.x, pose.y, pose.z]) - c)
-        if scene.far_time_varying:
+        if background and scene.far_time_varying:
             old = self._far_tex
             self._far_tex = self._make_far_texture(scene, t, supersample=1)
             old.release()
         q_far = _rot_z(-scene.yaw_rate * t) @ q
-        self._draw(q, q_far, eye)
+        self._draw(q, q_far, eye, background)
         if level == 0:
             self._fbo.read_into(self._texels if texels is None else texels, components=4, dtype="nu2")
         else:
             self._atlas.build_mipmaps(0, level)
             self._atlas.read_into(texels, level=level)
 
-    def _draw(self, q: np.ndarray, q_far: np.ndarray, eye: np.ndarray) -> None:
+    def _draw(self, q: np.ndarray, q_far: np.ndarray, eye: np.ndarray, background: bool = True) -> None:
         """Meshes first, then the far field only where no mesh was drawn (its fragments fail the depth test
         early, so the background pass costs only the uncovered texels)."""
         ctx, n = self.ctx, self.face_size
@@ -403,11 +414,14 @@ class Renderer:
         ctx.disable(self._mgl.CULL_FACE)
         ctx.enable(self._mgl.DEPTH_TEST)
         ctx.depth_func = "<"
-        self._fbo.clear(depth=1.0)
-        if self._meshes is not None and self._meshes.n_chunks:
+        self._fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        if self._meshes is not None and self._meshes.drawable:
+            self._mesh_prog["coverage"].value = 0.0 if background else 1.0
             views = cubemap.face_view_matrices(q, eye)
             self._meshes.draw(self._fbo, views, self._proj, q, eye, n)
             self._fbo.viewport = (0, 0, n, 6 * n)
+        if not background:
+            return
         # background at the far plane: face k's (right, up, forward) in world coordinates
         ctx.depth_func = "<="
         basis = np.einsum("kij,lj->kil", cubemap.FACES, q_far)  # (6, 3 axes, 3 world)

@@ -43,10 +43,12 @@ void main() {
 }
 """
 
-# Meshes carry no polarisation: the fourth channel (polarised UV) is 0.
+# Meshes carry no polarisation. The fourth channel is 0 (polarised UV) when the far field is drawn into the
+# atlas behind them, or 1 (coverage) when the far field is added per LED from its table.
 MESH_FS = """
 #version 330
 uniform sampler2DArray textures;
+uniform float coverage;
 in vec3 v_col;
 in vec2 v_uv;
 flat in float v_layer;
@@ -56,6 +58,6 @@ void main() {
     if (v_layer >= 0.0) {
         c *= texture(textures, vec3(v_uv, v_layer)).rgb;
     }
-    frag = vec4(c, 0.0);
+    frag = vec4(c, coverage);
 }
 """
