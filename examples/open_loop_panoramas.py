@@ -55,10 +55,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--panorama", action="append", default=[], help="panorama image (repeat for a sequence)")
     parser.add_argument("--seconds", type=float, default=20.0, help="seconds each panorama is shown")
     parser.add_argument("--out", default="panoramas-output", help="folder for generated panoramas")
-    parser.add_argument("--short", action="store_true", help="quick run: 1 s per panorama")
+    parser.add_argument("--short", action="store_true", help="quick run: 0.6 s per panorama")
     args = parser.parse_args(argv)
     if args.short:
-        args.seconds = 1.0
+        args.seconds = 0.6
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     panoramas = [Path(p).resolve() for p in args.panorama] or write_panoramas(out.resolve())

@@ -61,9 +61,10 @@ def rotation_indices(updates) -> list[int]:
     return [int(i) + 1 for i in np.flatnonzero(jumps)]
 
 
-def run_condition(rig, name, scene, x, y, heading_deg, rng, duration, window, seed):
-    """One trial; returns the pose updates it streamed and the log path."""
-    rig.load_scene(scene)
+def run_condition(rig, name, scene, x, y, heading_deg, rng, duration, window, seed, load=True):
+    """One trial; returns the pose updates it streamed and the log path. `load`: the scene is not on yet."""
+    if load:
+        rig.load_scene(scene)
     rig.closed_loop(True)
     rig.tether("free_yaw")
     rig.reset_origin(x, y, heading_deg)  # the condition's place becomes the virtual origin
@@ -129,17 +130,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=1, help="seed of the rotation times and directions")
     parser.add_argument("--duration", type=float, default=120.0, help="seconds per condition")
     parser.add_argument("--window", type=float, default=15.0, help="seconds plotted before and after a rotation")
-    parser.add_argument("--short", action="store_true", help="quick run: 1.6 s per condition, 0.5 s windows")
+    parser.add_argument("--short", action="store_true", help="quick run: 1.2 s per condition, 0.4 s windows")
     args = parser.parse_args(argv)
     if args.short:
-        args.duration, args.window = 1.6, 0.5
+        args.duration, args.window = 1.2, 0.4
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rng = random.Random(args.seed)
     results, logs = {}, []
     with script_rig(args) as rig:
+        shown = None
         for name, (scene, x, y, heading) in condition_poses().items():
-            updates, log = run_condition(rig, name, scene, x, y, heading, rng, args.duration, args.window, args.seed)
+            updates, log = run_condition(rig, name, scene, x, y, heading, rng, args.duration, args.window, args.seed,
+                                         load=scene != shown)
+            shown = scene
             results[name] = updates
             logs.append(log)
             print(f"{name}: {len(updates)} poses, {len(rotation_indices(updates))} rotations, log {log}")

@@ -59,10 +59,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--before", type=float, default=30.0, help="seconds before the displacement")
     parser.add_argument("--after", type=float, default=30.0, help="seconds after it")
     parser.add_argument("--out", default="displacement-output", help="folder for the plot")
-    parser.add_argument("--short", action="store_true", help="quick run: 1.5 s before and after")
+    parser.add_argument("--short", action="store_true", help="quick run: 1 s before and after")
     args = parser.parse_args(argv)
     if args.short:
-        args.before = args.after = 1.5
+        args.before = args.after = 1.0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     updates, lock = [], threading.Lock()
