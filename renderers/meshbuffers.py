@@ -47,15 +47,19 @@ def cluster_vertices(vertices, colours, faces, tri_chunk, cell: float):
     vertices (V, 3), colours (V, 3), faces (F, 3) int, tri_chunk (F,) chunk of each triangle (sorted).
     Returns new vertices (V', 3) float32, colours (V', 3) float32, faces (F', 3) int64 into them, and
     tri_chunk (F',), triangles still sorted by chunk; collapsed and duplicate triangles are dropped.
+    Returns None when a chunk spans more than 2^14 cells or there are more than 2^20 chunks (the cube
+    indices would not fit the 64-bit key): the caller keeps the finer level.
     """
     corners = faces.ravel()
     pos = vertices[corners].astype(np.float64)
     q = np.floor(pos / cell).astype(np.int64)
-    q -= q.min(axis=0)
-    if q.max() >= 1 << 16:
-        raise ValueError(f"object too large for level-of-detail cells of {cell} m")
     chunk = np.repeat(tri_chunk, 3).astype(np.int64)
-    key = ((chunk << 16 | q[:, 0]) << 16 | q[:, 1]) << 16 | q[:, 2]
+    lo = np.full((int(chunk.max()) + 1, 3), np.iinfo(np.int64).max)
+    np.minimum.at(lo, chunk, q)
+    q -= lo[chunk]  # cube indices relative to each chunk's corner
+    if q.max() >= 1 << 14 or chunk.max() >= 1 << 20:
+        return None
+    key = ((chunk << 14 | q[:, 0]) << 14 | q[:, 1]) << 14 | q[:, 2]
     uniq, inv = np.unique(key, return_inverse=True)
     count = np.bincount(inv, minlength=len(uniq)).astype(np.float64)
     new_v = np.stack([np.bincount(inv, pos[:, k], len(uniq)) for k in range(3)], axis=1) / count[:, None]
@@ -105,7 +109,11 @@ class MeshBuffers:
             base = len(mesh.vertices)
             if mesh.texture is None:
                 for cell in LOD_CELLS:
-                    v, c, f, tc = cluster_vertices(mesh.vertices, mesh.colours, *levels[0], cell)
+                    lod = cluster_vertices(mesh.vertices, mesh.colours, *levels[0], cell)
+                    if lod is None:  # too many cells for this object: keep the finer level
+                        levels.append(levels[-1])
+                        continue
+                    v, c, f, tc = lod
                     levels.append((f + base, tc))
                     verts.append(v)
                     cols.append(c)
@@ -119,11 +127,11 @@ class MeshBuffers:
                 f, tc = levels[min(k, len(levels) - 1)]
                 per_chunk = np.bincount(tc, minlength=n_chunks)
                 starts = np.concatenate([[0], np.cumsum(per_chunk)[:-1]])
-                if k < len(levels):
+                if k < len(levels) and (k == 0 or levels[k] is not levels[k - 1]):
                     idx_blocks.append((f + v0).ravel())
                     f_obj[:, k] = i0 + 3 * starts
                     i0 += 3 * len(f)
-                else:  # no finer cells for this object: repeat its last level
+                else:  # the same triangles as the level before (textured, or too large to cluster)
                     f_obj[:, k] = f_obj[:, k - 1]
                 n_obj[:, k] = 3 * per_chunk
             first.append(f_obj)

@@ -323,3 +323,16 @@ def test_meshes_over_the_far_field_table_match_the_background_pass(renderer, dom
         assert diff.mean() < 0.002 and np.percentile(diff, 99) < 0.02
     finally:
         gl_path.release()
+
+
+def test_a_kilometre_wide_object_keeps_working(renderer, dome):
+    """Objects too large for the fine level-of-detail cells keep their full detail instead of failing."""
+    v = np.array([[-500, -500, 0], [500, -500, 0], [500, 500, 0], [-500, 500, 0], [0, 0, 300]], np.float32)
+    f = np.array([[0, 1, 2], [0, 2, 3], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    scene = build_scene({"scene": "horizon", "sky": 0.0, "ground": 0.0})
+    scene.objects["mountain"] = SceneObject(MeshData(v, f, np.full((5, 3), 0.5, np.float32)),
+                                            position=(0.0, 0.0, -1.0))
+    scene.__post_init__()
+    renderer.set_scene(scene)
+    g = green(renderer.render(Pose(0, 0, 0.5, 0.0)), dome)
+    assert g.max() > 0.4
