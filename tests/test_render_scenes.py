@@ -336,3 +336,19 @@ def test_a_kilometre_wide_object_keeps_working(renderer, dome):
     renderer.set_scene(scene)
     g = green(renderer.render(Pose(0, 0, 0.5, 0.0)), dome)
     assert g.max() > 0.4
+
+
+def test_each_face_draws_only_the_chunks_it_can_see(renderer):
+    """A chunk straight ahead is drawn by the forward face only; one straddling two faces by both."""
+    from antarium.renderers.cubemap import FACES
+
+    scene = build_scene({"scene": "horizon"})
+    scene.objects["ahead"] = SceneObject(box(0.2), position=(5.0, 0.0, 0.0))
+    scene.objects["edge"] = SceneObject(box(0.2), position=(5.0, 5.0, 0.0))  # on the +x/+y face boundary
+    scene.__post_init__()
+    renderer.set_scene(scene)
+    vis = renderer._meshes.visible_chunks(np.eye(3), np.array([0.0, 0.0, 0.1]))
+    plus_x, plus_y = 0, 2
+    assert np.allclose(FACES[plus_x, 0], [1, 0, 0]) and np.allclose(FACES[plus_y, 0], [0, 1, 0])
+    assert vis[0].tolist() == [True, False, False, False, False, False]
+    assert vis[1, plus_x] and vis[1, plus_y] and vis[1].sum() == 2
