@@ -10,9 +10,10 @@ from antarium.cli import main
 
 def test_learn_then_run_writes_model_log_pictures_and_summary(tmp_path, capsys):
     route = tmp_path / "route.csv"
-    route.write_text("x_m,y_m\n0.5,-0.3\n0.8,-0.25\n")
+    route.write_text("x_m,y_m\n0.5,-0.3\n0.7,-0.28\n")
     model = tmp_path / "ant.npz"
-    assert main(["ant", "learn", "--route", str(route), "--out", str(model), "--log", str(tmp_path / "learn.h5")]) == 0
+    assert main(["ant", "learn", "--route", str(route), "--spacing", "0.02", "--out", str(model),
+                 "--log", str(tmp_path / "learn.h5")]) == 0
     assert "1875" in capsys.readouterr().out  # bytes per route MBON
     assert main(["ant", "run", str(model), "--out", str(tmp_path / "run"), "--heading-deg", "10"]) == 0
     for name in ("run.h5", "run_paths.png", "run_traces.png", "run.json"):

@@ -9,13 +9,14 @@ for the next frame. Nothing here renders, encodes or paces: that is the frame lo
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from antarium.ant.eye import Eye, View
-from antarium.ant.locomotion import AntLocomotion
+from antarium.ant.locomotion import AntLocomotion, BusLegs
 from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M, RunSummary, arrived, stopping_distance
 from antarium.ant.routes import Route
 from antarium.pose import Pose
@@ -46,9 +47,12 @@ class VirtualAnt:
     frames_per_decision: frames the loop runs per decision; the command is spread evenly over them
     """
 
-    def __init__(self, eye: Eye, model, loop, legs: AntLocomotion, read_leds: Callable[[], np.ndarray],
-                 frames_per_decision: int = 1) -> None:
-        if loop.source is not legs:
+    def __init__(self, eye: Eye, model, loop, legs: AntLocomotion | BusLegs, read_leds: Callable[[], np.ndarray],
+                 frames_per_decision: int = 1, delivery_timeout_s: float = 2.0) -> None:
+        if isinstance(legs, BusLegs):
+            if not hasattr(loop.source, "received"):
+                raise ValueError("legs on the bus need a frame loop reading the bus (open_source('bus', ...))")
+        elif loop.source is not legs:
             raise ValueError("the frame loop must read the ant's legs (FrameLoop(source=legs, ...))")
         if loop.tether != legs.tether:
             raise ValueError(f"loop tether {loop.tether!r} and ant tether {legs.tether!r} differ")
@@ -56,6 +60,7 @@ class VirtualAnt:
             raise ValueError(f"frames_per_decision must be >= 1, got {frames_per_decision}")
         self.eye, self.model, self.loop, self.legs, self.read_leds = eye, model, loop, legs, read_leds
         self.frames_per_decision = int(frames_per_decision)
+        self.delivery_timeout_s = float(delivery_timeout_s)
         self._queued: tuple[float, float] = (0.0, 0.0)
 
     # -- where the ant is ------------------------------------------------------------------------------
@@ -87,8 +92,21 @@ class VirtualAnt:
         for _ in range(n):
             if forward or turn:
                 self.legs.walk(forward / n, turn / n)
+                self._await_delivery()
             self.loop.step()
         self._queued = (0.0, 0.0)
+
+    def _await_delivery(self) -> None:
+        """Legs on the bus: wait (bounded, wall time) until the loop's bus source has received every step, so that
+        a simulated clock never runs ahead of the messages."""
+        if not isinstance(self.legs, BusLegs):
+            return
+        deadline = time.monotonic() + self.delivery_timeout_s
+        while self.loop.source.received < self.legs.published:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"the bus did not deliver the ant's steps within {self.delivery_timeout_s} s "
+                                   f"({self.loop.source.received} of {self.legs.published} received)")
+            time.sleep(0.0002)
 
     def look(self) -> View:
         return self.eye.look(self.read_leds(), yaw=self.legs.yaw)

@@ -71,3 +71,48 @@ class AntLocomotion(LocomotionSource):
 
     def status(self) -> dict[str, Any]:
         return {"connected": True, "samples": self._seq, "tether": self.tether, "yaw": self.yaw}
+
+
+class BusLegs:
+    """The ant's legs on the bus: every step is published as a 44-byte `antarium.locomotion.wire` sample on
+    `antarium/<rig>/locomotion`, where the frame loop's "bus" source reads it — as it would read a trackball on
+    another computer. Rotations are those of `AntLocomotion` (same tethers); `published` counts the steps.
+
+    session: an open zenoh session (`antarium.bus.open_session`); rig: the rig's name.
+    """
+
+    def __init__(self, session, rig: str = "rig1", tether: str = "free_yaw", yaw: float = 0.0,
+                 ball_radius: float = BALL_RADIUS_M, clock: Clock | None = None) -> None:
+        from antarium.bus import check_rig_name, locomotion_key
+
+        self._legs = AntLocomotion(tether, yaw, ball_radius, clock)
+        self._publisher = session.declare_publisher(locomotion_key(check_rig_name(rig)))
+        self.published = 0
+
+    @property
+    def tether(self) -> str:
+        return self._legs.tether
+
+    @property
+    def yaw(self) -> float:
+        return self._legs.yaw
+
+    def walk(self, forward: float, turn: float) -> BallSample:
+        """Like `AntLocomotion.walk`, and publish the sample."""
+        from antarium.locomotion import wire
+
+        sample = self._legs.walk(forward, turn)
+        self._legs.read()
+        self._publisher.put(wire.encode(sample))
+        self.published += 1
+        return sample
+
+    def turn_to(self, yaw: float) -> None:
+        self._legs.turn_to(yaw)
+
+    def read(self) -> list[BallSample]:
+        """Nothing to read here: the samples travel over the bus."""
+        return []
+
+    def close(self) -> None:
+        self._publisher.undeclare()

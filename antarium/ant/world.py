@@ -18,7 +18,7 @@ from typing import Any
 
 from antarium.ant.agent import VirtualAnt
 from antarium.ant.eye import Eye, EyeParams
-from antarium.ant.locomotion import AntLocomotion
+from antarium.ant.locomotion import AntLocomotion, BusLegs
 from antarium.clock import Clock, SimulatedClock
 from antarium.pose import Pose
 
@@ -30,10 +30,13 @@ EYE_HEIGHT_M = 0.01
 def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = None, tether: str = "free_yaw",
                 clock: Clock | None = None, log_path: str | Path | None = None, log_metadata: dict | None = None,
                 frames_per_decision: int = 1, eye_height: float = EYE_HEIGHT_M,
-                renderer_kwargs: dict | None = None) -> Iterator[VirtualAnt]:
+                renderer_kwargs: dict | None = None, bus: dict | None = None,
+                rig: str = "rig1") -> Iterator[VirtualAnt]:
     """A `VirtualAnt` with `model` in a frame loop on an emulated dome showing `scene`.
 
     log_path: write an HDF5 trial log there (like a real trial's), or None.
+    bus: a `[bus]` section: the ant's steps then travel as ball rotations over zenoh (`BusLegs`) to the frame
+    loop's "bus" locomotion source for rig `rig`, as a trackball's would; None: the in-process "ant" source.
     """
     from antarium.firmware_proto.link import open_link
     from antarium.frame_loop import FrameLoop
@@ -56,7 +59,18 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
         if log_path is not None:
             config = {"ant": {"model": model.kind, "tether": tether, "scene": str(scene), "eye": eye.params.channel}}
             log = stack.enter_context(TrialLog(log_path, config, name="virtual ant", metadata=log_metadata))
-        legs = AntLocomotion(tether, clock=clock)
-        loop = FrameLoop(clock=clock, source=legs, renderer=renderer, link=link, tether=tether, log=log,
+        if bus is None:
+            legs = source = AntLocomotion(tether, clock=clock)
+        else:
+            from antarium.bus import open_session
+            from antarium.locomotion import open_source
+
+            session = stack.enter_context(open_session(bus, role="server"))
+            source = open_source("bus", rig=rig, session=session, clock=clock)
+            source.start()
+            stack.callback(source.stop)
+            legs = BusLegs(session, rig, tether, clock=clock)
+            stack.callback(legs.close)
+        loop = FrameLoop(clock=clock, source=source, renderer=renderer, link=link, tether=tether, log=log,
                          origin=Pose(0.0, 0.0, eye_height, 0.0))
         yield VirtualAnt(eye, model, loop, legs, link.emulator.led_values, frames_per_decision)
