@@ -46,12 +46,27 @@ class EmulatorProcess:
         self.port = port or _free_udp_port(host)
         self.extra_args = list(extra_args or [])
         self.proc: subprocess.Popen | None = None
+        self._output = None
 
     def start(self) -> None:
+        """Start (or restart) the emulator process; its output goes to a temporary file (see `output`)."""
+        import tempfile
+
         cmd = [sys.executable, "-m", "antarium", "emulate", "--host", self.host, "--port", str(self.port),
                *self.extra_args]
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.PIPE, text=True)
+        if self._output is not None:
+            self._output.close()
+        self._output = tempfile.TemporaryFile(mode="w+b")  # a file, never a pipe that could fill and block it
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self._output, stderr=subprocess.STDOUT)
+
+    def output(self, max_bytes: int = 4000) -> str:
+        """The end of what the emulator printed (for error messages)."""
+        if self._output is None:
+            return ""
+        self._output.seek(0, 2)
+        size = self._output.tell()
+        self._output.seek(max(0, size - max_bytes))
+        return self._output.read().decode(errors="replace")
 
     @property
     def running(self) -> bool:
@@ -67,9 +82,9 @@ class EmulatorProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait(timeout_s)
-        if self.proc.stderr is not None:
-            self.proc.stderr.close()
         self.proc = None
+        self._output.close()
+        self._output = None
 
 
 def _free_udp_port(host: str) -> int:
@@ -267,6 +282,9 @@ class Server:
             out["telemetry"] = loop.telemetry  # polled by the loop's thread (the link is not shared)
         if self.emulator is not None:
             out["emulator_running"] = self.emulator.running
+            if not out["emulator_running"]:
+                last = self.emulator.output().strip().splitlines()[-1:] or ["no output"]
+                out["alarms"].append(f"the dome emulator process is not running ({last[0]})")
         log = self.trial_log
         if log is not None:
             out["log"] = log.status()

@@ -41,7 +41,8 @@ def test_emulator_killed_and_restarted_mid_recording(tmp_path):
         server.emulator.proc.wait(5)
         assert wait_for(lambda: not loop.link_ok, 5.0)
         frames_at_outage = loop.frame
-        assert "dome link down" in " ".join(server.status()["alarms"])
+        alarms = " ".join(server.status()["alarms"])
+        assert "dome link down" in alarms and "emulator process is not running" in alarms
         time.sleep(0.5)
         assert loop.frame > frames_at_outage + 20  # still pacing
         server.emulator.start()
