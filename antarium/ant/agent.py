@@ -124,8 +124,10 @@ class VirtualAnt:
 
 
 def learning_walk(ant: VirtualAnt, route: Route, spacing: float, place_length: float = 0.1,
-                  progress: Callable[[int], None] | None = None) -> int:
+                  progress: Callable[[int], None] | None = None, keep: list | None = None,
+                  keep_every: int = 10) -> int:
     """Walk the ant along `route`, learning a view every `spacing` metres; returns the number of views.
+    Every `keep_every`-th learned `View` is appended to `keep` when given (e.g. for PI_error).
 
     Facing along the route it learns with its model's rule (Antcar: in-silico oscillation into the left and
     right MBONs). Antcar also learns its nest place MBON on the first and its feeder MBON on the last
@@ -139,6 +141,8 @@ def learning_walk(ant: VirtualAnt, route: Route, spacing: float, place_length: f
         ant.frame()
         view = ant.look()
         ant.model.learn(view)
+        if keep is not None and i % keep_every == 0:
+            keep.append(view)
         if learns_places and s[i] <= place_length:
             ant.model.learn_place(view, "nest")
         if learns_places and s[i] >= route.length - place_length:

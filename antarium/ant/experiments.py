@@ -17,7 +17,7 @@ import numpy as np
 
 from antarium.ant.agent import Track, follow_route, learning_walk
 from antarium.ant.eye import EyeParams
-from antarium.ant.metrics import median_mad
+from antarium.ant.metrics import median_mad, memory_pi_error
 from antarium.ant.models import make_model
 from antarium.ant.plots import plot_paths, plot_traces, scene_top_view
 from antarium.ant.routes import Route, RouteError, curved_route
@@ -80,6 +80,7 @@ class TrialOutcome:
     model_ms_per_decision: float      # the model's `decide` alone
     learned_views: int
     memory_bytes: dict[str, int]
+    pi_error: float                   # Antcar's PI_error (eq. 11-12) over every 10th learned view; NaN otherwise
     log: str | None
     picture: str | None
 
@@ -147,15 +148,17 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
                      log_metadata={"route": route.points.tolist(), "model": kind},
                      renderer_kwargs={"face_size": face_size}) as ant:
         ant.loop.event("ant_learning_walk", spacing=spacing, route_length=route.length)
-        learning_walk(ant, route, spacing, progress=progress)
+        kept: list = []
+        learning_walk(ant, route, spacing, progress=progress, keep=kept)
         result, wall, model_ms = _follow(ant, route, max_decisions or _decision_limit(model, route), start_offset,
                                          progress)
         top = scene_top_view(ant.loop.renderer.scene)
     picture = _outputs(out, name, route, kind, result.track, top)
     if out is not None and save:
         save_model(out / f"{name}_model.npz", model, eye_params, route.points)
+    pi = memory_pi_error(model, kept) if hasattr(model, "lambda_diff") else math.nan
     outcome = TrialOutcome(kind, name, asdict(result.summary), wall, model_ms, model.learned_views,
-                           mbon_bytes(model), str(log_path) if log_path else None, picture)
+                           mbon_bytes(model), pi, str(log_path) if log_path else None, picture)
     return outcome, result.track
 
 
@@ -174,18 +177,18 @@ def follow_saved(model, eye_params: EyeParams, route: Route, out_dir: str | Path
         top = scene_top_view(ant.loop.renderer.scene)
     picture = _outputs(out, name, route, model.kind, result.track, top)
     outcome = TrialOutcome(model.kind, name, asdict(result.summary), wall, model_ms, model.learned_views,
-                           mbon_bytes(model), str(log_path), picture)
+                           mbon_bytes(model), math.nan, str(log_path), picture)
     (out / f"{name}.json").write_text(json.dumps(asdict(outcome), indent=2, default=float))
     return outcome, result.track
 
 
 def table(outcomes: list[TrialOutcome]) -> str:
-    """A markdown table, one row per model: lateral / angular error median +- MAD (of the per-route medians'
-    pooled decisions), arrivals, Ardin errors per route, time per decision."""
+    """A markdown table, one row per model: median +- MAD over routes of each route's median lateral / angular
+    error, arrivals, Ardin errors per route (mean), time per decision, memory, median PI_error."""
     rows = ["| model | routes | lateral error median ± MAD (cm) | angular error median ± MAD (°) | arrived | "
             "errors per route (Ardin, > 20 cm) | ms per decision (model) | ms per decision (closed loop) | "
-            "memory per route |",
-            "|---|---|---|---|---|---|---|---|---|"]
+            "memory per route | PI_error |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
     for kind in dict.fromkeys(o.model for o in outcomes):
         mine = [o for o in outcomes if o.model == kind]
         lat = median_mad([o.summary["lateral_median"] for o in mine])
@@ -198,8 +201,14 @@ def table(outcomes: list[TrialOutcome]) -> str:
         rows.append(
             f"| {kind} | {len(mine)} | {100 * lat[0]:.1f} ± {100 * lat[1]:.1f} | {ang[0]:.1f} ± {ang[1]:.1f} | "
             f"{arrived}/{len(mine)} | {errors:.1f} | {np.mean([o.model_ms_per_decision for o in mine]):.2f} | "
-            f"{1e3 * np.mean([o.seconds_per_decision for o in mine]):.1f} | {mem_text} |")
+            f"{1e3 * np.mean([o.seconds_per_decision for o in mine]):.1f} | {mem_text} | "
+            f"{_pi_text([o.pi_error for o in mine])} |")
     return "\n".join(rows)
+
+
+def _pi_text(values) -> str:
+    v = np.asarray(values, np.float64)
+    return "—" if not np.isfinite(v).any() else f"{100 * np.nanmedian(v):.1f} %"
 
 
 def write_outcomes(out_dir: Path, outcomes: list[TrialOutcome], extra: dict | None = None) -> str:
