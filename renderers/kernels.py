@@ -110,3 +110,17 @@ def convert_pairs(pairs, gain, is_uv, swap, out):  # pragma: no cover - compiled
                 b *= FULL / s
         out[i, 0] = np.uint16(a)
         out[i, 1] = np.uint16(b)
+
+
+def warm_up() -> None:
+    """Compile (or load from the cache) every kernel for the argument types the renderer uses, so that the
+    first frame is not late."""
+    i64, f32 = np.int64, np.float32
+    indptr, indices = np.array([0, 1], i64), np.zeros(1, np.int32)
+    weights, texels, channel = np.ones(1, f32), np.zeros((1, 4), np.uint16), np.zeros(1, i64)
+    pairs = np.zeros((1, 2), f32)
+    sample_pairs(indptr, indices, weights, texels, channel, pairs)
+    sample_over_far(indptr, indices, weights, texels, channel, pairs, pairs.copy())
+    lookup_pairs(np.zeros((2, 2, 2), np.uint16), np.zeros(1, i64), np.zeros(1, i64), np.zeros(1, f32),
+                 np.zeros(1), 0.0, pairs)
+    convert_pairs(pairs, pairs.copy(), np.zeros(1, np.bool_), False, np.zeros((1, 2), np.uint16))

@@ -37,7 +37,7 @@ def _deg(params: dict, key: str, default=None, suffix: str = "_deg"):
 
 def _sky(params: dict) -> Sky:
     kw = {}
-    for key in ("sun_azimuth", "sun_elevation"):
+    for key in ("sun_azimuth", "sun_elevation", "sun_radius"):
         v = _deg(params, key)
         if v is not None:
             kw[key] = v

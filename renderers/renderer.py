@@ -115,6 +115,9 @@ class Renderer:
 
         self.ctx = create_context()
         self._setup_gl()
+        from .kernels import warm_up
+
+        warm_up()
         self._texels = np.empty((6 * n * n, 4), dtype=np.uint16)
         self._pairs = np.empty((N_PIXELS, 2), dtype=np.float32)
         self._far_pairs = np.empty((N_PIXELS, 2), dtype=np.float32)

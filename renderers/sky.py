@@ -63,7 +63,9 @@ class Sky:
     zenith: tuple = (0.18, 0.30, 0.45)
     ground: tuple = (0.06, 0.03, 0.008)
     sun_radiance: float = 1.0
-    sun_radius: float = np.radians(0.27)
+    # The real sun (0.27 deg) at radiance <= 1 would average to ~3 % over an LED's 1.5 deg footprint; drawn at
+    # half the LED pitch it lights the LEDs around it to about half their range, a visible compass cue.
+    sun_radius: float = np.radians(0.75)
     _sun: np.ndarray = field(init=False, repr=False)
     yaw_rate = 0.0
     time_varying = False
@@ -72,6 +74,8 @@ class Sky:
         for name in ("sun_azimuth", "sun_elevation", "dop_max", "sun_radiance", "sun_radius"):
             if not np.isfinite(getattr(self, name)):
                 raise ValueError(f"sky {name} must be finite, got {getattr(self, name)!r}")
+        if not 0.0 < self.sun_radius < np.pi / 2:
+            raise ValueError(f"sun radius must be in (0, 90) degrees, got {np.degrees(self.sun_radius)!r}")
         if not 0.0 <= self.dop_max <= 1.0:
             raise ValueError(f"sky dop_max must be in [0, 1], got {self.dop_max!r}")
         if not -np.pi / 2 <= self.sun_elevation <= np.pi / 2:
