@@ -3,7 +3,10 @@
 import json
 
 import numpy as np
+import pytest
 
+from antarium.ant.experiments import route_from_log
+from antarium.ant.routes import Route
 from antarium.ant.storage import FORMAT_VERSION
 from antarium.cli import main
 
@@ -20,7 +23,10 @@ def test_learn_then_run_writes_model_log_pictures_and_summary(tmp_path, capsys):
         assert (tmp_path / "run" / name).stat().st_size > 0
     summary = json.loads((tmp_path / "run" / "run.json").read_text())["summary"]
     assert summary["arrived"] and summary["decisions"] > 5
-    assert (tmp_path / "learn.h5").stat().st_size > 0
+    # The path of an earlier trial log is a route too: the learning walk's log holds the route it walked.
+    walked = route_from_log(tmp_path / "learn.h5")
+    assert walked.length == pytest.approx(Route.load(route).length, abs=0.005)
+    assert np.abs(Route.load(route).project(walked.points)[1]).max() < 1e-6
 
 
 def test_a_route_with_one_point_is_refused(tmp_path, capsys):
