@@ -185,7 +185,8 @@ def follow_saved(model, eye_params: EyeParams, route: Route, out_dir: str | Path
 def table(outcomes: list[TrialOutcome]) -> str:
     """A markdown table, one row per model: median +- MAD over routes of each route's median lateral / angular
     error, arrivals, Ardin errors per route (mean), time per decision, memory, median PI_error."""
-    rows = ["| model | routes | lateral error median ± MAD (cm) | angular error median ± MAD (°) | arrived | "
+    rows = ["| model | routes | lateral error median ± MAD (cm) | angular error median ± MAD (°) | "
+            "arrived (without put-back) | "
             "errors per route (Ardin, > 20 cm) | ms per decision (model) | ms per decision (closed loop) | "
             "memory per route | PI_error |",
             "|---|---|---|---|---|---|---|---|---|---|"]
@@ -194,13 +195,15 @@ def table(outcomes: list[TrialOutcome]) -> str:
         lat = median_mad([o.summary["lateral_median"] for o in mine])
         ang = median_mad([o.summary["angular_median_deg"] for o in mine])
         arrived = sum(o.summary["arrived"] for o in mine)
+        clean = sum(o.summary["arrived"] and o.summary["errors"] == 0 for o in mine)
         errors = np.mean([o.summary["errors"] for o in mine])
         mem = mine[0].memory_bytes
         mem_text = (f"{max(mem.get('left', 0), mem.get('familiarity', 0))} B per MBON" if "views" not in mem
                     else f"{int(np.mean([o.memory_bytes['views'] for o in mine]))} B of views")
         rows.append(
             f"| {kind} | {len(mine)} | {100 * lat[0]:.1f} ± {100 * lat[1]:.1f} | {ang[0]:.1f} ± {ang[1]:.1f} | "
-            f"{arrived}/{len(mine)} | {errors:.1f} | {np.mean([o.model_ms_per_decision for o in mine]):.2f} | "
+            f"{arrived}/{len(mine)} ({clean}/{len(mine)}) | {errors:.1f} | "
+            f"{np.mean([o.model_ms_per_decision for o in mine]):.2f} | "
             f"{1e3 * np.mean([o.seconds_per_decision for o in mine]):.1f} | {mem_text} | "
             f"{_pi_text([o.pi_error for o in mine])} |")
     return "\n".join(rows)
