@@ -126,13 +126,14 @@ class Server:
     def __init__(self, config: dict[str, Any], *, clock: Clock | None = None, source=None,
                  renderer_factory: Callable | None | bool = True, link=None, session=None,
                  record: str | None = None, echo: Callable[[str], None] | None = None) -> None:
-        from antarium.trial_log import check_log_dir
+        from antarium.trial_log import check_log_dir, prepare_writer
 
         self.config = config
         self.rig = bus.check_rig_name(config["rig"]["name"])
         self.clock = clock or MonotonicClock()
         self.echo = echo or (lambda line: print(line, file=sys.stderr, flush=True))
         self.log_dir = check_log_dir(config["log"]["dir"])
+        prepare_writer()  # the first trial then starts at once
         self._renderer_factory = default_renderer_factory if renderer_factory is True else renderer_factory
         self.source = source if source is not None else self._open_source()
         self.emulator: EmulatorProcess | None = None

@@ -91,16 +91,20 @@ class TrialLog:
         attrs = {"format": "antarium-trial-log", "format_version": FORMAT_VERSION, "software_version": __version__,
                  "created_utc": _dt.datetime.now(_dt.UTC).isoformat(), "trial_name": name,
                  "metadata": metadata_json, "config": _json(config)}
-        ctx = _writer_context()
-        self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_writer_main, args=(child, str(self.path), attrs),
-                                 name=f"trial-log {self.path.name}", daemon=True)
-        self._proc.start()
-        child.close()
-        if not self._conn.poll(start_timeout_s):
+        self._proc = _take_writer()
+        self._conn = self._proc.conn
+        try:
+            self._conn.send(("open", str(self.path), attrs))
+            if not self._conn.poll(start_timeout_s):
+                raise LogError(f"trial log writer for {str(self.path)!r} did not answer within {start_timeout_s} s")
+            kind, detail = self._conn.recv()
+        except (OSError, EOFError) as exc:
             self._proc.kill()
-            raise LogError(f"trial log writer for {str(self.path)!r} did not start within {start_timeout_s} s")
-        kind, detail = self._conn.recv()
+            raise LogError(f"trial log writer for {str(self.path)!r} failed to start: {exc}; "
+                           f"{self._proc.output()}") from None
+        except LogError:
+            self._proc.kill()
+            raise
         if kind != "ready":
             self._proc.join(5)
             raise LogError(f"cannot create trial log {str(self.path)!r}: {detail}")
@@ -222,25 +226,121 @@ class TrialLog:
         self.close()
 
 
-def _writer_context():
-    """Writers are forked from a clean fork server (never from a process holding zenoh or GL threads), which
-    has numpy and h5py imported already: a trial starts in tens of milliseconds instead of a fresh interpreter."""
-    import multiprocessing
+class _Duplex:
+    """Two one-way pipe connections used as one (send to the writer, receive from it)."""
 
-    ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["antarium.trial_log", "h5py", "numpy"])
-    return ctx
+    def __init__(self, recv_fd: int, send_fd: int) -> None:
+        from multiprocessing.connection import Connection
+
+        self._in = Connection(recv_fd, writable=False)
+        self._out = Connection(send_fd, readable=False)
+
+    def send(self, message) -> None:
+        self._out.send(message)
+
+    def recv(self):
+        return self._in.recv()
+
+    def poll(self, timeout: float = 0.0) -> bool:
+        return self._in.poll(timeout)
+
+    def close(self) -> None:
+        self._in.close()
+        self._out.close()
+
+
+class _WriterProcess:
+    """`python -m antarium.trial_log FD FD`: a fresh interpreter (never a fork of a process holding zenoh or
+    GL threads, never a re-import of the user's main script) that imports numpy and h5py while it waits."""
+
+    def __init__(self) -> None:
+        import os
+        import subprocess
+        import sys
+        import tempfile
+
+        to_child_r, to_child_w = os.pipe()
+        from_child_r, from_child_w = os.pipe()
+        self._output = tempfile.TemporaryFile()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "antarium.trial_log", str(to_child_r), str(from_child_w)],
+            pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL, stdout=self._output,
+            stderr=subprocess.STDOUT)
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self.conn = _Duplex(from_child_r, to_child_w)
+
+    @property
+    def exitcode(self) -> int | None:
+        return self.proc.poll()
+
+    def output(self) -> str:
+        if self._output.closed:
+            return ""
+        self._output.seek(0)
+        return self._output.read()[-2000:].decode(errors="replace")
+
+    def join(self, timeout: float | None = None) -> None:
+        import subprocess
+
+        try:
+            self.proc.wait(timeout)
+            self._output.close()
+        except subprocess.TimeoutExpired:
+            pass
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.conn.close()
+        self._output.close()
+
+
+_spare_lock = threading.Lock()
+_spare: _WriterProcess | None = None
+
+
+def prepare_writer() -> None:
+    """Start a writer process now, so that the next trial starts without waiting for Python to import h5py."""
+    global _spare
+    with _spare_lock:
+        if _spare is None or _spare.exitcode is not None:
+            _spare = _WriterProcess()
+
+
+def _take_writer() -> _WriterProcess:
+    """The prepared writer (or a new one); a new spare is started for the trial after."""
+    global _spare
+    with _spare_lock:
+        writer = _spare if _spare is not None and _spare.exitcode is None else _WriterProcess()
+        _spare = _WriterProcess()
+    return writer
+
+
+def _writer_process_main(recv_fd: int, send_fd: int) -> None:
+    """Entry of the writer process: wait for ("open", path, attrs), then write (see `_writer_main`)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group: the parent closes us
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    import h5py  # noqa: F401 - imported while waiting, so that opening is quick
+
+    conn = _Duplex(recv_fd, send_fd)
+    try:
+        kind, path, attrs = conn.recv()
+    except (EOFError, OSError):  # a spare that was never used: the server has ended
+        return
+    if kind == "open":
+        _writer_main(conn, path, attrs)
 
 
 def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
     """The writer process: create the file, append the row batches it receives, flush after each."""
     import os
-    import signal
 
     import h5py
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group: the parent closes us
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     dtypes = {"frames": FRAME_DTYPE, "locomotion": SAMPLE_DTYPE, **_text_dtypes()}
     try:
         f = h5py.File(path, "w-", libver="latest")
@@ -346,3 +446,9 @@ def read_table(path: str | Path, table: str) -> dict[str, np.ndarray]:
             col = np.array([v.decode() if isinstance(v, bytes) else v for v in col], dtype=object)
         columns[name] = col
     return columns
+
+
+if __name__ == "__main__":
+    import sys
+
+    _writer_process_main(int(sys.argv[1]), int(sys.argv[2]))
