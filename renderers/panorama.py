@@ -143,9 +143,9 @@ class Panorama:
         self._gbua = gbua
 
     def supersample(self, step: float) -> int:
-        """Sub-samples per axis so that every image pixel inside a cell of `step` (rad) counts."""
+        """Sub-samples per axis: about one per image pixel inside a cell of `step` (rad)."""
         pixel = 2 * np.pi / self._gbua.shape[1]
-        return int(min(8, max(1, np.ceil(step / pixel))))
+        return int(min(8, max(1, round(step / pixel))))
 
     def evaluate(self, d, t=0.0):
         v = equirect_lookup(self._gbua, d)

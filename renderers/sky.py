@@ -85,8 +85,8 @@ class Sky:
         self._sun = sun_direction(self.sun_azimuth, self.sun_elevation)
 
     def supersample(self, step: float) -> int:
-        """Sub-samples per axis to average over a cell of `step` (rad): the sun's disc needs a few."""
-        return 2
+        """Sub-samples per axis to average over a cell of `step` (rad): one while the sun's disc spans cells."""
+        return 1 if self.sun_radius >= step else 2
 
     @property
     def sun(self) -> np.ndarray:
