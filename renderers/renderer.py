@@ -72,8 +72,9 @@ class Renderer:
     from the LED pitch); footprint_deg: FWHM of each LED's acceptance; brightness: global drive scale
     in [0, 1]; near, far: clip planes (m); far_face_size: side of the far-field cube texture; chunk_size:
     cell (m) of the culling grid of large meshes; lod_texels: level-of-detail error bound in texels (0: full
-    detail always); clock: an `antarium.clock` clock for drifting stimuli
-    when `render` gets no time; fast_far_field: use the table lookup for scenes without meshes.
+    detail always); clock: an `antarium.clock` clock for drifting stimuli when `render` gets no time;
+    fast_far_field: take static far fields from a footprint-integrated table (`farfield`) instead of drawing
+    them into the cube map every frame.
     """
 
     def __init__(self, dome=None, face_size: int | None = None, footprint_deg: float = LED_PITCH_DEG,
@@ -331,6 +332,7 @@ class Renderer:
         self._convert.configure(contrast=scene.contrast)
 
     def set_brightness(self, brightness: float) -> None:
+        """Global drive scale in [0, 1] (1: a radiance of 1 drives an LED of gain 1 fully)."""
         self._convert.configure(brightness=brightness)
 
     def _object(self, name: str):
