@@ -97,29 +97,34 @@ def test_log_survives_sigkill(tmp_path):
 
 
 _FILLER = textwrap.dedent("""
-    import resource, signal, sys
-    from antarium.clock import SimulatedClock
-    from antarium.frame_loop import FrameLoop
-    from antarium.locomotion import open_source
-    from antarium.trial_log import TrialLog
+    import json, resource, signal, sys, time
+    from antarium.config import resolve
+    from antarium.server import Server
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-    resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))  # the disk fills after ~300 kB
-    clock = SimulatedClock()
-    log = TrialLog(sys.argv[1], {}, "full", flush_s=0.05)
-    loop = FrameLoop(clock=clock, source=open_source("scripted", clock=clock), log=log)
-    for _ in range(40):
-        loop.run(frames=190)
-        log.flush(wait=True)
-    log.close()
-    print(loop.frame, log.status()["error"] is not None, log.status()["rows_lost"] > 0, flush=True)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))  # the disk "fills" after ~300 kB
+    config = resolve({"rig": {"name": "full"}, "bus": {"enabled": False}, "log": {"dir": sys.argv[1], "flush_s": 0.05},
+                      "loop": {"rate_hz": 1000.0}, "locomotion": {"source": "scripted", "rate_hz": 20000.0}})
+    alarms = []
+    server = Server(config, renderer_factory=None, link=False, record="full", echo=alarms.append).start_thread()
+    deadline = time.monotonic() + 30
+    while not server.status()["alarms"] and time.monotonic() < deadline:
+        time.sleep(0.05)
+    frames = server.loop.frame
+    time.sleep(0.5)
+    status = server.status()
+    print(json.dumps({"alarms": status["alarms"], "lost": status["log"]["rows_lost"],
+                      "frames_go_on": server.loop.frame > frames + 100, "echo": alarms}), flush=True)
+    server.stop()
 """)
 
 
-def test_disk_full_is_reported_while_the_loop_continues(tmp_path):
-    path = tmp_path / "full.h5"
-    out = subprocess.run([sys.executable, "-c", _FILLER, str(path)], capture_output=True, text=True, timeout=60)
+def test_disk_full_is_loud_while_the_stimulus_continues(tmp_path):
+    out = subprocess.run([sys.executable, "-c", _FILLER, str(tmp_path)], capture_output=True, text=True, timeout=90)
     assert out.returncode == 0, out.stderr
-    frames, has_error, lost = out.stdout.split()
-    assert int(frames) == 40 * 190 and has_error == "True" and lost == "True"
+    result = json.loads(out.stdout.splitlines()[-1])
+    assert any(a.startswith("TRIAL LOG NOT WRITTEN") for a in result["alarms"])
+    assert result["lost"] > 0 and result["frames_go_on"]
+    assert any("log_error" in line for line in result["echo"])  # printed for the operator
+    (path,) = tmp_path.glob("*.h5")
     with open_log(path) as f:  # what was written before the disk filled is still readable
-        assert 0 < len(f["frames"]) < 40 * 190
+        assert len(f["frames"]) > 0
