@@ -14,11 +14,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--record", default=None, metavar="NAME",
                         help="record a trial named NAME from the start (stopped cleanly on exit)")
     parser.add_argument("--print-config", action="store_true", help="print the resolved config (TOML) and exit")
+    parser.add_argument("--status-every", type=float, default=10.0, metavar="S",
+                        help="print a status line every S seconds (default 10; 0: never)")
+
+
+def _print_status(server, every_s: float) -> None:
+    """One line every `every_s` seconds: frame rate, late frames, latency, alarms."""
+    import time
+
+    if every_s <= 0 or not server.wait_ready(None):
+        return
+    while True:
+        time.sleep(every_s)
+        s = server.status()
+        if "frames" not in s:
+            continue
+        lat = s["latency"]
+        latency = "n/a" if lat is None else f"p50 {lat['p50'] * 1e3:.1f} p99 {lat['p99'] * 1e3:.1f} ms"
+        rate = s["frame_rate_hz"] or 0.0
+        print(f"antarium serve: {s['frames']} frames, {rate:.1f}/{s['target_rate_hz']:g} Hz, {s['late_frames']} late, "
+              f"latency {latency}" + "".join(f"; ALARM: {a}" for a in s["alarms"]), flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
     import signal
     import sys
+    import threading
 
     from antarium.config import load_config
     from antarium.server import Server
@@ -44,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
     where = ", ".join(bus["listen"]) if bus["enabled"] else "bus disabled"
     print(f"antarium serve: rig {server.rig!r} at {config['loop']['rate_hz']:g} frames/s; bus: {where}; "
           f"trial logs in {server.log_dir}", flush=True)
+    threading.Thread(target=_print_status, args=(server, args.status_every), daemon=True).start()
     frames = server.run(seconds=args.seconds)
     stats = server.final_stats
     print(f"antarium serve: {frames} frames, {stats['late_frames']} late, {stats['skipped_frames']} skipped, "
