@@ -66,7 +66,8 @@ def _check_pose(pose) -> Pose:
 
 
 class Renderer:
-    """Off-screen cube-map renderer for the dome.
+    """Off-screen cube-map renderer for the dome. Use it from the thread that built it: its EGL context is
+    current there only (the server builds it in the frame loop's thread and runs commands there).
 
     dome: `antarium.geometry.Dome` (default: `load_dome()`); face_size: cube face side in texels (default
     from the LED pitch); footprint_deg: FWHM of each LED's acceptance; brightness: global drive scale
