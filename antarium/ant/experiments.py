@@ -17,7 +17,7 @@ import numpy as np
 
 from antarium.ant.agent import Track, follow_route, learning_walk
 from antarium.ant.eye import EyeParams
-from antarium.ant.metrics import median_mad, memory_pi_error
+from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M, median_mad, memory_pi_error
 from antarium.ant.models import make_model
 from antarium.ant.plots import plot_paths, plot_traces, scene_top_view
 from antarium.ant.routes import Route, RouteError, curved_route
@@ -106,15 +106,15 @@ def _decision_limit(model, route: Route) -> int:
     return int(math.ceil(3.0 * route.length / step)) + 10
 
 
-def _follow(ant, route: Route, max_decisions: int, start_offset, progress):
+def _follow(ant, route: Route, max_decisions: int, start_offset, progress, put_back: float = ARDIN_ERROR_DISTANCE_M):
     """follow_route with timing: (FollowResult, wall seconds per decision, model ms per decision)."""
     model = ant.model
     acc = _timed_decide(model)
     ant.loop.event("ant_release", start_offset=list(start_offset))
     t0 = time.perf_counter()
     try:
-        result = follow_route(ant, route, max_decisions, ARRIVE_RADIUS_M, start_offset=start_offset,
-                              progress=progress)
+        result = follow_route(ant, route, max_decisions, ARRIVE_RADIUS_M, put_back_distance=put_back,
+                              start_offset=start_offset, progress=progress)
     finally:
         del model.decide
     wall = time.perf_counter() - t0
@@ -133,7 +133,8 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
                      model_params: dict | None = None, tether: str = "free_yaw", learn_spacing: float | None = None,
                      max_decisions: int | None = None, start_offset: tuple[float, float] = (0.0, 0.0),
                      eye_params: EyeParams | None = None, progress=None, save: bool = True,
-                     face_size: int = FACE_SIZE) -> tuple[TrialOutcome, Track]:
+                     face_size: int = FACE_SIZE,
+                     put_back: float = ARDIN_ERROR_DISTANCE_M) -> tuple[TrialOutcome, Track]:
     """Learn `route` with a fresh `kind` model by a learning walk, then follow it in closed loop.
 
     Writes `<name>.h5` (trial log of the whole session), `<name>_paths.png`, `<name>_traces.png` and
@@ -151,7 +152,7 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
         kept: list = []
         learning_walk(ant, route, spacing, progress=progress, keep=kept)
         result, wall, model_ms = _follow(ant, route, max_decisions or _decision_limit(model, route), start_offset,
-                                         progress)
+                                         progress, put_back)
         top = scene_top_view(ant.loop.renderer.scene)
     picture = _outputs(out, name, route, kind, result.track, top)
     if out is not None and save:
@@ -223,8 +224,10 @@ def write_outcomes(out_dir: Path, outcomes: list[TrialOutcome], extra: dict | No
 
 
 def evaluate(out_dir: str | Path, n_routes: int = 10, length: float = 10.0, kinds=("antcar", "ardin",
-             "perfect_memory"), seed: int = 0, scene: Any = "habitat", progress_factory=None) -> str:
+             "perfect_memory"), seed: int = 0, scene: Any = "habitat", progress_factory=None,
+             put_back: float = ARDIN_ERROR_DISTANCE_M) -> str:
     """Each model learns and follows `n_routes` seeded curved routes of `length` m; returns the markdown table.
+    `put_back`: Ardin's put-back distance (m; math.inf: never put back, Antcar's own protocol).
 
     Per route and model: a trial log, a picture of the paths, traces; `evaluation.md` / `.json` sum it up.
     """
@@ -241,14 +244,17 @@ def evaluate(out_dir: str | Path, n_routes: int = 10, length: float = 10.0, kind
         for kind in kinds:
             bar = progress_factory(f"route {i} {kind}") if progress_factory is not None else None
             outcome, track = train_and_follow(kind, route, out, f"route{i:02d}_{kind}", scene=scene,
-                                              progress=bar.update if bar is not None else None, save=False)
+                                              progress=bar.update if bar is not None else None, save=False,
+                                              put_back=put_back)
             if bar is not None:
                 bar.close()
             outcomes.append(outcome)
             tracks.setdefault(i, {})[kind] = track
-            write_outcomes(out, outcomes, {"n_routes": n_routes, "length_m": length, "seed": seed})
+            write_outcomes(out, outcomes, {"n_routes": n_routes, "length_m": length, "seed": seed,
+                                           "put_back_m": put_back if math.isfinite(put_back) else None})
         plot_paths(out / f"route{i:02d}_all.png", route, tracks[i], title=f"route {i}: learned and followed", top=top)
-    return write_outcomes(out, outcomes, {"n_routes": n_routes, "length_m": length, "seed": seed})
+    return write_outcomes(out, outcomes, {"n_routes": n_routes, "length_m": length, "seed": seed,
+                                          "put_back_m": put_back if math.isfinite(put_back) else None})
 
 
 def demo(out_dir: str | Path, scene: Any = "habitat", progress=None) -> TrialOutcome:

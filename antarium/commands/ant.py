@@ -63,6 +63,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the first route")
     p.add_argument("--out", required=True, help="folder for logs, pictures, evaluation.md/.json")
     p.add_argument("--scene", default="habitat")
+    p.add_argument("--put-back-cm", type=float, default=20.0,
+                   help="Ardin's protocol: farther than this off the route counts an error and the ant is put "
+                        "back (default 20; 0: never, Antcar's own protocol)")
     p = sub.add_parser("demo", help="train on a short route, follow it; log and picture of both paths")
     p.add_argument("--out", required=True)
     p.add_argument("--scene", default="habitat")
@@ -90,7 +93,10 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--models: unknown {bad or 'none given'}; allowed: {', '.join(KINDS)}")
         if args.routes < 1 or args.length <= 0:
             raise ValueError("--routes must be >= 1 and --length > 0 m")
-        print(experiments.evaluate(out, args.routes, args.length, kinds, args.seed, args.scene, _bar))
+        if args.put_back_cm < 0:
+            raise ValueError(f"--put-back-cm must be >= 0 (0: never put back), got {args.put_back_cm}")
+        put_back = args.put_back_cm / 100.0 if args.put_back_cm > 0 else math.inf
+        print(experiments.evaluate(out, args.routes, args.length, kinds, args.seed, args.scene, _bar, put_back))
         return 0
     outcome = experiments.demo(out, scene=args.scene, progress=_bar("virtual ant demo").update)
     print(f"virtual ant demo: {outcome.summary}\n  log: {outcome.log}\n  picture: {outcome.picture}")
