@@ -4,10 +4,16 @@ structs), so a trackball driver on another computer or a simulated ant can drive
 Each sample is stamped with this process's clock when it arrives (clocks of different computers are never
 compared). Malformed payloads are counted and dropped. `connected` is False when no sample arrived for
 `timeout_s` seconds after one did (publisher gone), so the loop holds the pose until samples come back.
+
+A device driver on another computer also reports on `antarium/<rig>/events` (JSON with "event" and
+"source", e.g. the USB trackball's "locomotion_lost" at an unplug): such a "locomotion_lost" makes
+`connected` False at once, without waiting for `timeout_s`; "locomotion_back" / "locomotion_connected" or
+the next sample clear it. The server's own events (JSON with "kind") are ignored.
 """
 
 from __future__ import annotations
 
+import json
 import threading
 from collections import deque
 from typing import Any
@@ -33,6 +39,8 @@ class BusSource(LocomotionSource):
         self._pending: deque[BallSample] = deque(maxlen=max_pending)
         self._lock = threading.Lock()
         self._sub = None
+        self._events_sub = None
+        self._device_lost = False
         self.received = 0
         self.malformed = 0
         self.last_error = ""
@@ -45,13 +53,14 @@ class BusSource(LocomotionSource):
         self._session, self._own_session = session, False
 
     def start(self) -> None:
-        from antarium.bus import locomotion_key, open_session
+        from antarium.bus import events_key, locomotion_key, open_session
 
         if self._sub is not None:
             return
         if self._session is None:
             self._session = open_session(self.bus_section, role="client")
         self._sub = self._session.declare_subscriber(locomotion_key(self.rig), self._on_sample)
+        self._events_sub = self._session.declare_subscriber(events_key(self.rig), self._on_event)
 
     def _on_sample(self, sample) -> None:  # zenoh thread: keep it short
         t = self.clock.now()
@@ -66,6 +75,22 @@ class BusSource(LocomotionSource):
             self._pending.append(decoded)
             self.received += 1
             self._last_t = t
+            self._device_lost = False
+
+    def _on_event(self, sample) -> None:  # zenoh thread
+        try:
+            event = json.loads(sample.payload.to_string())
+        except ValueError:
+            return
+        if not isinstance(event, dict) or "source" not in event:
+            return
+        kind = event.get("event")
+        with self._lock:
+            if kind == "locomotion_lost":
+                self._device_lost = True
+                self.last_error = f"{event['source']} reports locomotion_lost: {event.get('reason', '')}".strip()
+            elif kind in ("locomotion_back", "locomotion_connected"):
+                self._device_lost = False
 
     def read(self) -> list[BallSample]:
         with self._lock:
@@ -76,14 +101,15 @@ class BusSource(LocomotionSource):
     def status(self) -> dict[str, Any]:
         with self._lock:
             last = self._last_t
-            connected = last is None or self.clock.now() - last <= self.timeout_s
+            connected = not self._device_lost and (last is None or self.clock.now() - last <= self.timeout_s)
             return {"connected": connected, "received": self.received, "malformed": self.malformed,
                     "last_error": self.last_error}
 
     def stop(self) -> None:
-        if self._sub is not None:
-            self._sub.undeclare()
-            self._sub = None
+        for sub in (self._sub, self._events_sub):
+            if sub is not None:
+                sub.undeclare()
+        self._sub = self._events_sub = None
         if self._own_session and self._session is not None:
             self._session.close()
             self._session = None
