@@ -146,10 +146,29 @@ def resolve(raw: dict[str, Any]) -> dict[str, Any]:
                 raise ConfigError(
                     f"unknown key {key!r} in [{section}]; allowed: {', '.join(sorted(DEFAULTS[section]))}"
                 )
+    _one_ball_radius(raw, resolved)
     name = resolved["rig"]["name"]
     if not name or any(c in name for c in "/*?$# "):
         raise ConfigError(f"[rig] name must be a non-empty key chunk without '/', wildcards or spaces, got {name!r}")
     return resolved
+
+
+def _one_ball_radius(raw: dict[str, Any], resolved: dict[str, Any]) -> None:
+    """The ball has one radius: `[trackball] ball_radius` (the hardware's) is the loop's unless `[loop]` sets it;
+    two different values are refused, since the ant's motion would be scaled by their ratio."""
+    trackball = raw.get("trackball")
+    if not isinstance(trackball, dict) or "ball_radius" not in trackball:
+        return
+    try:
+        r = check_value("loop", "ball_radius", trackball["ball_radius"])
+    except ConfigError as exc:
+        raise ConfigError(str(exc).replace("[loop]", "[trackball]")) from None
+    if "ball_radius" in raw.get("loop", {}) and not math.isclose(resolved["loop"]["ball_radius"], r):
+        raise ConfigError(
+            f"[loop] ball_radius {resolved['loop']['ball_radius']} m differs from [trackball] ball_radius {r} m; "
+            "allowed: one value (set it in [trackball] only)"
+        )
+    resolved["loop"]["ball_radius"] = r
 
 
 def load_config(path: str | Path | None = None) -> dict[str, Any]:

@@ -50,3 +50,12 @@ def test_bad_files_are_reported(tmp_path):
     bad.write_text("[loop\nrate_hz = 1")
     with pytest.raises(ConfigError, match="not valid TOML"):
         load_config(bad)
+
+
+def test_the_ball_has_one_radius():
+    assert resolve({"trackball": {"ball_radius": 0.04}})["loop"]["ball_radius"] == 0.04
+    assert resolve({"loop": {"ball_radius": 0.04}, "trackball": {"ball_radius": 0.04}})["loop"]["ball_radius"] == 0.04
+    with pytest.raises(ConfigError, match=r"\[loop\] ball_radius 0.05 m differs from \[trackball\] ball_radius 0.04"):
+        resolve({"loop": {"ball_radius": 0.05}, "trackball": {"ball_radius": 0.04}})
+    with pytest.raises(ConfigError, match=r"\[trackball\] ball_radius must be in"):
+        resolve({"trackball": {"ball_radius": 5.0}})
