@@ -9,7 +9,7 @@ scripts, a trackball driver, a simulated ant) *connect* to `[bus] connect`, or t
 endpoints when that is empty, and listen nowhere themselves.
 
     session = open_session(config["bus"], role="client")
-    session.declare_publisher(locomotion_key("rig1"), express=True).put(wire.encode(sample))
+    locomotion_publisher(session, "rig1").put(wire.encode(sample))
 """
 
 from __future__ import annotations
@@ -55,6 +55,15 @@ def rig_key(rig: str, *parts: str) -> str:
 def locomotion_key(rig: str) -> str:
     """Where a trackball or a simulated ant publishes `antarium.locomotion.wire` structs (44 bytes each)."""
     return rig_key(rig, "locomotion")
+
+
+def locomotion_publisher(session, rig: str):
+    """The publisher for locomotion samples: express (no batching delay) and blocking rather than dropping
+    when the link is congested, so that no ball rotation — no part of the ant's path — is silently lost."""
+    import zenoh
+
+    return session.declare_publisher(locomotion_key(rig), express=True,
+                                     congestion_control=zenoh.CongestionControl.BLOCK)
 
 
 def pose_key(rig: str) -> str:

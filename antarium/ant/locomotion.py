@@ -83,10 +83,10 @@ class BusLegs:
 
     def __init__(self, session, rig: str = "rig1", tether: str = "free_yaw", yaw: float = 0.0,
                  ball_radius: float = BALL_RADIUS_M, clock: Clock | None = None) -> None:
-        from antarium.bus import check_rig_name, locomotion_key
+        from antarium.bus import check_rig_name, locomotion_publisher
 
         self._legs = AntLocomotion(tether, yaw, ball_radius, clock)
-        self._publisher = session.declare_publisher(locomotion_key(check_rig_name(rig)))
+        self._publisher = locomotion_publisher(session, check_rig_name(rig))
         self.published = 0
 
     @property

@@ -87,7 +87,7 @@ class _Publisher:
         from antarium import bus
 
         self.session = session
-        self.sample_pub = session.declare_publisher(bus.locomotion_key(rig), express=True) if session else None
+        self.sample_pub = bus.locomotion_publisher(session, rig) if session else None
         self.events_key = bus.events_key(rig)
         self.status_key = bus.rig_key(rig, "trackball", "status")
 

@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
             bus.open_session({"listen": [endpoint]}, "client") as client:
         received = [0]
         server.declare_subscriber(bus.locomotion_key("bench"), lambda s: received.__setitem__(0, received[0] + 1))
-        pub = client.declare_publisher(bus.locomotion_key("bench"), express=True)
+        pub = bus.locomotion_publisher(client, "bench")
         time.sleep(0.3)  # let the client connect
 
         def publish(sample):
