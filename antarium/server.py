@@ -11,6 +11,7 @@ virtual ant run it without hardware; by default it is built from the rig config 
 
 from __future__ import annotations
 
+import gc
 import json
 import math
 import subprocess
@@ -531,6 +532,11 @@ class Server:
             self._ready.set()
             self._shutdown()
             raise
+        # Everything long-lived exists now (renderer, scene, link, bus): move it out of the garbage collector's
+        # way, so that a collection during the experiment scans only what frames allocate — a full collection
+        # over these object graphs would stall a frame for milliseconds.
+        gc.collect()
+        gc.freeze()
         self._status_thread = threading.Thread(target=self._status_loop, name="status", daemon=True)
         self._status_thread.start()
         self._loop_thread = threading.current_thread()
