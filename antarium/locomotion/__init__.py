@@ -10,7 +10,9 @@ for the motion of the ant standing on the top pole.
 
 from __future__ import annotations
 
+import threading
 from abc import ABC, abstractmethod
+from collections import deque
 from dataclasses import dataclass
 from importlib import import_module
 from typing import Any
@@ -57,6 +59,32 @@ class LocomotionSource(ABC):
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+class BufferedSource(LocomotionSource):
+    """A source whose samples arrive on another thread (a device reader, a socket, a bus callback).
+
+    That thread calls `_push(sample)`; `read()` hands over everything pushed since the previous call. At most
+    `max_pending` samples wait: beyond that the oldest is dropped and `_push` returns True so the caller can
+    count it. `_lock` may also guard the subclass's own counters.
+    """
+
+    def __init__(self, max_pending: int = 100_000) -> None:
+        self._lock = threading.Lock()
+        self._pending: deque[BallSample] = deque(maxlen=max_pending)
+
+    def _push(self, sample: BallSample) -> bool:
+        """Queue one sample (any thread); True if the queue was full and the oldest sample was dropped."""
+        with self._lock:
+            full = len(self._pending) == self._pending.maxlen
+            self._pending.append(sample)
+        return full
+
+    def read(self) -> list[BallSample]:
+        with self._lock:
+            out = list(self._pending)
+            self._pending.clear()
+        return out
 
 
 #: back-end name -> "module:Class", imported only when opened.

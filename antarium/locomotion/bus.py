@@ -14,15 +14,13 @@ the next sample clear it. The server's own events (JSON with "kind") are ignored
 from __future__ import annotations
 
 import json
-import threading
-from collections import deque
 from typing import Any
 
 from antarium.clock import Clock, MonotonicClock
-from antarium.locomotion import BallSample, LocomotionSource, wire
+from antarium.locomotion import BufferedSource, wire
 
 
-class BusSource(LocomotionSource):
+class BusSource(BufferedSource):
     """rig: the rig name; bus: a `[bus]` section (client role: connects to the server's endpoints)
     or session: an open zenoh session to share (not closed by `stop`)."""
 
@@ -36,8 +34,7 @@ class BusSource(LocomotionSource):
         self.timeout_s = float(timeout_s)
         self._session = session
         self._own_session = session is None
-        self._pending: deque[BallSample] = deque(maxlen=max_pending)
-        self._lock = threading.Lock()
+        super().__init__(max_pending)
         self._sub = None
         self._events_sub = None
         self._device_lost = False
@@ -71,8 +68,8 @@ class BusSource(LocomotionSource):
                 self.malformed += 1
                 self.last_error = str(exc)
             return
+        self._push(decoded)
         with self._lock:
-            self._pending.append(decoded)
             self.received += 1
             self._last_t = t
             self._device_lost = False
@@ -91,12 +88,6 @@ class BusSource(LocomotionSource):
                 self.last_error = f"{event['source']} reports locomotion_lost: {event.get('reason', '')}".strip()
             elif kind in ("locomotion_back", "locomotion_connected"):
                 self._device_lost = False
-
-    def read(self) -> list[BallSample]:
-        with self._lock:
-            out = list(self._pending)
-            self._pending.clear()
-        return out
 
     def status(self) -> dict[str, Any]:
         with self._lock:

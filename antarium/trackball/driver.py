@@ -19,7 +19,6 @@ from __future__ import annotations
 import array
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -27,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from antarium.clock import Clock, MonotonicClock
-from antarium.locomotion import BallSample, LocomotionSource
+from antarium.locomotion import BallSample, BufferedSource
 from antarium.trackball import config as tbconfig
 from antarium.trackball import protocol as P
 
@@ -36,7 +35,7 @@ LATENCY_WINDOW = 1 << 16  # reports kept for the arrival -> publication latency 
 QUALITY_SMOOTHING = 0.01  # weight of each report in `quality_avg` (about the last 100 reports)
 
 
-class UsbTrackball(LocomotionSource):
+class UsbTrackball(BufferedSource):
     def __init__(
         self,
         trackball: str | Path | dict[str, Any] | tbconfig.TrackballConfig | None = None,
@@ -62,8 +61,7 @@ class UsbTrackball(LocomotionSource):
         self.retry_s = float(retry_s)
         self._solver = self.config.solver()
         self._metres_per_count = self.config.metres_per_count()
-        self._queue: deque[BallSample] = deque(maxlen=max_queue)
-        self._lock = threading.Lock()
+        super().__init__(max_queue)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._connected = False
@@ -97,12 +95,6 @@ class UsbTrackball(LocomotionSource):
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
-
-    def read(self) -> list[BallSample]:
-        with self._lock:
-            samples = list(self._queue)
-            self._queue.clear()
-        return samples
 
     def status(self) -> dict[str, Any]:
         age = time.monotonic() - self._last_report if self._last_report else None
@@ -259,10 +251,8 @@ class UsbTrackball(LocomotionSource):
         k = self._metres_per_count
         rotation, quality = self._solver.solve_one([c[0] * k[0], c[1] * k[1], c[2] * k[2], c[3] * k[3]])
         sample = BallSample(self.clock.now(), report.seq, rotation, report.t_us * 1e-6, quality)
-        with self._lock:
-            if len(self._queue) == self._queue.maxlen:
-                counters["dropped_samples"] += 1
-            self._queue.append(sample)
+        if self._push(sample):
+            counters["dropped_samples"] += 1
         if self.on_sample is not None:
             try:
                 self.on_sample(sample)

@@ -13,12 +13,11 @@ from __future__ import annotations
 
 import socket
 import threading
-from collections import deque
 from pathlib import Path
 from typing import Any
 
 from antarium.clock import Clock, MonotonicClock
-from antarium.locomotion import BallSample, LocomotionSource
+from antarium.locomotion import BallSample, BufferedSource, LocomotionSource
 from antarium.trackball.fictrac import FicTracFrame, FicTracParseError, parse_line, to_sample
 
 TRANSPORTS = ("udp", "tcp")
@@ -53,7 +52,7 @@ class _Counters:
         return frame
 
 
-class FicTracSource(LocomotionSource):
+class FicTracSource(BufferedSource):
     """FicTrac's live stream on loopback or the lab network."""
 
     def __init__(
@@ -76,8 +75,7 @@ class FicTracSource(LocomotionSource):
         self.max_match_error = max_match_error
         self.timeout_s, self.retry_s = timeout_s, retry_s
         self._stats = _Counters()
-        self._queue: deque[BallSample] = deque(maxlen=max_queue)
-        self._lock = threading.Lock()
+        super().__init__(max_queue)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._sock: socket.socket | None = None
@@ -116,12 +114,6 @@ class FicTracSource(LocomotionSource):
             self._sock.close()
             self._sock = None
 
-    def read(self) -> list[BallSample]:
-        with self._lock:
-            samples = list(self._queue)
-            self._queue.clear()
-        return samples
-
     def status(self) -> dict[str, Any]:
         now = self.clock.now()
         fresh = self._last_frame is not None and now - self._last_frame <= self.timeout_s
@@ -135,8 +127,7 @@ class FicTracSource(LocomotionSource):
             return
         t = self.clock.now()
         sample = to_sample(frame, t, self.max_match_error)
-        with self._lock:
-            self._queue.append(sample)
+        self._push(sample)
         self._last_frame = t
 
     def _run(self) -> None:
