@@ -1,10 +1,11 @@
 """Trial logs: one self-describing HDF5 file per recording (h5py), written so that nothing is lost.
 
-The frame loop only appends rows to in-memory buffers (cheap); a writer thread appends them to the
-file and flushes it every `flush_s` seconds (at most 1 s). The file is written in SWMR mode, so after
-a crash or SIGKILL it still opens (`open_log`, or `h5py.File(path, "r", swmr=True)`) and holds
-everything up to the last flush. A write error (disk full) does not stop the stimulus: the log keeps
-counting what it could not write and reports it in `status()`, and the server makes that loud.
+The frame loop only appends rows to in-memory buffers (cheap); every `flush_s` seconds (at most 1 s) they
+go to a writer process, which opens the file, appends them in SWMR mode and closes it again. So after a
+crash or SIGKILL the file holds everything up to the last batch and is almost always closed and clean
+(any HDF5 >= 1.10 opens it, MATLAB included); a kill in the millisecond of a batch leaves it marked open,
+which `open_log` (SWMR read) still opens. A write error (disk full) does not stop the stimulus: the log
+keeps counting what it could not write and reports it in `status()`, and the server makes that loud.
 Every dataset and its units are listed in `docs/logs.md`.
 """
 
@@ -20,6 +21,10 @@ from typing import Any
 import numpy as np
 
 FORMAT_VERSION = 1
+
+#: HDF5 format bounds: 1.10 is the oldest format with SWMR and the newest that HDF5 1.10 (MATLAB R2023/R2024,
+#: Debian 12's tools) can read; h5py's "latest" (HDF5 2.0 here) writes datatype messages 1.10 cannot decode
+LIBVER = ("v110", "v110")
 
 #: per-frame table: times in seconds on the loop's clock, positions in metres, angles in radians
 FRAME_DTYPE = np.dtype([
@@ -72,7 +77,7 @@ class TrialLog:
 
     The writer is a process of its own so that HDF5 never holds the frame loop's GIL and a failing disk
     cannot take the stimulus down: a write error is reported in `status()["error"]`, the loop goes on.
-    If this process dies (even SIGKILL) the writer sees its pipe close, writes nothing more and closes the file.
+    If this process dies (even SIGKILL) the writer sees its pipe close and ends; the file is closed between batches.
     """
 
     def __init__(self, path: str | Path, config: dict[str, Any], name: str = "", metadata: dict | None = None,
@@ -191,7 +196,7 @@ class TrialLog:
                 "error": self.error}
 
     def close(self, timeout_s: float = 30.0) -> None:
-        """Hand over what is pending, close the file (clears its SWMR flag) and end the writer. Safe twice."""
+        """Hand over what is pending, wait until it is written and end the writer. Safe twice."""
         if self._closed:
             return
         self._stop.set()
@@ -335,22 +340,36 @@ def _writer_process_main(recv_fd: int, send_fd: int) -> None:
         _writer_main(conn, path, attrs)
 
 
+def _open_for_append(path: str):
+    """The log opened for one batch of appends, in SWMR-write mode (writes ordered so that a kill mid-batch
+    leaves a file that SWMR readers can open); file locking off, so a reader that holds the file between two
+    batches (h5py, MATLAB, HDFView) cannot block the recording."""
+    import h5py
+
+    f = h5py.File(path, "r+", libver=LIBVER, locking=False)
+    f.swmr_mode = True
+    return f
+
+
 def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
-    """The writer process: create the file, append the row batches it receives, flush after each."""
+    """The writer process: create the file, then for each batch of rows it receives: open, append, close.
+
+    The file is closed between batches (a batch takes about a millisecond), so a SIGKILL or crash almost
+    always finds it closed: its superblock's status flags are clear and any HDF5 >= 1.10 opens it (MATLAB
+    without `h5clear`). A kill during a batch leaves the SWMR flags set; `open_log` still opens it.
+    """
     import os
 
     import h5py
 
     dtypes = {"frames": FRAME_DTYPE, "locomotion": SAMPLE_DTYPE, **_text_dtypes()}
     try:
-        f = h5py.File(path, "w-", libver="latest")
-        for key, value in attrs.items():
-            f.attrs[key] = value
-        for table, dtype in dtypes.items():
-            f.create_dataset(table, shape=(0,), maxshape=(None,), dtype=dtype,
-                             chunks=(1024 if table in ("frames", "locomotion") else 64,))
-        f.swmr_mode = True
-        f.flush()
+        with h5py.File(path, "w-", libver=LIBVER, locking=False) as f:
+            for key, value in attrs.items():
+                f.attrs[key] = value
+            for table, dtype in dtypes.items():
+                f.create_dataset(table, shape=(0,), maxshape=(None,), dtype=dtype,
+                                 chunks=(1024 if table in ("frames", "locomotion") else 64,))
     except (OSError, ValueError) as exc:
         conn.send(("error", str(exc)))
         return
@@ -361,21 +380,23 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
     while True:
         try:
             kind, batch = conn.recv()
-        except (EOFError, OSError):  # the server died: keep what is written, close cleanly
+        except (EOFError, OSError):  # the server died: what is written stays, the file is closed
             break
         if kind == "close":
             break
         if error is None:
             try:
+                f = _open_for_append(path)
                 for table, rows in batch.items():
                     data = np.array(rows, dtype=dtypes[table])
                     ds = f[table]
                     n = ds.shape[0]
                     ds.resize((n + len(data),))
                     ds[n:] = data
-                    written[table] += len(data)
+                f.close()  # flushes: only now is the batch on disk
+                for table, rows in batch.items():
+                    written[table] += len(rows)
                     rows.clear()
-                f.flush()
             except (OSError, RuntimeError, ValueError, TypeError) as exc:
                 error = f"writing trial log {path!r} failed: {exc}"
         if error is not None:
@@ -388,7 +409,6 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
         # on disk (readable as after a crash), tell the parent, and leave without HDF5's shutdown
         _send_quietly(conn, ("closed", {"rows_written": written, "rows_lost": lost, "error": error}))
         os._exit(0)
-    f.close()
     _send_quietly(conn, ("closed", {"rows_written": written, "rows_lost": lost, "error": error}))
 
 
