@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from antarium.ant.eye import Eye, View
-from antarium.ant.locomotion import AntLocomotion, BusLegs
+from antarium.ant.locomotion import AntLocomotion, BusLegs, TrackballLegs
 from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M, RunSummary, arrived, stopping_distance
 from antarium.ant.routes import Route
 from antarium.pose import Pose
@@ -42,18 +42,21 @@ class Track:
 class VirtualAnt:
     """An eye, a model and legs in a frame loop.
 
-    loop:      `antarium.frame_loop.FrameLoop` whose `source` is `legs`
+    loop:      `antarium.frame_loop.FrameLoop` whose `source` is `legs` (`legs.source` for `TrackballLegs`; the
+               loop's "bus" source for `BusLegs`)
     read_leds: returns the (20350, 2) uint16 LEDs the dome shows now (`link.emulator.led_values`)
     frames_per_decision: frames the loop runs per decision; the command is spread evenly over them
     """
 
-    def __init__(self, eye: Eye, model, loop, legs: AntLocomotion | BusLegs, read_leds: Callable[[], np.ndarray],
-                 frames_per_decision: int = 1, delivery_timeout_s: float = 2.0) -> None:
+    def __init__(self, eye: Eye, model, loop, legs: AntLocomotion | BusLegs | TrackballLegs,
+                 read_leds: Callable[[], np.ndarray], frames_per_decision: int = 1,
+                 delivery_timeout_s: float = 2.0) -> None:
         if isinstance(legs, BusLegs):
             if not hasattr(loop.source, "received"):
                 raise ValueError("legs on the bus need a frame loop reading the bus (open_source('bus', ...))")
-        elif loop.source is not legs:
-            raise ValueError("the frame loop must read the ant's legs (FrameLoop(source=legs, ...))")
+        elif loop.source is not getattr(legs, "source", legs):
+            raise ValueError("the frame loop must read the ant's legs (FrameLoop(source=legs, ...), "
+                             "source=legs.source for TrackballLegs)")
         if loop.tether != legs.tether:
             raise ValueError(f"loop tether {loop.tether!r} and ant tether {legs.tether!r} differ")
         if int(frames_per_decision) < 1:

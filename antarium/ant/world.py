@@ -7,6 +7,8 @@
 The rig is the real one: `antarium.renderers.Renderer` renders the scene at the loop's pose, the frame loop
 sends it over `open_link("virtual")`, and the ant reads `link.emulator.led_values()` — what the panels show.
 Everything runs on a `SimulatedClock` unless a clock is given, so it runs as fast as the computer allows.
+The ant walks through the "ant" locomotion source, ball rotations on the bus (`bus=`) or the emulated USB
+trackball read by the real driver (`trackball=`), in either tether.
 """
 
 from __future__ import annotations
@@ -18,12 +20,15 @@ from typing import Any
 
 from antarium.ant.agent import VirtualAnt
 from antarium.ant.eye import Eye, EyeParams
-from antarium.ant.locomotion import AntLocomotion, BusLegs
+from antarium.ant.locomotion import AntLocomotion, BusLegs, TrackballLegs
+from antarium.ball import BALL_RADIUS_M
 from antarium.clock import Clock, SimulatedClock
 from antarium.pose import Pose
 
 #: eye height above the ground at ant scale (m)
 EYE_HEIGHT_M = 0.01
+#: the frame loop's rate (frames/s): the dome's
+LOOP_RATE_HZ = 190.0
 
 
 @contextlib.contextmanager
@@ -31,12 +36,15 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
                 clock: Clock | None = None, log_path: str | Path | None = None, log_metadata: dict | None = None,
                 frames_per_decision: int = 1, eye_height: float = EYE_HEIGHT_M,
                 renderer_kwargs: dict | None = None, bus: dict | None = None,
-                rig: str = "rig1") -> Iterator[VirtualAnt]:
+                rig: str = "rig1", trackball: Any = None) -> Iterator[VirtualAnt]:
     """A `VirtualAnt` with `model` in a frame loop on an emulated dome showing `scene`.
 
     log_path: write an HDF5 trial log there (like a real trial's), or None.
     bus: a `[bus]` section: the ant's steps then travel as ball rotations over zenoh (`BusLegs`) to the frame
     loop's "bus" locomotion source for rig `rig`, as a trackball's would; None: the in-process "ant" source.
+    trackball: True, or a `[trackball]` section (dict, file, `TrackballConfig`): the ant's steps move the ball of
+    an emulated USB trackball on the loop's clock, and the real driver reading it is the loop's source
+    (`TrackballLegs`); its default reports at 950 Hz, five per frame.
     """
     from antarium.firmware_proto.link import open_link
     from antarium.frame_loop import FrameLoop
@@ -59,7 +67,16 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
         if log_path is not None:
             config = {"ant": {"model": model.kind, "tether": tether, "scene": str(scene), "eye": eye.params.channel}}
             log = stack.enter_context(TrialLog(log_path, config, name="virtual ant", metadata=log_metadata))
-        if bus is None:
+        if bus is not None and trackball is not None:
+            raise ValueError("virtual_rig: give bus= (legs on the bus) or trackball= (the emulated USB trackball), "
+                             "not both")
+        if trackball is not None:
+            legs = TrackballLegs(tether, trackball=None if trackball is True else trackball, clock=clock,
+                                 step_s=1.0 / LOOP_RATE_HZ)
+            legs.start()
+            stack.callback(legs.stop)
+            source = legs.source
+        elif bus is None:
             legs = source = AntLocomotion(tether, clock=clock)
         else:
             from antarium.bus import open_session
@@ -72,5 +89,6 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
             legs = BusLegs(session, rig, tether, clock=clock)
             stack.callback(legs.close)
         loop = FrameLoop(clock=clock, source=source, renderer=renderer, link=link, tether=tether, log=log,
-                         origin=Pose(0.0, 0.0, eye_height, 0.0))
+                         origin=Pose(0.0, 0.0, eye_height, 0.0), rate_hz=LOOP_RATE_HZ,
+                         ball_radius=legs.driver.config.ball_radius if trackball is not None else BALL_RADIUS_M)
         yield VirtualAnt(eye, model, loop, legs, link.emulator.led_values, frames_per_decision)

@@ -8,11 +8,14 @@ with 32-byte reports, vendor control requests START / STOP / SET_RATE / SET_RESO
 stall). Reports come from a scripted ball motion (`motion(t)` -> angular velocity, rad/s, dome frame)
 through the forward kinematics of the `truth` config (its sensor placement, counts per mm and signs are
 the hardware's; the driver's config may differ, which is what calibration fixes). Fractional counts are
-carried over like a real sensor's.
+carried over like a real sensor's. A motion may instead have a method `rotation(t0, t1)` giving the
+rotation vector (rad) over a device-time interval, which is then used exactly (e.g. a virtual ant's steps).
 
-Timing: `realtime=True` paces reports on the wall clock (a late host gets one report holding all the
-counts since the last, as the firmware does); `realtime=False` returns a report on every read, each
-covering one sample period of device time (tests, benchmarks).
+Timing: `realtime=True` paces reports on a clock (a late host gets one report holding all the counts since
+the last, as the firmware does): the wall clock, or the injected `clock` (`antarium.clock`; with a
+`SimulatedClock` the device keeps step with a frame loop on that clock — call `wake()` after the clock moved);
+`realtime=False` returns a report on every read, each covering one sample period of device time (tests,
+benchmarks). `transfers` counts the transfers handed to the host, `due()` says whether a report is ready now.
 
 Faults, by report index n (0 = first report after START): `faults={n: kind}` with kind
 "short" (a 7-byte transfer), "garbage" (32 bytes with a wrong id), "drop" (the report is lost: a
@@ -34,6 +37,7 @@ import numpy as np
 import usb.backend
 import usb.core
 
+from antarium.clock import Clock
 from antarium.trackball import protocol as P
 from antarium.trackball.config import TrackballConfig
 
@@ -41,6 +45,9 @@ LIBUSB_ERROR_NO_DEVICE = -4
 LIBUSB_ERROR_TIMEOUT = -7
 LIBUSB_ERROR_PIPE = -9
 FAULT_KINDS = ("short", "garbage", "drop", "lift", "unplug")
+#: tolerance (s) when comparing clock readings with report ends, so that a frame loop's slots on a period
+#: that is a multiple of the report period meet the reports exactly despite rounding
+_TIME_EPS_S = 1e-9
 
 Motion = Callable[[float], "tuple[float, float, float] | np.ndarray"]
 
@@ -113,11 +120,14 @@ class EmulatedTrackball(usb.backend.IBackend):
         replug_after_s: float | None = None,
         max_speed: float = 6.35,
         seed: int = 0,
+        clock: Clock | None = None,
     ) -> None:
         super().__init__()
         self.truth = truth or TrackballConfig()
         self.motion = motion or walk(radius=self.truth.ball_radius)
         self.realtime = realtime
+        self._clock_now = clock.now if clock is not None else time.monotonic
+        self.transfers = 0
         self.faults = dict(faults or {})
         bad = {k: v for k, v in self.faults.items() if v not in FAULT_KINDS}
         if bad:
@@ -141,7 +151,7 @@ class EmulatedTrackball(usb.backend.IBackend):
         self._seq = 0
         self._index = 0  # report index since START (the key of `faults`)
         self._t_dev = 0.0  # device time of the end of the last report (s)
-        self._t0 = 0.0  # wall time of START (realtime)
+        self._t0 = 0.0  # clock time of START (realtime)
         self._remainder = np.zeros(2 * P.N_SENSORS)
 
     def _describe(self) -> None:
@@ -187,6 +197,22 @@ class EmulatedTrackball(usb.backend.IBackend):
         with self._cond:
             return self._t_dev
 
+    def now(self) -> float:
+        """Device time now (s since START) on the device's clock (realtime; 0 before START)."""
+        with self._cond:
+            return self._clock_now() - self._t0 if self.running else 0.0
+
+    def due(self) -> bool:
+        """A realtime device: whether a report is ready to be read now."""
+        with self._cond:
+            return (self._plugged and self.running and self.realtime
+                    and self._clock_now() - self._t0 >= self._t_dev + 1.0 / self.rate_hz - _TIME_EPS_S)
+
+    def wake(self) -> None:
+        """The injected clock moved on: a waiting read looks at it again now."""
+        with self._cond:
+            self._cond.notify_all()
+
     @property
     def plugged(self) -> bool:
         with self._cond:
@@ -209,7 +235,11 @@ class EmulatedTrackball(usb.backend.IBackend):
     def _counts(self, t0: float, t1: float, lift: bool) -> tuple[tuple[int, ...], tuple[bool, bool]]:
         """Integer counts of each sensor axis for the device-time interval [t0, t1] (midpoint rule)."""
         dt = t1 - t0
-        rotation = np.asarray(self.motion(0.5 * (t0 + t1)), dtype=float) * dt
+        exact = getattr(self.motion, "rotation", None)
+        if exact is not None:
+            rotation = np.asarray(exact(t0, t1), dtype=float)
+        else:
+            rotation = np.asarray(self.motion(0.5 * (t0 + t1)), dtype=float) * dt
         metres = self._solver.readings(rotation)
         scale = self.resolution_cpi / self.truth.resolution_cpi
         cpmm = np.array([c * scale for s in self.truth.sensors for c in s.counts_per_mm])
@@ -230,10 +260,10 @@ class EmulatedTrackball(usb.backend.IBackend):
             deadline = time.monotonic() + timeout_ms / 1000.0 if timeout_ms else None
             while True:
                 self._check(handle)
-                now = time.monotonic() - self._t0
-                if self.running and now >= self._t_dev + period:
+                now = self._clock_now() - self._t0
+                if self.running and now >= self._t_dev + period - _TIME_EPS_S:
                     # all whole periods elapsed since the last report go into this one
-                    t1 = self._t_dev + period * int((now - self._t_dev) / period)
+                    t1 = self._t_dev + period * int((now - self._t_dev) / period + _TIME_EPS_S * self.rate_hz)
                     break
                 wait = (self._t_dev + period - now) if self.running else 0.05
                 if deadline is not None:
@@ -347,6 +377,7 @@ class EmulatedTrackball(usb.backend.IBackend):
             if data is None:
                 raise usb.core.USBTimeoutError("Operation timed out", LIBUSB_ERROR_TIMEOUT, errno.ETIMEDOUT)
             buff[: len(data)] = array.array("B", data)
+            self.transfers += 1
             return len(data)
 
     def ctrl_transfer(self, dev_handle, bmRequestType, bRequest, wValue, wIndex, data, timeout):
@@ -368,7 +399,7 @@ class EmulatedTrackball(usb.backend.IBackend):
                 self._seq = 0
                 self._index = 0
                 self._t_dev = 0.0
-                self._t0 = time.monotonic()
+                self._t0 = self._clock_now()
                 self._remainder[:] = 0.0
             elif bRequest == P.REQ_STOP:
                 self.running = False
