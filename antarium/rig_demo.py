@@ -1,4 +1,4 @@
-"""The embedded default rig for a short fixed time, leaving what a user wants to see (`antarium demo`).
+"""The embedded default rig for a short fixed time, leaving what a user wants to see (`antarium demo --rig-seconds`).
 
 Runs `antarium serve`'s embedded default (the emulator as its own process on loopback, the default habitat,
 the scripted walker in closed loop), records one trial, rotates the scene by 90 degrees half-way (the

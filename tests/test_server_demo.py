@@ -1,8 +1,43 @@
-"""The demo run of the embedded default rig leaves a trial log, a path plot and a picture of the dome."""
+"""`antarium demo`: a virtual ant trained on a short route follows it in the emulated rig's closed loop and leaves a
+trial log, a picture of the learned and followed path and a picture of the dome; the embedded default rig's run
+(scripted walker, served in real time) leaves a trial log, a path plot and a picture of the dome."""
 
 import h5py
+import numpy as np
 
+from antarium.ant.experiments import ARRIVE_RADIUS_M, DEMO_ROUTE_SEED
+from antarium.ant.rig_demo import run_ant_demo
+from antarium.ant.routes import curved_route
+from antarium.cli import main
 from antarium.rig_demo import run_demo_rig
+from antarium.trial_log import read_table
+
+
+def test_ant_demo_outputs(tmp_path):
+    lines = []
+    paths = run_ant_demo(tmp_path, echo=lines.append, route_length=0.4)
+    assert set(paths) == {"trial log", "path plot", "traces", "dome picture"}
+    assert paths["trial log"].parent == tmp_path / "trials" and paths["trial log"].name.endswith("_virtual_ant.h5")
+    for name in ("path plot", "traces", "dome picture"):
+        assert paths[name].stat().st_size > 10_000
+    events = read_table(paths["trial log"], "events")
+    kinds = [k.decode() if isinstance(k, bytes) else k for k in events["kind"]]
+    assert kinds.count("ant_learning_walk") == 1 and kinds.count("ant_release") == 1
+    decisions = kinds.count("ant_decision")
+    samples = read_table(paths["trial log"], "locomotion")
+    assert decisions >= 10 and len(samples["seq"]) >= decisions - 1   # its steps came through the trackball
+    frames = read_table(paths["trial log"], "frames")
+    route = curved_route(DEMO_ROUTE_SEED, length=0.4)
+    assert np.hypot(frames["x"][-1] - route.end[0], frames["y"][-1] - route.end[1]) < ARRIVE_RADIUS_M
+    assert lines[0].startswith("virtual ant: Antcar learned ") and " arrived after " in lines[0]
+    # a second run never overwrites the first trial log
+    again = run_ant_demo(tmp_path, echo=lines.append, route_length=0.4)
+    assert again["trial log"] != paths["trial log"] and paths["trial log"].exists()
+
+
+def test_demo_refuses_bad_rig_seconds(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path), "--rig-seconds", "-1"]) == 2
+    assert "--rig-seconds must be in [0, 3600]" in capsys.readouterr().err
 
 
 def test_demo_rig_outputs(tmp_path):

@@ -1,35 +1,44 @@
-"""`antarium demo`: the main job on the embedded default (emulated dome, no hardware).
+"""`antarium demo`: the main job on the emulated dome (no hardware).
 
-First the dome's geometry summary and layout pictures, then the embedded default rig (`antarium serve` with no
-config: the emulator as its own process on loopback, the default habitat, the scripted walker in closed loop)
-for a short fixed time, recording one trial; it prints the paths of the trial log, the path plot and the
-picture of what the dome showed.
+First the dome's geometry summary and layout pictures, then a virtual ant in the closed loop of the emulated rig:
+Antcar learns a short route and follows it, walking through the emulated USB trackball (simulated clock, about
+10 s); it prints the paths of the trial log, the path plot (learned and followed path over the world's top view),
+the familiarity traces and the picture of what the dome showed. `--rig-seconds S` also runs the embedded default
+rig (`antarium serve` with no config: the emulator as its own process, the scripted walker) in real time.
 """
 
 from __future__ import annotations
 
 import argparse
 
-HELP = "run the embedded default rig for a short time and write its outputs (no hardware needed)"
+HELP = "train a virtual ant on a short route and let it follow it in the emulated rig's closed loop (no hardware)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="demo-output", help="folder for the outputs (default: demo-output)")
-    parser.add_argument("--seconds", type=float, default=8.0, help="how long the rig runs (default 8 s)")
+    parser.add_argument("--rig-seconds", type=float, default=0.0, metavar="S",
+                        help="also run the embedded default rig (served, real time, scripted walker) for S seconds")
 
 
 def run(args: argparse.Namespace) -> int:
+    from antarium.ant.rig_demo import run_ant_demo
     from antarium.commands import layout
-    from antarium.rig_demo import run_demo_rig
 
-    if not 0 < args.seconds <= 3600:
-        raise ValueError(f"--seconds must be in (0, 3600], got {args.seconds}")
+    if not 0 <= args.rig_seconds <= 3600:
+        raise ValueError(f"--rig-seconds must be in [0, 3600], got {args.rig_seconds}")
     code = layout.run(argparse.Namespace(out=args.out, no_pictures=False, export=None, regenerate=False,
                                          layout_out=None, margin_mm=None, min_pitch_mm=None))
     if code:
         return code
-    print(f"running the embedded default rig for {args.seconds:g} s (emulated dome, default habitat, "
-          "scripted walker in closed loop; the scene turns 90 degrees half-way) ...", flush=True)
-    for name, path in run_demo_rig(args.out, args.seconds).items():
+    print("virtual ant in the closed loop (emulated dome, default habitat, emulated USB trackball, simulated clock): "
+          "learning a 1.5 m route, then following it ...", flush=True)
+    for name, path in run_ant_demo(args.out).items():
         print(f"{name}: {path}")
+    if args.rig_seconds:
+        from antarium.rig_demo import run_demo_rig
+
+        print(f"running the embedded default rig for {args.rig_seconds:g} s (emulator process, default habitat, "
+              "scripted walker in closed loop; the scene turns 90 degrees half-way) ...", flush=True)
+        for name, path in run_demo_rig(args.out, args.rig_seconds).items():
+            print(f"{name}: {path}")
     return 0
