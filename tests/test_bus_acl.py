@@ -1,0 +1,112 @@
+"""The access-control example of docs/bus.md, loaded as written, enforced by a real server over loopback TCP.
+
+Loopback is the only interface a test may use, so the doc's file is run three ways: as written (`lo` is an
+operators' interface: a local script commands the rig), with `lo` moved to the doc's "lab" subject (the peer
+watches the pose stream but its commands are refused) and with `lo` in no subject (an unlisted interface:
+refused everything). Every variant is the doc's text with one substitution, checked to apply exactly once.
+"""
+
+import math
+import re
+import threading
+from pathlib import Path
+
+import pytest
+
+import antarium
+from antarium import bus
+from antarium.config import resolve
+from antarium.locomotion import BallSample, wire
+from antarium.rig import RigError
+from antarium.server import Server, wait_for
+
+DOC = (Path(__file__).resolve().parent.parent / "docs" / "bus.md").read_text()
+OPERATORS = '{ id: "operators", interfaces: ["lo", "eth1"] }'
+LAB = '{ id: "lab", interfaces: ["eth0"] }'
+
+
+def doc_acl() -> str:
+    security = DOC[DOC.index("## Security"):]
+    match = re.search(r"```json5\n(.*?)```", security, re.S)
+    assert match, "docs/bus.md: no json5 block under '## Security'"
+    text = match.group(1)
+    assert text.count(OPERATORS) == 1 and text.count(LAB) == 1, "the doc's subjects changed: update this test"
+    return text
+
+
+def serve(tmp_path, acl_text: str, locomotion: dict | None = None):
+    acl = tmp_path / "acl.json5"
+    acl.write_text(acl_text)
+    config = resolve({
+        "rig": {"name": "rig1"},  # the doc's key expressions name rig1
+        "bus": {"listen": [bus.free_tcp_endpoint()], "access_control": str(acl)},
+        "log": {"dir": str(tmp_path / "logs")},
+        "locomotion": locomotion or {"source": "scripted", "speed": 0.02},
+    })
+    return config, Server(config, renderer_factory=None, link=False).start_thread()
+
+
+def refused_command(server, session) -> None:
+    """A raw query for a command gets no reply at all, and the rig is unchanged."""
+    before = server.loop.scene_rotation
+    replies = list(session.get(bus.command_key("rig1", "rotate_scene"), payload=b'{"deg": 45}', timeout=1.0))
+    assert replies == []
+    assert server.loop.scene_rotation == before
+
+
+def test_the_documented_acl_lets_a_loopback_script_command_the_rig(tmp_path):
+    config, server = serve(tmp_path, doc_acl())
+    try:
+        with antarium.Rig("rig1", config=config, timeout_s=5.0) as rig:
+            assert rig.rotate_scene(45)["scene_rotation_deg"] == pytest.approx(45)
+            assert rig.closed_loop(False)["closed_loop"] is False
+            assert rig.status()["rig"] == "rig1"
+        assert math.degrees(server.loop.scene_rotation) == pytest.approx(45)
+    finally:
+        server.stop()
+
+
+def test_a_peer_on_a_lab_interface_watches_and_sends_locomotion_but_cannot_command(tmp_path):
+    acl = doc_acl().replace(OPERATORS, OPERATORS.replace('"lo", ', ""))
+    acl = acl.replace(LAB, LAB.replace('"eth0"', '"eth0", "lo"'))
+    config, server = serve(tmp_path, acl, locomotion={"source": "bus", "timeout_s": 5.0})
+    try:
+        with bus.open_session(config["bus"], role="client") as session:
+            got_pose = threading.Event()
+            poses = []
+
+            def on_pose(sample):
+                poses.append(bus.decode_pose(bytes(sample.payload.to_bytes())))
+                got_pose.set()
+
+            subscriber = session.declare_subscriber(bus.pose_key("rig1"), on_pose)
+            assert got_pose.wait(5.0), "the lab may watch the pose stream"
+            subscriber.undeclare()
+            assert poses[0]["closed_loop"] is True
+            publisher = bus.locomotion_publisher(session, "rig1")  # a trackball PC on the lab network
+            for seq in range(50):
+                publisher.put(wire.encode(BallSample(0.0, seq, (0.0, -0.001, 0.0))))
+            assert wait_for(lambda: server.source.received == 50, 5.0)
+            refused_command(server, session)
+            with antarium.Rig("rig1", config=config, session=session, timeout_s=1.0) as rig:  # sees the server
+                with pytest.raises(RigError, match="refused by the bus's access control"):
+                    rig.rotate_scene(45)
+            assert server.loop.scene_rotation == 0.0
+    finally:
+        server.stop()
+
+
+def test_a_peer_on_an_unlisted_interface_is_refused(tmp_path):
+    acl = doc_acl().replace(OPERATORS, OPERATORS.replace('"lo", ', ""))
+    assert '"lo"' not in acl
+    config, server = serve(tmp_path, acl)
+    try:
+        with bus.open_session(config["bus"], role="client") as session:
+            with pytest.raises(RigError, match="no antarium server"):  # it cannot even see the server
+                antarium.Rig("rig1", config=config, session=session, timeout_s=1.0).connect()
+            refused_command(server, session)
+            status = list(session.get(bus.command_key("rig1", "status"), timeout=1.0))
+            assert status == []
+    finally:
+        server.stop()
+
