@@ -22,8 +22,8 @@ import numpy as np
 
 FORMAT_VERSION = 1
 
-#: HDF5 format bounds: 1.10 is the oldest format with SWMR and the newest that HDF5 1.10 (MATLAB R2023/R2024,
-#: Debian 12's tools) can read; h5py's "latest" (HDF5 2.0 here) writes datatype messages 1.10 cannot decode
+#: HDF5 format bounds: 1.10 is the oldest format with SWMR and the newest that HDF5 1.10 libraries (MATLAB's,
+#: Debian 12's tools) read; h5py's "latest" (HDF5 2.0 here) writes datatype messages that 1.10 cannot decode
 LIBVER = ("v110", "v110")
 
 #: per-frame table: times in seconds on the loop's clock, positions in metres, angles in radians
@@ -386,14 +386,14 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
             break
         if error is None:
             try:
+                arrays = {table: np.array(rows, dtype=dtypes[table]) for table, rows in batch.items()}
                 f = _open_for_append(path)
-                for table, rows in batch.items():
-                    data = np.array(rows, dtype=dtypes[table])
+                for table, data in arrays.items():
                     ds = f[table]
                     n = ds.shape[0]
                     ds.resize((n + len(data),))
                     ds[n:] = data
-                f.close()  # flushes: only now is the batch on disk
+                f.close()  # flushes: only now is the batch in the file
                 for table, rows in batch.items():
                     written[table] += len(rows)
                     rows.clear()
