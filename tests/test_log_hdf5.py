@@ -157,3 +157,19 @@ def test_hdf5_tools_read_every_table_and_attribute(closed_log):
         assert expect in out.stdout, table
     out = subprocess.run(["h5dump", "-a", "/metadata", str(closed_log)], capture_output=True, text=True)
     assert out.returncode == 0 and '"ant": 3' in out.stdout
+
+
+def test_a_reader_holding_the_file_open_never_stops_the_recording(tmp_path):
+    path = tmp_path / "held.h5"
+    clock = SimulatedClock()
+    with TrialLog(path, {}, "held") as log:
+        loop = FrameLoop(clock=clock, source=open_source("scripted", clock=clock), log=log)
+        loop.run(until=0.5)
+        log.flush(wait=True)
+        with h5py.File(path, "r") as reader:  # a plain reader (HDF5 file lock taken) between two batches
+            assert len(reader["frames"]) == 95
+            loop.run(until=1.0)
+            log.flush(wait=True)
+            assert log.status()["error"] is None and log.status()["rows_written"]["frames"] == 190
+    with h5py.File(path, "r") as f:
+        assert len(f["frames"]) == 190
