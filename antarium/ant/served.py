@@ -1,0 +1,278 @@
+"""The virtual ant on a served rig: `antarium serve` runs the rig in real time exactly as for a real ant, and the
+ant's process stands in for the dome and the insect.
+
+    antarium serve --config ant_rig.toml                                  # renders, sends frames over UDP
+    python -m antarium.ant.served ant.npz --config ant_rig.toml --out run/   # the ant (model from `ant learn`)
+
+The ant's process hosts the dome: the distributor and its 55 panels (the `antarium.firmware_proto` emulator) listen
+on `[link] host:port`, where the server sends its LED frames (`spawn_emulator = false`), and the ant's eye reads
+what those panels show. Its legs turn the ball of an emulated USB trackball read by the real driver
+(`TrackballLegs`), which publishes every sample on the rig's bus as a trackball on another computer does; the
+server reads them with its "bus" locomotion source. Pose, displacements and trials go through the experiment-script
+API (`antarium.Rig`), so the server logs the trial as a real one.
+
+`served_ant(model, config)` yields a `VirtualAnt` whose loop is the served rig's (`ServedLoop`): `learning_walk`
+and `follow_route` run on it unchanged, in real time (`MonotonicClock`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+from antarium.ant.agent import VirtualAnt
+from antarium.ant.eye import Eye, EyeParams
+from antarium.ant.locomotion import TrackballLegs
+from antarium.clock import Clock, MonotonicClock
+from antarium.pose import Pose
+
+HELP = "put a trained virtual ant on a served rig (`antarium serve --config`): it hosts the dome and walks a route"
+
+
+def served_config(config: str | Path | dict[str, Any]) -> dict[str, Any]:
+    """The resolved rig config (TOML path or parsed table), checked for a served virtual ant: the server sends its
+    frames to the ant's dome and reads the ant's ball from the bus."""
+    from antarium.config import load_config, resolve
+
+    cfg = resolve(config) if isinstance(config, dict) else load_config(config)
+    link, loco = cfg["link"], cfg["locomotion"]
+    problems = []
+    if link["interface"] != "udp" or link["spawn_emulator"] or link["port"] == 0:
+        problems.append('[link] must be interface = "udp", spawn_emulator = false and a port (the ant\'s dome '
+                        f'listens there), got {link}')
+    if loco["source"] != "bus":
+        problems.append(f'[locomotion] source must be "bus" (the ant\'s trackball publishes there), got '
+                        f'{loco["source"]!r}')
+    if not cfg["bus"]["enabled"]:
+        problems.append("[bus] enabled must be true")
+    if problems:
+        raise ValueError("rig config not fit for a served virtual ant: " + "; ".join(problems))
+    return cfg
+
+
+class DomeHost:
+    """The dome the server drives, in this process: the emulated distributor and panels answering datagrams on UDP
+    `host:port` in a thread (`antarium.firmware_proto.server.serve`); `led_values()` is what its panels show."""
+
+    def __init__(self, host: str, port: int) -> None:
+        from antarium.firmware_proto.emulator import Emulator
+
+        self.emulator = Emulator()
+        self.counters = self.emulator.counters
+        self.host, self.port = host, port
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+
+    def handle_datagram(self, payload) -> list[bytes]:
+        with self._lock:
+            return self.emulator.handle_datagram(payload)
+
+    def stats(self) -> dict:
+        with self._lock:
+            return self.emulator.stats()
+
+    def led_values(self):
+        """(20350, 2) uint16: the LEDs the dome shows now (a whole latched frame, never a half-received one)."""
+        with self._lock:
+            return self.emulator.led_values()
+
+    def _serve(self) -> None:
+        from antarium.firmware_proto.server import serve
+
+        try:
+            serve(self, self.host, self.port, stop=self._stop, ready=lambda address: self._ready.set())
+        except BaseException as exc:  # reported by start  # noqa: BLE001
+            self._error = exc
+            self._ready.set()
+
+    def start(self, timeout_s: float = 5.0) -> None:
+        self._thread = threading.Thread(target=self._serve, name="ant-dome", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(timeout_s) or self._error is not None:
+            self.stop()
+            raise RuntimeError(f"the virtual ant's dome cannot listen on udp://{self.host}:{self.port}: "
+                               f"{self._error or 'timed out'}")
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+
+
+class ServedLoop:
+    """The served rig's frame loop as the virtual ant sees it (the interface `VirtualAnt` uses of a `FrameLoop`).
+
+    `step()` waits for the next frame slot on `clock`, lets the ant's trackball driver read (and publish) every
+    report due, then waits (bounded, `timeout_s`) for the pose of a frame the server began after that;
+    `set_pose` is the rig's `set_pose` command; `event` keeps the ant's events (`events`) and hands them to
+    `on_event`.
+    """
+
+    def __init__(self, rig, legs: TrackballLegs, clock: Clock, rate_hz: float, tether: str, pose_every: int = 1,
+                 timeout_s: float = 10.0, on_event: Callable[[float, str, dict], None] | None = None) -> None:
+        self.rig, self.legs, self.clock = rig, legs, clock
+        self.source = legs.source
+        self.tether = tether
+        self.period = 1.0 / rate_hz
+        self.pose_every = int(pose_every)
+        self.timeout_s = float(timeout_s)
+        self.on_event = on_event
+        self.renderer = None  # the server renders
+        self.frame = 0
+        self.events: list[dict[str, Any]] = []
+        self._next_t: float | None = None
+        rig.tether(tether)
+        rig.closed_loop(True)
+        self.pose = rig.pose(self.timeout_s)
+
+    def step(self) -> None:
+        now = self.clock.now()
+        self._next_t = now if self._next_t is None else max(self._next_t + self.period, now)
+        self.clock.sleep_until(self._next_t)
+        self.source.read()  # every report due has been read and published; the server integrates the samples
+        self.pose = self._next_pose()
+        self.frame += 1
+
+    def _next_pose(self) -> Pose:
+        """The pose of a frame the server began after now: two stream updates later."""
+        first = self.rig.latest()
+        need = (first.frame if first is not None else -1) + 2 * self.pose_every
+        deadline = time.monotonic() + self.timeout_s
+        while True:
+            latest = self.rig.latest()
+            if latest is not None and latest.frame >= need:
+                return latest.pose
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"the served rig {self.rig.name!r} sent no new pose for {self.timeout_s} s; "
+                                   "is `antarium serve` still running?")
+            time.sleep(0.0005)
+
+    def set_pose(self, pose: Pose) -> None:
+        self.rig.set_pose(pose.x, pose.y, math.degrees(pose.heading), pose.z)
+        self.pose = pose
+
+    def event(self, kind: str, **data: Any) -> None:
+        t = self.clock.now()
+        self.events.append({"t": t, "kind": kind, **data})
+        if self.on_event is not None:
+            self.on_event(t, kind, data)
+
+
+@contextlib.contextmanager
+def served_ant(model, config: str | Path | dict[str, Any], eye_params: EyeParams | None = None,
+               frames_per_decision: int = 1, timeout_s: float = 30.0) -> Iterator[VirtualAnt]:
+    """A `VirtualAnt` with `model` on the rig that `antarium serve --config <config>` serves (see the module
+    docstring; `served_config` says what the config needs). Waits up to `timeout_s` for the server."""
+    from antarium import bus
+    from antarium.geometry import load_dome
+    from antarium.locomotion import wire
+    from antarium.rig import Rig
+    from antarium.trackball.config import TrackballConfig
+
+    cfg = served_config(config)
+    eye = Eye.from_dome(load_dome(), eye_params)
+    if eye.params.n_pn != model.n_pn:
+        raise ValueError(f"the model expects {model.n_pn} PNs but the eye gives {eye.params.n_pn}")
+    name, loop_cfg = cfg["rig"]["name"], cfg["loop"]
+    clock = MonotonicClock()
+    with contextlib.ExitStack() as stack:
+        dome = DomeHost(cfg["link"]["host"], cfg["link"]["port"])
+        dome.start()
+        stack.callback(dome.stop)
+        session = stack.enter_context(bus.open_session(cfg["bus"], role="client"))
+        rig = stack.enter_context(Rig(name, config=cfg, session=session, timeout_s=timeout_s))
+        publisher = bus.locomotion_publisher(session, name)
+        stack.callback(publisher.undeclare)
+        events = bus.events_key(name)
+        trackball = cfg.get("trackball") or TrackballConfig(ball_radius=loop_cfg["ball_radius"], sample_rate_hz=950)
+        legs = TrackballLegs(loop_cfg["tether"], trackball=trackball, clock=clock, step_s=1.0 / loop_cfg["rate_hz"],
+                             on_sample=lambda s: publisher.put(wire.encode(s)),
+                             on_event=lambda e: session.put(events, json.dumps(e)))
+        legs.start()
+        stack.callback(legs.stop)
+
+        def publish(t: float, kind: str, data: dict) -> None:
+            session.put(events, json.dumps({"t": t, "kind": kind, "data": data}, default=float))
+
+        loop = ServedLoop(rig, legs, clock, loop_cfg["rate_hz"], loop_cfg["tether"], loop_cfg["pose_every"],
+                          timeout_s, on_event=publish)
+        yield VirtualAnt(eye, model, loop, legs, dome.led_values, frames_per_decision)
+
+
+def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out: str | Path,
+               start_offset: tuple[float, float] = (0.0, 0.0), max_decisions: int | None = None,
+               trial: str = "virtual_ant", echo: Callable[[str], None] = print) -> dict[str, Any]:
+    """Release the ant of `model_file` (written by `antarium ant learn`) at the start of its route on the served rig
+    and let it follow the route in real time, inside a trial that the server logs. Writes `<out>/served.json`
+    (summary, the ant's decisions) and `<out>/served_paths.png`; returns the summary."""
+    from dataclasses import asdict
+
+    from antarium.ant.agent import follow_route
+    from antarium.ant.plots import plot_paths, scene_top_view
+    from antarium.ant.routes import Route
+    from antarium.ant.storage import load_model
+    from antarium.renderers import build_scene
+
+    model, eye_params, stored = load_model(model_file)
+    if stored is None:
+        raise ValueError(f"{model_file}: the model file holds no route to follow")
+    route = Route(stored)
+    cfg = served_config(config)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    step = getattr(model.params, "step", None) or model.params.k_v  # metres per decision at most
+    limit = max_decisions or int(math.ceil(3.0 * route.length / step)) + 10
+    with served_ant(model, cfg, eye_params) as ant:
+        with ant.loop.rig.trial(trial, model=model.kind, route=route.points.tolist()) as log:
+            t0 = time.monotonic()
+            result = follow_route(ant, route, limit, 0.1, start_offset=start_offset)
+            seconds = time.monotonic() - t0
+        events = ant.loop.events
+    summary = {**asdict(result.summary), "trial_log": log, "seconds": seconds,
+               "decisions_per_s": result.summary.decisions / seconds}
+    (out / "served.json").write_text(json.dumps({"summary": summary, "events": events}, indent=2, default=float))
+    picture = plot_paths(out / "served_paths.png", route, {f"{model.kind} (served rig)": result.track},
+                         title="virtual ant on the served rig", top=scene_top_view(build_scene(cfg["render"]["scene"])))
+    echo(f"virtual ant on rig {cfg['rig']['name']!r}: {'arrived' if summary['arrived'] else 'did not arrive'} after "
+         f"{summary['decisions']} decisions in {seconds:.1f} s ({summary['decisions_per_s']:.1f} decisions/s); "
+         f"lateral error median {100 * summary['lateral_median']:.1f} cm\n  trial log (server): {log}\n"
+         f"  summary: {out / 'served.json'}\n  picture: {picture}")
+    return summary
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("model_file", help="model file written by 'antarium ant learn' (holds its route)")
+    parser.add_argument("--config", required=True, help="the rig config `antarium serve` runs with (TOML)")
+    parser.add_argument("--out", required=True, help="folder for served.json and served_paths.png")
+    parser.add_argument("--lateral-cm", type=float, default=0.0, help="release this far left of the route start")
+    parser.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
+    parser.add_argument("--max-decisions", type=int, default=None)
+
+
+def run(args: argparse.Namespace) -> int:
+    run_served(args.model_file, args.config, args.out, (args.lateral_cm / 100.0, math.radians(args.heading_deg)),
+               args.max_decisions)
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    parser = argparse.ArgumentParser(prog="python -m antarium.ant.served", description=HELP)
+    add_arguments(parser)
+    _args = parser.parse_args()
+    try:
+        sys.exit(run(_args))
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        print(f"antarium.ant.served: error: {exc}", file=sys.stderr)
+        sys.exit(2)
