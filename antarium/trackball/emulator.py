@@ -233,7 +233,8 @@ class EmulatedTrackball(usb.backend.IBackend):
             raise _no_device()
 
     def _counts(self, t0: float, t1: float, lift: bool) -> tuple[tuple[int, ...], tuple[bool, bool]]:
-        """Integer counts of each sensor axis for the device-time interval [t0, t1] (midpoint rule)."""
+        """Integer counts of each sensor axis for the device-time interval [t0, t1] (the motion's exact rotation,
+        or the midpoint rule)."""
         dt = t1 - t0
         exact = getattr(self.motion, "rotation", None)
         if exact is not None:
