@@ -43,7 +43,10 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     },
     "render": {
         "scene": "habitat",  # a scene name, a file path, or a table {scene = name, ...parameters} (renderers)
-        "face_size": 0,  # cube face side in texels; 0: the renderer's default (from the LED pitch)
+        "face_size": 0,  # cube face side in texels; 0: the renderer's default (96 with a far layer, else 192)
+        "far_layer": "async",  # "off", "sync" or "async": meshes beyond near_radius_m from a recent eye position
+        "near_radius_m": 3.0,  # meshes within this distance are drawn every frame
+        "far_layer_error_deg": 0.25,  # largest parallax error of the far layer before a frame is drawn in full
     },
     "bus": {
         "enabled": True,
@@ -70,6 +73,7 @@ _CHOICES = {
     ("loop", "tether"): ("free_yaw", "fixed"),
     ("link", "interface"): ("udp", "virtual"),
     ("bus", "mode"): ("peer", "client", "router"),
+    ("render", "far_layer"): ("off", "sync", "async"),
 }
 _RANGES = {
     ("loop", "rate_hz"): (1.0, 2000.0),
@@ -82,6 +86,8 @@ _RANGES = {
     ("loop", "realtime_priority"): (0, 99),
     ("link", "port"): (0, 65535),
     ("render", "face_size"): (0, 2048),
+    ("render", "near_radius_m"): (0.01, 1000.0),
+    ("render", "far_layer_error_deg"): (0.01, 5.0),
     ("log", "flush_s"): (0.01, 1.0),
 }
 #: sections whose extra keys are allowed (passed on to a back-end)

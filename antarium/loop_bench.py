@@ -68,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
         result = summarise(frames, config["loop"]["rate_hz"])
         result["rejected_frames"] = server.final_stats.get("rejected_frames", 0)
         result["link_outages"] = server.final_stats.get("link_outages", 0)
+        result["far_layer"] = server.final_stats.get("far_layer")
         result["config"] = {"render": config["render"], "loop_rate_hz": config["loop"]["rate_hz"],
                             "link": config["link"]["interface"], "locomotion": config["locomotion"]["source"]}
     _print(result)
@@ -89,6 +90,11 @@ def _print(r: dict[str, Any]) -> None:
           f"target")
     print(f"  late frames     {r['late_frames']}   skipped slots {r['skipped_slots']}   rejected frames "
           f"{r['rejected_frames']}   link outages {r['link_outages']}")
+    layer = r.get("far_layer")
+    if layer and layer["mode"] != "off":
+        error = f", ERROR {layer['error']}" if layer["error"] else ""
+        print(f"  far layer       {layer['mode']}: {layer['layer_frames']} frames with it, "
+              f"{layer['full_frames']} in full (start-up, edits, eye jumps), {layer['builds']} layers built{error}")
     ratio = r["latency_p99_over_period"]
     print(f"  latency         {_fmt(r['latency'])}"
           + ("" if ratio is None else f"   (p99 = {ratio:.2f} x the {period_ms:.2f} ms frame period)"))

@@ -101,7 +101,9 @@ def default_renderer_factory(render_cfg: dict[str, Any], clock: Clock | None = N
     from antarium.geometry import load_dome
     from antarium.renderers import Renderer
 
-    return Renderer(load_dome(), face_size=render_cfg["face_size"] or None, clock=clock)
+    return Renderer(load_dome(), face_size=render_cfg["face_size"] or None, clock=clock,
+                    far_layer=render_cfg["far_layer"], near_radius=render_cfg["near_radius_m"],
+                    far_layer_error_deg=render_cfg["far_layer_error_deg"])
 
 
 #: scene_edit operations -> (renderer method, {bus argument: (renderer argument, converter)})
@@ -278,6 +280,11 @@ class Server:
                 out["alarms"].append("dome link down: " + (loop.last_link_error or "no telemetry"))
             if not loop.locomotion_connected:
                 out["alarms"].append("locomotion source disconnected: pose held")
+        renderer = self.renderer
+        if renderer is not None and hasattr(renderer, "far_layer_status"):
+            out["far_layer"] = renderer.far_layer_status()
+            if out["far_layer"]["error"]:
+                out["alarms"].append("far layer stopped, every frame drawn in full: " + out["far_layer"]["error"])
         if self.source is not None:
             out["locomotion"] = self.source.status()
         if loop is not None and self.link is not None:
@@ -593,6 +600,8 @@ class Server:
         self._stopping.set()
         if self.loop is not None:
             self.final_stats = self.loop.stats()
+            if self.renderer is not None and hasattr(self.renderer, "far_layer_status"):
+                self.final_stats["far_layer"] = self.renderer.far_layer_status()
             if self.loop.last_frame is not None:
                 self.final_frame = self.loop.last_frame.copy()
         if self.trial_log is not None:

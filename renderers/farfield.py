@@ -1,12 +1,12 @@
-"""Fast path for scenes that are only far field (sky, panorama, synthetic stimuli): no GL per frame.
+"""Footprint-integrated far-field tables: an LED's value as a function of the dome's yaw, no GL per frame.
 
-A far field at infinity looks the same from every eye position, so an LED's value depends only on the yaw
-psi between dome and world: v_i = F~(azimuth_i + psi, elevation_i), where F~ is the far field already
-integrated over the LED footprint. F~ is tabulated once per scene, in 16 bits, on a 0.25° (elevation,
-azimuth) grid: the field is averaged over each grid cell (sub-samples as fine as its detail needs), blurred
-along each row by a periodic Gaussian of width sigma/cos(el) (FFT) and along elevation by a Gaussian of
-width sigma, the grid continuing over the zenith (rows beyond 90° are the rows below it, turned by 180°).
-Per frame: a bilinear lookup per LED (`kernels.lookup_pairs`).
+Content seen from a fixed eye position (a far field at infinity, or the far layer of meshes rendered from one
+point, `far_layer`) gives every LED a value that depends only on the yaw psi between dome and world:
+v_i = F~(azimuth_i + psi, elevation_i), where F~ is the content already integrated over the LED footprint.
+F~ is tabulated in 16 bits on a 0.25° (elevation, azimuth) grid (`TableGrid`): the content is averaged over
+each grid cell, blurred along each row by a periodic Gaussian of width sigma/cos(el) (FFT) and along
+elevation by a Gaussian of width sigma, the grid continuing over the zenith (rows beyond 90° are the rows
+below it, turned by 180°). Per frame: a bilinear lookup per LED (`kernels.lookup_pairs`).
 """
 
 from __future__ import annotations
@@ -35,41 +35,23 @@ def _grid_directions(el: np.ndarray, az: np.ndarray) -> np.ndarray:
     return d.reshape(-1, 3)
 
 
-class FarFieldTable:
-    """F~ on the grid and the per-LED lookup. directions: (20350, 3) dome-frame LED directions; fwhm (rad)."""
+class TableGrid:
+    """The (elevation, azimuth) grid of the tables for a set of LEDs, and where each LED reads it.
 
-    def __init__(self, scene, directions: np.ndarray, fwhm: float, t: float = 0.0):
-        from scipy.ndimage import gaussian_filter1d
+    directions: (20350, 3) dome-frame LED directions; fwhm: footprint width (rad). Rows span the LEDs'
+    elevations plus four footprint sigmas, up to 90° and the same margin beyond.
+    """
 
-        sigma = fwhm / math.sqrt(8 * math.log(2))
+    def __init__(self, directions: np.ndarray, fwhm: float):
+        self.fwhm = float(fwhm)
+        self.sigma = sigma = fwhm / math.sqrt(8 * math.log(2))
         el_led = np.arcsin(np.clip(directions[:, 2], -1, 1))
         margin = 4 * sigma + STEP
-        el_lo = el_led.min() - margin
-        n_rows = int(math.ceil((math.pi / 2 + margin - el_lo) / STEP))
+        self.el_lo = el_lo = el_led.min() - margin
+        self.n_rows = n_rows = int(math.ceil((math.pi / 2 + margin - el_lo) / STEP))
         self.n_cols = n_cols = int(round(2 * math.pi / STEP))
-        el = el_lo + np.arange(n_rows) * STEP
-        az = np.arange(n_cols) * STEP
-        # the field averaged over each grid cell (s x s sub-samples), so detail finer than the grid cannot alias
-        sub = scene.supersample(STEP)
-        offsets = (np.arange(sub) - (sub - 1) / 2) * (STEP / sub)
-        field = np.zeros((n_rows, n_cols, 4))
-        for de in offsets:
-            for da in offsets:
-                field += scene.evaluate_far(_grid_directions(el + de, az + da), t).reshape(n_rows, n_cols, 4)
-        field /= sub * sub
-        el_true = np.where(el > math.pi / 2, math.pi - el, el)
-        freq = np.fft.rfftfreq(n_cols, d=STEP)  # cycles per radian
-        sig_az = sigma / np.maximum(np.cos(el_true), 1e-3)
-        transfer = np.exp(-2 * (math.pi * freq[None, :] * sig_az[:, None]) ** 2).astype(np.float32)
-        field = np.fft.irfft(np.fft.rfft(field, axis=1) * transfer[:, :, None], n=n_cols, axis=1)
-        field = gaussian_filter1d(field.astype(np.float32), sigma / STEP, axis=0, mode="nearest", truncate=3.0)
-        # 16-bit fixed point (radiance * 65535), green/blue and UV apart: a quarter of the float table's
-        # bytes, so the per-frame gathers mostly hit the cache
-        table = np.empty((n_rows, n_cols + 1, 4), dtype=np.uint16)
-        table[:, :n_cols] = np.rint(np.clip(field, 0.0, 1.0) * 65535.0)
-        table[:, n_cols] = table[:, 0]
-        self.table_gb = np.ascontiguousarray(table[..., 0:2])
-        self.table_uv = np.ascontiguousarray(table[..., 2:4])
+        self.el = el_lo + np.arange(n_rows) * STEP
+        self.az = np.arange(n_cols) * STEP
         pos = (el_led - el_lo) / STEP
         row = np.clip(np.floor(pos), 0, n_rows - 2).astype(np.int64)
         is_uv = (np.arange(len(directions)) % PIXELS_PER_PANEL) >= GB_PER_PANEL
@@ -79,12 +61,69 @@ class FarFieldTable:
         order = np.lexsort((self.col0, row))  # sweep the table row by row
         self.order_gb = order[~is_uv[order]]
         self.order_uv = order[is_uv[order]]
+        el_true = np.where(self.el > math.pi / 2, math.pi - self.el, self.el)
+        freq = np.fft.rfftfreq(n_cols, d=STEP)  # cycles per radian
+        sig_az = sigma / np.maximum(np.cos(el_true), 1e-3)
+        self._transfer = np.exp(-2 * (math.pi * freq[None, :] * sig_az[:, None]) ** 2).astype(np.float32)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, cols + 1) of a table: the last column repeats the first."""
+        return self.n_rows, self.n_cols + 1
+
+    def directions(self, d_el: float = 0.0, d_az: float = 0.0) -> np.ndarray:
+        """(rows * cols, 3) world directions of the grid points, offset by (d_el, d_az) radians."""
+        return _grid_directions(self.el + d_el, self.az + d_az)
+
+    def blur(self, field: np.ndarray) -> np.ndarray:
+        """(rows, cols, C) float32: `field` (content averaged over each cell) blurred by the LED footprint."""
+        import scipy.fft
+        from scipy.ndimage import gaussian_filter1d
+
+        spectrum = scipy.fft.rfft(np.asarray(field, dtype=np.float32), axis=1, workers=1)
+        spectrum *= self._transfer[:, :, None]
+        blurred = scipy.fft.irfft(spectrum, n=self.n_cols, axis=1, workers=1)
+        return gaussian_filter1d(blurred, self.sigma / STEP, axis=0, mode="nearest", truncate=3.0)
+
+    def quantise(self, values: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Radiance (rows, cols, C) in [0, 1] (clipped) into `out` (rows, cols + 1, C) uint16 as value * 65535,
+        the last column repeating the first; returns `out`."""
+        v = np.clip(values, 0.0, 1.0) * 65535.0
+        np.rint(v, out=out[:, : self.n_cols], casting="unsafe")
+        out[:, self.n_cols] = out[:, 0]
+        return out
+
+
+class FarFieldTable:
+    """Footprint-integrated content as two tables on `grid`, [G, B] and [UV, polarised UV], each
+    (rows, cols + 1, 2) uint16 (radiance * 65535: a quarter of a float table's bytes, so the per-frame gathers
+    mostly hit the cache), and the per-LED lookup."""
+
+    def __init__(self, grid: TableGrid, table_gb: np.ndarray, table_uv: np.ndarray):
+        self.grid, self.table_gb, self.table_uv = grid, table_gb, table_uv
+
+    @classmethod
+    def of_scene(cls, scene, directions: np.ndarray, fwhm: float, t: float = 0.0) -> FarFieldTable:
+        """The far field of `scene` at time t (s) for LEDs at (20350, 3) dome-frame `directions`, footprint
+        `fwhm` (rad)."""
+        g = TableGrid(directions, fwhm)
+        # the field averaged over each grid cell (s x s sub-samples), so detail finer than the grid cannot alias
+        sub = scene.supersample(STEP)
+        offsets = (np.arange(sub) - (sub - 1) / 2) * (STEP / sub)
+        field = np.zeros((g.n_rows, g.n_cols, 4), dtype=np.float32)
+        for de in offsets:
+            for da in offsets:
+                field += scene.evaluate_far(g.directions(de, da), t).reshape(g.n_rows, g.n_cols, 4)
+        field /= sub * sub
+        table = g.quantise(g.blur(field), np.empty((*g.shape, 4), dtype=np.uint16))
+        return cls(g, np.ascontiguousarray(table[..., 0:2]), np.ascontiguousarray(table[..., 2:4]))
 
     def lookup(self, psi: float, out: np.ndarray) -> np.ndarray:
         """(20350, 2) float32 pair radiances ([G, B] or [UV, polarised UV]) for yaw `psi` (rad) into `out`."""
         from .kernels import lookup_pairs
 
-        shift = (psi / STEP) % self.n_cols
-        lookup_pairs(self.table_gb, self.order_gb, self.row, self.row_frac, self.col0, shift, out)
-        lookup_pairs(self.table_uv, self.order_uv, self.row, self.row_frac, self.col0, shift, out)
+        g = self.grid
+        shift = (psi / STEP) % g.n_cols
+        lookup_pairs(self.table_gb, g.order_gb, g.row, g.row_frac, g.col0, shift, out)
+        lookup_pairs(self.table_uv, g.order_uv, g.row, g.row_frac, g.col0, shift, out)
         return out

@@ -84,6 +84,19 @@ def lookup_pairs(table, order, row, row_frac, col0, shift, out):  # pragma: no c
 
 
 @njit(cache=True)
+def gather_bilinear(texels, taps, weights, out):  # pragma: no cover - compiled
+    """out[p] = sum_k weights[p, k] * texels[taps[p, k]] / 65535: texels (T, 4) uint16; taps (P, 4) int32;
+    weights (P, 4) float32; out (P, 4) float32."""
+    scale = np.float32(1.0 / 65535.0)
+    for p in range(taps.shape[0]):
+        for c in range(4):
+            acc = np.float32(0.0)
+            for k in range(4):
+                acc += weights[p, k] * np.float32(texels[taps[p, k], c])
+            out[p, c] = acc * scale
+
+
+@njit(cache=True)
 def convert_pairs(pairs, gain, is_uv, swap, out):  # pragma: no cover - compiled
     """Pair radiances (n, 2) float32 in [0, 1] -> LED drives (n, 2) uint16.
 

@@ -79,12 +79,11 @@ class MeshBuffers:
     lod_angle: radians; a chunk at distance D uses level-of-detail cells up to lod_angle * D (0: no LOD).
     """
 
-    def __init__(self, ctx, prog, scene, chunk_size: float = 2.0, lod_angle: float = 0.0):
+    def __init__(self, ctx, prog, objects: dict, chunk_size: float = 2.0, lod_angle: float = 0.0):
         self.ctx, self.prog = ctx, prog
         self.lod_angle = float(lod_angle)
         self._resources = []
         self.n_chunks = 0
-        objects = scene.objects
         if not objects:
             return
         import moderngl
@@ -229,13 +228,20 @@ class MeshBuffers:
         allowed = self.lod_angle * dist / LOD_CELLS[0]
         return np.clip(np.floor(np.log2(np.maximum(allowed, 1e-9))) + 1, 0, len(LOD_CELLS)).astype(np.int64)
 
-    def draw(self, fbo, views: np.ndarray, proj: np.ndarray, q: np.ndarray, eye: np.ndarray, n: int) -> int:
-        """Draw every face's visible chunks into the atlas; returns the number of chunk draws."""
+    def near_chunks(self, eye: np.ndarray, radius: float) -> np.ndarray:
+        """(n_chunks,) bool: some of the chunk's bounding sphere lies within `radius` (m) of `eye` (m)."""
+        return np.linalg.norm(self._centre - eye, axis=1) - self._radius < radius
+
+    def draw(self, fbo, views: np.ndarray, proj: np.ndarray, q: np.ndarray, eye: np.ndarray, n: int,
+             chunks: np.ndarray | None = None) -> int:
+        """Draw every face's visible chunks (only those where `chunks` (n_chunks,) bool is set, if given) into
+        the atlas; returns the number of chunk draws."""
         level = self.levels(eye)
         rows = np.arange(self.n_chunks)
         counts = self._count[rows, level]
         firsts = self._first[rows, level]
-        vis = self.visible_chunks(q, eye) & (counts > 0)[:, None]
+        keep = counts > 0 if chunks is None else (counts > 0) & chunks
+        vis = self.visible_chunks(q, eye) & keep[:, None]
         # commands ordered by (face, culled or not), so each face needs at most two indirect draws
         face, chunk = np.nonzero(vis.T)
         batch = 2 * face + self._single_sided[chunk]

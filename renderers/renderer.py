@@ -38,6 +38,8 @@ def default_face_size(pitch_deg: float = LED_PITCH_DEG, fraction: float = TEXEL_
 
 
 DEFAULT_FACE_SIZE = default_face_size()
+#: default face size of the near meshes when a far layer carries the rest (`far_layer`)
+NEAR_FACE_SIZE = 96
 #: texels across the footprint's FWHM below which a wider footprint samples a coarser mipmap level
 TEXELS_PER_FWHM = 2.5
 
@@ -75,19 +77,38 @@ class Renderer:
     cell (m) of the culling grid of large meshes; lod_texels: level-of-detail error bound in texels (0: full
     detail always); clock: an `antarium.clock` clock for drifting stimuli when `render` gets no time;
     fast_far_field: take static far fields from a footprint-integrated table (`farfield`) instead of drawing
-    them into the cube map every frame.
+    them into the cube map every frame; far_layer: "off", "sync" or "async": draw only the meshes within
+    `near_radius` (m) every frame, the rest from a layer rendered from a recent eye position while its
+    parallax error stays under `far_layer_error_deg` (`far_layer`; face_size then defaults to
+    NEAR_FACE_SIZE and the layer is rendered at `layer_face_size`, default DEFAULT_FACE_SIZE).
     """
 
     def __init__(self, dome=None, face_size: int | None = None, footprint_deg: float = LED_PITCH_DEG,
                  brightness: float = 1.0, near: float = 1e-3, far: float = 1e3, far_face_size: int | None = None,
-                 chunk_size: float = 1.0, lod_texels: float = 1.0, clock=None, fast_far_field: bool = True):
+                 chunk_size: float = 1.0, lod_texels: float = 1.0, clock=None, fast_far_field: bool = True,
+                 far_layer: str = "off", near_radius: float = 3.0, far_layer_error_deg: float = 0.25,
+                 layer_face_size: int | None = None):
         if dome is None:
             from antarium.geometry import load_dome
 
             dome = load_dome()
-        n = DEFAULT_FACE_SIZE if face_size is None else face_size
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 16 <= n <= 2048:
-            raise ValueError(f"face_size must be an integer in 16..2048, got {face_size!r}")
+        from .far_layer import MODES
+
+        if far_layer not in MODES:
+            raise ValueError(f"far_layer must be one of {', '.join(MODES)}, got {far_layer!r}")
+        if not (np.isfinite(near_radius) and near_radius > 0):
+            raise ValueError(f"near_radius must be a positive number of metres, got {near_radius!r}")
+        if not (np.isfinite(far_layer_error_deg) and 0 < far_layer_error_deg <= 5):
+            raise ValueError(f"far_layer_error_deg must be in (0, 5], got {far_layer_error_deg!r}")
+        layered = far_layer != "off"
+        n = (NEAR_FACE_SIZE if layered else DEFAULT_FACE_SIZE) if face_size is None else face_size
+        m = DEFAULT_FACE_SIZE if layer_face_size is None else layer_face_size
+        for label, value in (("face_size", n), ("layer_face_size", m)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 16 <= value <= 2048:
+                raise ValueError(f"{label} must be an integer in 16..2048, got {value!r}")
+        self.far_layer_mode, self.near_radius = far_layer, float(near_radius)
+        self.far_layer_error = math.radians(far_layer_error_deg)
+        self.layer_face_size = int(m)
         if not (np.isfinite(footprint_deg) and 0 < footprint_deg < 45):
             raise ValueError(f"footprint_deg must be in (0, 45), got {footprint_deg!r}")
         if not (0 < near < far and np.isfinite(far)):
@@ -102,6 +123,7 @@ class Renderer:
         if not (np.isfinite(lod_texels) and lod_texels >= 0):
             raise ValueError(f"lod_texels must be a non-negative number, got {lod_texels!r}")
         #: level-of-detail error bound (rad): a fraction of the largest texel
+        self.lod_texels = float(lod_texels)
         self.lod_angle = math.radians(lod_texels * cubemap.largest_texel_deg(self.face_size))
         if clock is None:
             from antarium.clock import MonotonicClock
@@ -128,6 +150,9 @@ class Renderer:
         self.scene: Scene | None = None
         self._meshes: MeshBuffers | None = None
         self._table = None
+        self._layer = None
+        #: frames drawn with the far layer, and in full (no usable layer: start-up, edits, a jump of the eye)
+        self.layer_frames = self.full_frames = 0
         self._t0 = 0.0
         self._last_q = np.eye(3)
         self.last_timings = {"render": 0.0, "sample": 0.0, "convert": 0.0}
@@ -209,11 +234,11 @@ class Renderer:
         try:
             self._set_footprint(new.lowpass_deg)
             if self._table_ok(new):
-                table = FarFieldTable(new, self._directions, self._fwhm)
+                table = FarFieldTable.of_scene(new, self._directions, self._fwhm)
             else:
                 far_tex = self._make_far_texture(new)
             if new.objects:
-                meshes = MeshBuffers(self.ctx, self._mesh_prog, new, self.chunk_size, self.lod_angle)
+                meshes = MeshBuffers(self.ctx, self._mesh_prog, new.objects, self.chunk_size, self.lod_angle)
         except BaseException:
             for res in (far_tex, meshes):
                 if res is not None:
@@ -228,7 +253,34 @@ class Renderer:
         for res in (old_tex, old_meshes):
             if res is not None:
                 res.release()
+        self._restart_layer()
         return new
+
+    def _restart_layer(self) -> None:
+        """A new far layer for the current scene and footprint (none when off, or nothing to split)."""
+        from .far_layer import FarLayer
+
+        if self._layer is not None:
+            self._layer.release()
+            self._layer = None
+        scene = self.scene
+        if self.far_layer_mode == "off" or self._table is None or not scene.objects or scene.yaw_rate != 0:
+            return
+        lod = math.radians(self.lod_texels * cubemap.largest_texel_deg(self.layer_face_size))
+        self._layer = FarLayer(self.far_layer_mode, self.ctx, dict(scene.objects), self._table, self.near_radius,
+                               self.far_layer_error, self.layer_face_size, self.chunk_size, lod,
+                               lambda eye, radius: self._meshes.near_chunks(eye, radius))
+
+    def far_layer_status(self) -> dict:
+        """Mode, frames drawn with the far layer and in full, layers built, and the builder's error ("" if none)."""
+        layer = self._layer
+        return {"mode": self.far_layer_mode if layer is not None else "off", "layer_frames": self.layer_frames,
+                "full_frames": self.full_frames, "builds": layer.builds if layer is not None else 0,
+                "error": (layer.error or "") if layer is not None else ""}
+
+    def _layer_edit(self, edit: tuple) -> None:
+        if self._layer is not None:
+            self._layer.edit(edit)
 
     def _table_ok(self, scene: Scene) -> bool:
         """Whether the far field comes from a `FarFieldTable` (static, or only turning about the vertical)."""
@@ -268,12 +320,14 @@ class Renderer:
                             obj.yaw if yaw is None else yaw, obj.scale)
         self._meshes.update_object(name, moved)
         scene.objects[name] = moved
+        self._layer_edit(("move", name, moved))
 
     def remove_object(self, name: str) -> None:
         """Remove a named object from the scene (instantly: its chunks are no longer drawn)."""
         self._object(name)
         self._meshes.hide(name)
         del self.scene.objects[name]
+        self._layer_edit(("hide", name))
 
     def add_object(self, name: str, obj) -> None:
         """Add (or replace) a named `SceneObject`; the mesh buffers are rebuilt (previous kept on error)."""
@@ -288,11 +342,12 @@ class Renderer:
         objects = dict(scene.objects)
         objects[name] = obj
         trial = Scene(far=scene.far, objects=objects, name=scene.name)
-        meshes = MeshBuffers(self.ctx, self._mesh_prog, trial, self.chunk_size, self.lod_angle)
+        meshes = MeshBuffers(self.ctx, self._mesh_prog, trial.objects, self.chunk_size, self.lod_angle)
         if self._meshes is not None:
             self._meshes.release()
         self._meshes = meshes
         scene.objects = objects
+        self._layer_edit(("objects", dict(objects)))
 
     def scale_channel(self, channel: str, factor: float) -> None:
         """Scale one channel ('green', 'blue' or 'uv'); factor 0 removes it."""
@@ -319,11 +374,13 @@ class Renderer:
         self._set_footprint(cutoff_deg)
         if self._table is not None:
             try:
-                self._table = FarFieldTable(scene, self._directions, self._fwhm)
+                self._table = FarFieldTable.of_scene(scene, self._directions, self._fwhm)
             except BaseException:
                 self._fwhm, self._kernel_matrix = old
                 raise
         scene.lowpass_deg = cutoff_deg
+        if self._fwhm != old[0]:
+            self._restart_layer()
 
     def set_contrast(self, contrast: float) -> None:
         """Scale every channel's deviations from its mean over the dome (1: unchanged, 0: uniform)."""
@@ -375,10 +432,17 @@ class Renderer:
 
             level, texels, indptr, indices, weights = self._sampling()
             over_table = self._table is not None
-            self._render_cube(scene, pose, q, t, level, texels, background=not over_table)
+            layer = None if self._layer is None else self._layer.current(self._scene_eye(scene, pose))
+            if self._layer is not None:
+                if layer is None:
+                    self.full_frames += 1
+                else:
+                    self.layer_frames += 1
+            self._render_cube(scene, pose, q, t, level, texels, background=not over_table,
+                              chunks=None if layer is None else layer[1])
             t1 = time.perf_counter()
             if over_table:
-                self._table.lookup(psi, self._far_pairs)
+                (self._table if layer is None else layer[0]).lookup(psi, self._far_pairs)
                 sample_over_far(indptr, indices, weights, texels, self._channel, self._far_pairs, pairs)
             else:
                 sample_pairs(indptr, indices, weights, texels, self._channel, pairs)
@@ -388,30 +452,36 @@ class Renderer:
         self.last_timings = {"render": t1 - t0, "sample": t2 - t1, "convert": t3 - t2}
         return out
 
+    @staticmethod
+    def _scene_eye(scene: Scene, pose: Pose) -> np.ndarray:
+        """(3,) eye position (m) in the coordinates of the scene's objects (undoing the scene's rotation)."""
+        c = np.array([*scene.pivot, 0.0])
+        return c + _rot_z(-scene.rotation) @ (np.array([pose.x, pose.y, pose.z]) - c)
+
     def _render_cube(self, scene: Scene, pose: Pose, q: np.ndarray, t: float, level: int = 0,
-                     texels: np.ndarray | None = None, background: bool = True) -> None:
+                     texels: np.ndarray | None = None, background: bool = True, chunks=None) -> None:
         """Draw the six faces for `pose` and read the atlas (mipmap `level`) back into `texels`.
 
         background: draw the far field behind the meshes (channel 3 = polarised UV); otherwise leave it
-        black and write the meshes' coverage into channel 3, for `kernels.sample_over_far`.
+        black and write the meshes' coverage into channel 3, for `kernels.sample_over_far`. chunks: (n_chunks,)
+        bool, the mesh chunks to draw (default: all).
         """
         if background:
             self._ensure_far_texture()
-        c = np.array([*scene.pivot, 0.0])
-        eye = c + _rot_z(-scene.rotation) @ (np.array([pose.x, pose.y, pose.z]) - c)
+        eye = self._scene_eye(scene, pose)
         if background and scene.far_time_varying:
             old = self._far_tex
             self._far_tex = self._make_far_texture(scene, t, supersample=1)
             old.release()
         q_far = _rot_z(-scene.yaw_rate * t) @ q
-        self._draw(q, q_far, eye, background)
+        self._draw(q, q_far, eye, background, chunks)
         if level == 0:
             self._fbo.read_into(self._texels if texels is None else texels, components=4, dtype="nu2")
         else:
             self._atlas.build_mipmaps(0, level)
             self._atlas.read_into(texels, level=level)
 
-    def _draw(self, q: np.ndarray, q_far: np.ndarray, eye: np.ndarray, background: bool = True) -> None:
+    def _draw(self, q: np.ndarray, q_far: np.ndarray, eye: np.ndarray, background: bool = True, chunks=None) -> None:
         """Meshes first, then the far field only where no mesh was drawn (its fragments fail the depth test
         early, so the background pass costs only the uncovered texels)."""
         ctx, n = self.ctx, self.face_size
@@ -424,7 +494,7 @@ class Renderer:
         if self._meshes is not None and self._meshes.drawable:
             self._mesh_prog["coverage"].value = 0.0 if background else 1.0
             views = cubemap.face_view_matrices(q, eye)
-            self._meshes.draw(self._fbo, views, self._proj, q, eye, n)
+            self._meshes.draw(self._fbo, views, self._proj, q, eye, n, chunks=chunks)
             self._fbo.viewport = (0, 0, n, 6 * n)
         if not background:
             return
@@ -461,6 +531,9 @@ class Renderer:
         return (self._texels.astype(np.float32) / 65535.0).reshape(6, n, n, 4)
 
     def release(self) -> None:
+        if self._layer is not None:
+            self._layer.release()
+            self._layer = None
         for res in (self._far_tex, self._meshes):
             if res is not None:
                 res.release()

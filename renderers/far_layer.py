@@ -1,0 +1,350 @@
+"""The far layer: meshes beyond a near radius, rendered from a recent eye position into a footprint-integrated
+table, so that each frame draws only the meshes near the eye.
+
+Seen from an eye that moved by |delta| since the layer was rendered, content at distance D >= R (the near
+radius) is displaced by at most |delta| / (R - |delta|) radians. The layer is used while that bound stays under
+`error` (default 0.25°, a sixth of the LED pitch: about 13 mm of walking at R = 3 m); otherwise, and until a
+layer for the current scene edits exists, the frame is rendered in full. A frame using the layer:
+
+1. draws (at the near face size) the chunks that lie within R of the layer's eye, with their coverage;
+2. looks up the layer (a `FarFieldTable`: far meshes over the far field), one bilinear lookup per LED;
+3. samples the near atlas over that (`kernels.sample_over_far`).
+
+Near and far chunks are split by their distance from the layer's eye, so every chunk is drawn exactly once.
+The layer itself (`FarLayerBuilder`) renders the far chunks world-aligned at `layer_face_size` with their
+coverage, resamples the cube bilinearly onto the table grid (`farfield.TableGrid`), blurs it by the LED
+footprint and composites it over the scene's far-field table: layer + (1 - layer coverage) x far field, the
+same rule by which the near meshes are laid over it per LED.
+
+Two ways to build it, same code: `"sync"` builds in the calling thread whenever the layer is unusable
+(deterministic: what a frame shows depends only on the poses; for simulated clocks), `"async"` builds in a
+child process with its own GL context (on the other core), continuously while the eye moves, and hands the
+tables over in shared memory (double-buffered); frames never wait for it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import cubemap, shaders
+from .farfield import FarFieldTable, TableGrid
+from .meshbuffers import MeshBuffers
+
+MODES = ("off", "sync", "async")
+#: the eye may move this fraction of the allowed displacement before an async rebuild is asked for
+REFRESH_FRACTION = 0.25
+
+
+def allowed_displacement(radius: float, error: float) -> float:
+    """Largest eye displacement (m) for which content beyond `radius` (m) moves by at most `error` (rad)."""
+    return radius * math.tan(error) / (1.0 + math.tan(error))
+
+
+def cube_taps(directions: np.ndarray, face_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Bilinear taps of (P, 3) world directions in a world-aligned atlas (`cubemap` order): (P, 4) int32 texel
+    indices and (P, 4) float32 weights (clamped at face edges)."""
+    n = face_size
+    d = np.asarray(directions, dtype=np.float64)
+    forward = d @ cubemap.FACES[:, 0].T  # (P, 6)
+    face = np.argmax(forward, axis=1)
+    basis = cubemap.FACES[face]  # (P, 3, 3)
+    f = np.einsum("pj,pj->p", d, basis[:, 0])
+    a = np.einsum("pj,pj->p", d, basis[:, 1]) / f
+    b = np.einsum("pj,pj->p", d, basis[:, 2]) / f
+    x = np.clip((a + 1.0) * 0.5 * n - 0.5, 0.0, n - 1.0)
+    y = np.clip((b + 1.0) * 0.5 * n - 0.5, 0.0, n - 1.0)
+    x0 = np.minimum(np.floor(x).astype(np.int64), n - 2)
+    y0 = np.minimum(np.floor(y).astype(np.int64), n - 2)
+    fx, fy = x - x0, y - y0
+    base = face * n * n + y0 * n + x0
+    taps = np.stack([base, base + 1, base + n, base + n + 1], axis=1).astype(np.int32)
+    weights = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], axis=1).astype(np.float32)
+    return taps, weights
+
+
+class FarLayerBuilder:
+    """Renders the far layer of a set of objects over a far field, in table form, with the GL context given.
+
+    objects: {name: SceneObject}; far_field: the scene's `FarFieldTable` (its grid is the layer's); radius:
+    near radius (m); face_size: world-aligned cube face (texels); chunk_size (m) and lod_angle (rad) as in
+    `MeshBuffers`.
+    """
+
+    def __init__(self, ctx, objects: dict, far_field: FarFieldTable, radius: float, face_size: int,
+                 chunk_size: float, lod_angle: float, near: float = 1e-3, far: float = 1e3):
+        import moderngl
+
+        self.ctx, self.far_field, self.radius, self.face_size = ctx, far_field, float(radius), int(face_size)
+        self.chunk_size, self.lod_angle = float(chunk_size), float(lod_angle)
+        n, g = self.face_size, far_field.grid
+        self._mgl = moderngl
+        self._prog = ctx.program(vertex_shader=shaders.MESH_VS, fragment_shader=shaders.MESH_FS)
+        self._prog["textures"].value = 1
+        self._atlas = ctx.texture((n, 6 * n), 4, dtype="nu2")
+        self._depth = ctx.depth_renderbuffer((n, 6 * n))
+        self._fbo = ctx.framebuffer([self._atlas], self._depth)
+        self._proj = cubemap.projection_matrix(near, far)
+        self._texels = np.empty((6 * n * n, 4), dtype=np.uint16)
+        self._taps, self._weights = cube_taps(g.directions(), n)
+        self._field = np.empty((g.n_rows * g.n_cols, 4), dtype=np.float32)
+        cols = g.n_cols
+        self._static = np.concatenate([far_field.table_gb[:, :cols], far_field.table_uv[:, :cols]], axis=2)
+        self.meshes: MeshBuffers | None = None
+        self.set_objects(objects)
+
+    def set_objects(self, objects: dict) -> None:
+        meshes = MeshBuffers(self.ctx, self._prog, objects, self.chunk_size, self.lod_angle)
+        if self.meshes is not None:
+            self.meshes.release()
+        self.meshes = meshes
+
+    def apply(self, edit: tuple) -> None:
+        """A scene edit: ("objects", {name: SceneObject}), ("move", name, SceneObject) or ("hide", name)."""
+        kind = edit[0]
+        if kind == "objects":
+            self.set_objects(edit[1])
+        elif kind == "move":
+            self.meshes.update_object(edit[1], edit[2])
+        elif kind == "hide":
+            self.meshes.hide(edit[1])
+        else:
+            raise ValueError(f"unknown far-layer edit {kind!r}; allowed: objects, move, hide")
+
+    def build(self, eye: np.ndarray, out: FarFieldTable) -> FarFieldTable:
+        """The far layer seen from `eye` (3,) m, written into the tables of `out` (same grid); returns `out`."""
+        from .kernels import gather_bilinear
+
+        ctx, n, g = self.ctx, self.face_size, self.far_field.grid
+        eye = np.asarray(eye, dtype=np.float64)
+        self._fbo.use()
+        self._fbo.viewport = (0, 0, n, 6 * n)
+        ctx.enable(self._mgl.DEPTH_TEST)
+        ctx.depth_func = "<"
+        self._fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        meshes = self.meshes
+        if meshes is not None and meshes.drawable:
+            self._prog["coverage"].value = 1.0
+            q = np.eye(3)
+            far = ~meshes.near_chunks(eye, self.radius)
+            meshes.draw(self._fbo, cubemap.face_view_matrices(q, eye), self._proj, q, eye, n, chunks=far)
+        self._fbo.read_into(self._texels, components=4, dtype="nu2")
+        gather_bilinear(self._texels, self._taps, self._weights, self._field)
+        layer = g.blur(self._field.reshape(g.n_rows, g.n_cols, 4))  # [G, B, UV, coverage]
+        uncovered = 1.0 - np.clip(layer[..., 3:4], 0.0, 1.0)
+        layer[..., 3] = 0.0  # meshes carry no polarisation
+        layer += uncovered * (self._static * np.float32(1.0 / 65535.0))
+        g.quantise(layer[..., 0:2], out.table_gb)
+        g.quantise(layer[..., 2:4], out.table_uv)
+        return out
+
+    def release(self) -> None:
+        for res in (self.meshes, self._fbo, self._atlas, self._depth, self._prog):
+            if res is not None:
+                res.release()
+        self.meshes = None
+
+
+class FarLayer:
+    """The current far layer of a renderer, kept up to date by a builder ("sync" or "async").
+
+    Call `edit` for every change of the scene's objects, then `current(eye)` each frame: it returns
+    (layer table, near chunk mask) when a layer for the current objects is within the error bound of `eye`,
+    else None (render the frame in full). near_chunks(eye, radius) gives the renderer's own chunk mask.
+    """
+
+    def __init__(self, mode: str, ctx, objects: dict, far_field: FarFieldTable, radius: float, error: float,
+                 face_size: int, chunk_size: float, lod_angle: float, near_chunks):
+        if mode not in ("sync", "async"):
+            raise ValueError(f"far layer mode must be one of {', '.join(MODES)}, got {mode!r}")
+        self.mode, self.radius = mode, float(radius)
+        self.max_shift = allowed_displacement(self.radius, error)
+        self._near_chunks = near_chunks
+        self.grid = g = far_field.grid
+        self.generation = 0
+        self._eye = None  # eye, generation and near chunk mask of the layer in use
+        self._near = None
+        self._gen_ready = -1
+        self._index = 0
+        self.builds = 0
+        args = (objects, radius, face_size, chunk_size, lod_angle)
+        if mode == "sync":
+            self._builder = FarLayerBuilder(ctx, objects, far_field, *args[1:])
+            self._tables = [FarFieldTable(g, *_empty_tables(g))]
+        else:
+            self._worker = _Worker(far_field, args)
+            self._tables = [FarFieldTable(g, gb, uv) for gb, uv in self._worker.tables]
+
+    @property
+    def error(self) -> str | None:
+        """Why the async builder stopped (frames are then drawn in full), or None."""
+        return None if self.mode == "sync" else self._worker.error
+
+    def edit(self, edit: tuple) -> None:
+        """Apply a scene edit (see `FarLayerBuilder.apply`); the layer is unusable until rebuilt."""
+        self.generation += 1
+        if self.mode == "sync":
+            self._builder.apply(edit)
+        else:
+            self._worker.send(("edit", edit))
+
+    def _usable(self, eye: np.ndarray) -> bool:
+        return (self._eye is not None and self._gen_ready == self.generation
+                and float(np.linalg.norm(eye - self._eye)) <= self.max_shift)
+
+    def current(self, eye: np.ndarray):
+        """(FarFieldTable, near chunk mask) to draw the frame for `eye` (scene coordinates, m), or None."""
+        eye = np.asarray(eye, dtype=np.float64)
+        if self.mode == "sync":
+            if not self._usable(eye):
+                self._builder.build(eye, self._tables[0])
+                self._adopt(eye, self.generation, 0)
+        else:
+            for eye_built, gen, index in self._worker.results():
+                self._adopt(eye_built, gen, index)
+            stale = (self._eye is None or self._gen_ready != self.generation
+                     or np.linalg.norm(eye - self._eye) > REFRESH_FRACTION * self.max_shift)
+            if stale and not self._worker.busy:
+                self._worker.send(("build", eye, self.generation, 1 - self._index if self._eye is not None else 0))
+        if not self._usable(eye):
+            return None
+        return self._tables[self._index], self._near
+
+    def _adopt(self, eye: np.ndarray, generation: int, index: int) -> None:
+        self._eye, self._gen_ready, self._index = np.asarray(eye, dtype=np.float64), generation, index
+        self._near = self._near_chunks(self._eye, self.radius)
+        self.builds += 1
+
+    def release(self) -> None:
+        if self.mode == "sync":
+            self._builder.release()
+        else:
+            self._worker.close()
+
+
+def _empty_tables(grid: TableGrid, buffer=None) -> tuple[np.ndarray, np.ndarray]:
+    """([G, B], [UV, polarised UV]) (rows, cols + 1, 2) uint16 tables: zeroed, or views of `buffer` (both
+    tables back to back)."""
+    shape = (*grid.shape, 2)
+    if buffer is None:
+        return np.zeros(shape, np.uint16), np.zeros(shape, np.uint16)
+    size = int(np.prod(shape)) * 2
+    return tuple(np.ndarray(shape, dtype=np.uint16, buffer=buffer, offset=k * size) for k in range(2))
+
+
+class _Worker:
+    """The async builder: a child interpreter with its own GL context, two table slots in shared memory."""
+
+    def __init__(self, far_field: FarFieldTable, args: tuple):
+        import subprocess
+        import sys
+        from multiprocessing import Pipe, shared_memory
+
+        g = far_field.grid
+        nbytes = int(np.prod(g.shape)) * 2 * 2 * 2  # two uint16 tables of two channels
+        self._shm = [shared_memory.SharedMemory(create=True, size=nbytes) for _ in range(2)]
+        self.tables = [_empty_tables(g, s.buf) for s in self._shm]
+        for gb, uv in self.tables:
+            gb[...] = 0
+            uv[...] = 0
+        # a fresh interpreter (not multiprocessing's spawn, which re-runs the caller's main script)
+        self._conn, child = Pipe()
+        self._proc = subprocess.Popen([sys.executable, "-m", __name__, str(child.fileno())],
+                                      pass_fds=(child.fileno(),))
+        child.close()
+        self._conn.send(([s.name for s in self._shm], far_field.table_gb, far_field.table_uv, g, args))
+        self.busy = False
+        self.error: str | None = None
+
+    def send(self, message: tuple) -> None:
+        if self.error is not None:
+            return
+        try:
+            self._conn.send(message)
+        except (OSError, EOFError) as exc:
+            self.error = f"far-layer process gone: {exc}"
+            return
+        if message[0] == "build":
+            self.busy = True
+
+    def results(self):
+        """Layers finished since the last call: (eye, generation, table index) each."""
+        out = []
+        try:
+            while self.error is None and self._conn.poll():
+                msg = self._conn.recv()
+                if msg[0] == "built":
+                    self.busy = False
+                    out.append(msg[1:])
+                elif msg[0] == "error":
+                    self.error, self.busy = msg[1], False
+        except (OSError, EOFError) as exc:
+            self.error = f"far-layer process gone: {exc}"
+        return out
+
+    def close(self) -> None:
+        try:
+            self._conn.send(("stop",))
+        except (OSError, EOFError):
+            pass
+        try:
+            self._proc.wait(timeout=5)
+        except Exception:
+            self._proc.kill()
+            self._proc.wait()
+        self._conn.close()
+        self.tables = []
+        for s in self._shm:
+            s.close()
+            s.unlink()
+
+
+def _serve(fd: int) -> None:  # pragma: no cover - runs in the child process
+    """Child process: build layers on request into the shared tables until told to stop."""
+    import os
+    from multiprocessing import resource_tracker, shared_memory
+    from multiprocessing.connection import Connection
+
+    from .gl import create_context
+
+    try:
+        os.nice(10)  # the frame loop comes first
+    except OSError:
+        pass
+    conn = Connection(fd)
+    shm_names, static_gb, static_uv, grid, (objects, radius, face_size, chunk_size, lod_angle) = conn.recv()
+    shms = [shared_memory.SharedMemory(name=name) for name in shm_names]
+    for s in shms:  # the renderer owns the tables: this interpreter's resource tracker must not unlink them
+        resource_tracker.unregister(s._name, "shared_memory")
+    tables = [FarFieldTable(grid, *_empty_tables(grid, s.buf)) for s in shms]
+    try:
+        builder = FarLayerBuilder(create_context(), objects, FarFieldTable(grid, static_gb, static_uv), radius,
+                                  face_size, chunk_size, lod_angle)
+        while True:
+            msg = conn.recv()
+            if msg[0] == "stop":
+                break
+            if msg[0] == "edit":
+                builder.apply(msg[1])
+            elif msg[0] == "build":
+                _, eye, generation, index = msg
+                builder.build(eye, tables[index])
+                conn.send(("built", eye, generation, index))
+    except (EOFError, KeyboardInterrupt):
+        pass
+    except Exception as exc:  # reported to the renderer, which then renders every frame in full
+        try:
+            conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        except OSError:
+            pass
+    finally:
+        del tables
+        for s in shms:
+            s.close()
+
+
+if __name__ == "__main__":  # pragma: no cover - the async builder's process
+    import sys
+
+    _serve(int(sys.argv[1]))

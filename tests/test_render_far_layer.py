@@ -1,0 +1,195 @@
+"""The far layer (meshes beyond the near radius from a recent eye position) against full renders (real EGL)."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from antarium.geometry import load_dome
+from antarium.pose import Pose
+from antarium.renderers import cubemap
+from antarium.renderers.far_layer import allowed_displacement, cube_taps
+from antarium.renderers.habitat import habitat_scene
+from antarium.renderers.kernels import gather_bilinear
+from antarium.renderers.renderer import Renderer
+from antarium.renderers.scene import SceneObject
+
+#: a walk of 10 cm with turns, eye 1 cm above the ground (as an ant on the ball)
+WALK = [Pose(0.002 * k, 0.001 * k, 0.01, 0.02 * k) for k in range(50)]
+CHECK = (0, 20, 49)
+
+
+@pytest.fixture(scope="module")
+def dome():
+    return load_dome()
+
+
+def small_habitat():
+    return habitat_scene(n_tussocks=300, n_stones=60, n_bushes=8, n_trees=4)
+
+
+def drive_to_radiance(frame: np.ndarray) -> np.ndarray:
+    return frame.astype(np.float64) / 65535.0
+
+
+@pytest.fixture(scope="module")
+def reference(dome):
+    """Full renders at the default face size (no far layer) at the CHECK poses. One renderer at a time: each
+    owns a GL context, current in its thread while it is the newest."""
+    r = Renderer(dome)
+    r.set_scene(small_habitat())
+    frames = [drive_to_radiance(r.render(WALK[k], t=0.0)) for k in CHECK]
+    r.release()
+    return frames
+
+
+def walk(renderer, poses):
+    out = np.empty((20350, 2), np.uint16)
+    frames = []
+    for k, pose in enumerate(poses):
+        renderer.render(pose, out=out, t=0.0)
+        if k in CHECK:
+            frames.append(drive_to_radiance(out))
+    return frames
+
+
+def test_cube_taps_interpolate_a_world_aligned_atlas():
+    n = 64
+    texel_dirs = cubemap.atlas_directions(n)
+    smooth = np.stack([0.5 + 0.4 * texel_dirs[:, 0], 0.5 + 0.4 * texel_dirs[:, 2], 0.3 + 0.2 * texel_dirs[:, 1],
+                       np.full(len(texel_dirs), 0.7)], axis=1)
+    atlas = np.rint(smooth * 65535).astype(np.uint16)
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(5000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    taps, weights = cube_taps(d, n)
+    assert taps.min() >= 0 and taps.max() < 6 * n * n
+    np.testing.assert_allclose(weights.sum(axis=1), 1.0, atol=1e-6)
+    out = np.empty((len(d), 4), np.float32)
+    gather_bilinear(atlas, taps, weights, out)
+    expected = np.stack([0.5 + 0.4 * d[:, 0], 0.5 + 0.4 * d[:, 2], 0.3 + 0.2 * d[:, 1], np.full(len(d), 0.7)], 1)
+    # a linear function of direction, sampled on a gnomonic grid: bilinear error of order a texel (1.8 deg)
+    assert np.abs(out - expected).max() < 0.4 * math.radians(cubemap.largest_texel_deg(n))
+
+
+def test_allowed_displacement_bounds_the_parallax():
+    r, err = 3.0, math.radians(0.25)
+    d = allowed_displacement(r, err)
+    # content at the near radius seen from an eye moved by d: displacement d / (r - d) radians
+    assert d / (r - d) == pytest.approx(math.tan(err), rel=1e-9)
+    assert 0.012 < d < 0.014
+
+
+def test_sync_far_layer_matches_full_renders_along_a_walk(dome, reference):
+    r = Renderer(dome, far_layer="sync")
+    r.set_scene(small_habitat())
+    frames = walk(r, WALK)
+    status = r.far_layer_status()
+    r.release()
+    diff = np.concatenate([np.abs(a - b).sum(axis=1) for a, b in zip(frames, reference)])
+    # near meshes at 96 texels, far ones from the layer at 192: LED values within a few % of the full render
+    assert diff.mean() < 0.004 and np.percentile(diff, 99) < 0.06
+    # every frame used a layer; a 10 cm walk needs a new one every <= 13 mm (0.25 deg at 3 m)
+    assert status["full_frames"] == 0 and status["layer_frames"] == len(WALK)
+    walked = math.hypot(WALK[-1].x - WALK[0].x, WALK[-1].y - WALK[0].y)
+    assert walked / allowed_displacement(3.0, math.radians(0.25)) <= status["builds"] <= 3 * len(CHECK) + 10
+
+
+def test_far_layer_follows_object_edits(dome):
+    scene = small_habitat()
+    tree = scene.objects["tree_0"]
+    moved = SceneObject(tree.mesh, position=(6.0, 0.0, 0.0), yaw=0.0)  # 6 m ahead: in the far layer
+    pose = Pose(0.0, 0.0, 0.01, 0.0)
+    ref = Renderer(dome)
+    ref.set_scene(small_habitat())
+    ref.move_object("tree_0", position=moved.position, yaw=0.0)
+    expected = drive_to_radiance(ref.render(pose, t=0.0))
+    ref.remove_object("tree_0")
+    expected_removed = drive_to_radiance(ref.render(pose, t=0.0))
+    ref.release()
+
+    r = Renderer(dome, far_layer="sync")
+    r.set_scene(scene)
+    before = drive_to_radiance(r.render(pose, t=0.0))
+    r.move_object("tree_0", position=moved.position, yaw=0.0)
+    after = drive_to_radiance(r.render(pose, t=0.0))
+    r.remove_object("tree_0")
+    removed = drive_to_radiance(r.render(pose, t=0.0))
+    builds = r.far_layer_status()["builds"]
+    r.release()
+    ahead = (dome.azimuth > -0.3) & (dome.azimuth < 0.3) & (dome.elevation > 0.05)
+    assert np.abs(after - before)[ahead].sum(axis=1).max() > 0.2  # the tree appeared in front
+    assert np.abs(after - expected).sum(axis=1).mean() < 0.004
+    assert np.abs(removed - expected_removed).sum(axis=1).mean() < 0.004
+    assert builds == 3  # one layer per edit, none in between
+
+
+def test_async_far_layer_takes_over_and_survives_its_process(dome, reference):
+    r = Renderer(dome, far_layer="async")
+    try:
+        r.set_scene(small_habitat())
+        out = np.empty((20350, 2), np.uint16)
+        deadline = time.monotonic() + 60
+        while r.layer_frames == 0 and time.monotonic() < deadline:  # full frames until the first layer is in
+            r.render(WALK[0], out=out, t=0.0)
+            time.sleep(0.005)
+        assert r.layer_frames == 1 and r.full_frames >= 1
+        first = drive_to_radiance(out)
+        assert np.abs(first - reference[0]).sum(axis=1).mean() < 0.004
+        # an eye jump far beyond the bound: drawn in full at once (never a stale layer)
+        full_before = r.full_frames
+        r.render(Pose(5.0, 5.0, 0.01, 0.0), out=out, t=0.0)
+        assert r.full_frames == full_before + 1
+        # the builder process dies: reported, and every frame is drawn in full from then on
+        r._layer._worker._proc.kill()
+        r._layer._worker._proc.wait()
+        deadline = time.monotonic() + 10
+        while not r.far_layer_status()["error"] and time.monotonic() < deadline:
+            r.render(Pose(5.0, 5.0, 0.01, 0.0), out=out, t=0.0)
+            time.sleep(0.01)
+        status = r.far_layer_status()
+        assert "far-layer process gone" in status["error"]
+        frame = r.render(Pose(5.0, 5.0, 0.01, 0.0), t=0.0)
+        assert frame.any() and r.far_layer_status()["full_frames"] == status["full_frames"] + 1
+    finally:
+        r.release()
+
+
+def test_async_release_stops_the_process_and_frees_the_tables(dome):
+    from multiprocessing import shared_memory
+
+    r = Renderer(dome, far_layer="async")
+    r.set_scene(small_habitat())
+    worker = r._layer._worker
+    names = [s.name for s in worker._shm]
+    r.release()
+    assert worker._proc.poll() is not None
+    for name in names:
+        with pytest.raises(FileNotFoundError):
+            shared_memory.SharedMemory(name=name)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"far_layer": "sometimes"}, "far_layer must be one of off, sync, async"),
+    ({"far_layer": "sync", "near_radius": 0.0}, "near_radius must be a positive number of metres"),
+    ({"far_layer": "sync", "far_layer_error_deg": 10.0}, "far_layer_error_deg must be in (0, 5]"),
+    ({"far_layer": "sync", "layer_face_size": 8}, "layer_face_size must be an integer in 16..2048"),
+])
+def test_bad_far_layer_settings_are_refused(dome, kwargs, message):
+    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)").replace("]", r"\]")):
+        Renderer(dome, **kwargs)
+
+
+def test_scenes_without_meshes_or_with_a_turning_far_field_have_no_layer(dome):
+    r = Renderer(dome, far_layer="sync")
+    try:
+        r.set_scene("horizon")
+        r.render(Pose(0, 0, 0.01, 0), t=0.0)
+        assert r.far_layer_status()["mode"] == "off"
+        r.set_scene(small_habitat())
+        assert r.far_layer_status()["mode"] == "sync"
+    finally:
+        r.release()
