@@ -33,6 +33,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
         "stats_every": 19,  # publish frame statistics every N frames
         "pose_every": 1,  # publish the pose every N frames
         "realtime_priority": 0,  # 1..99: run the frame loop (and the spawned emulator) SCHED_FIFO; 0: off
+        "cpu": -1,  # a CPU for the frame loop's thread alone (the rest of the rig on the others); -1: no pinning
     },
     "locomotion": {"source": "scripted"},  # other keys are passed to the source as keyword arguments
     "link": {
@@ -84,6 +85,7 @@ _RANGES = {
     ("loop", "stats_every"): (1, 100000),
     ("loop", "pose_every"): (1, 100000),
     ("loop", "realtime_priority"): (0, 99),
+    ("loop", "cpu"): (-1, 4095),
     ("link", "port"): (0, 65535),
     ("render", "face_size"): (0, 2048),
     ("render", "near_radius_m"): (0.01, 1000.0),

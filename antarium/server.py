@@ -153,6 +153,8 @@ class Server:
         self.record = record
         self.trial_paths: list[Path] = []
         self.final_stats: dict[str, Any] = {}
+        self._isolation = None  # antarium.cpu.Isolation when [loop] cpu pins the frame loop
+        self._loop_tid = 0
         self.final_frame = None  # the last LED frame sent, kept after the loop stopped
         self._entities: list = []
         self._pose_pub = self._stats_pub = None
@@ -257,6 +259,8 @@ class Server:
 
     def _status_loop(self) -> None:
         while not self._stopping.wait(1.0):
+            if self._isolation is not None:  # threads and processes started since inherit their starter's CPUs
+                self._isolation.apply(self._loop_tid)
             try:
                 status = self.status()
                 if self.session is not None:
@@ -527,6 +531,8 @@ class Server:
                 on_frame=self._on_frame, on_event=self._publish_event)
             if self.renderer is not None:
                 self._load_scene(self.config["render"]["scene"])
+                if hasattr(self.renderer, "wait_far_layer") and not self.renderer.wait_far_layer(self.loop.pose):
+                    self.echo("antarium serve: the far layer is not ready; the first frames are drawn in full")
             self._open_bus()
             if self.source is not None:
                 if self.session is not None and hasattr(self.source, "use_session"):
@@ -547,6 +553,7 @@ class Server:
         self._status_thread = threading.Thread(target=self._status_loop, name="status", daemon=True)
         self._status_thread.start()
         self._loop_thread = threading.current_thread()
+        self._isolate_loop(loop_cfg["cpu"])
         self._ready.set()
         self.loop.event("server_started", rig=self.rig)
         if self._stopping.is_set():  # stopped (a signal) while starting
@@ -558,6 +565,23 @@ class Server:
             return self.loop.run(until=until, frames=frames)
         finally:
             self._shutdown()
+
+    def _isolate_loop(self, cpu: int) -> None:
+        """[loop] cpu >= 0: this (the frame loop's) thread alone on that CPU; warns if that cannot be done."""
+        if cpu < 0:
+            return
+        from antarium import cpu as cpus
+
+        if not cpus.supported():
+            self.echo("antarium serve: [loop] cpu needs Linux (sched_setaffinity, /proc); running unpinned")
+            return
+        try:
+            self._isolation = cpus.Isolation(cpu)
+        except ValueError as exc:
+            self.echo(f"antarium serve: {exc}; running unpinned")
+            return
+        self._loop_tid = threading.get_native_id()
+        self._isolation.apply(self._loop_tid)
 
     def _set_realtime(self, priority: int) -> None:
         """SCHED_FIFO for this (the frame loop's) thread; processes it starts inherit it. Warns if not allowed."""

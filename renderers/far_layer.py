@@ -181,6 +181,11 @@ class FarLayer:
         """Why the async builder stopped (frames are then drawn in full), or None."""
         return None if self.mode == "sync" else self._worker.error
 
+    @property
+    def pid(self) -> int | None:
+        """Process id of the async builder (None when sync)."""
+        return None if self.mode == "sync" else self._worker._proc.pid
+
     def edit(self, edit: tuple) -> None:
         """Apply a scene edit (see `FarLayerBuilder.apply`); the layer is unusable until rebuilt."""
         self.generation += 1
@@ -308,9 +313,10 @@ def _serve(fd: int) -> None:  # pragma: no cover - runs in the child process
 
     from .gl import create_context
 
-    try:
-        os.nice(10)  # the frame loop comes first
-    except OSError:
+    try:  # the frame loop comes first: an ordinary, lowered priority even if the loop's thread is real-time
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        os.nice(10)
+    except (AttributeError, OSError):
         pass
     conn = Connection(fd)
     shm_names, static_gb, static_uv, grid, (objects, radius, face_size, chunk_size, lod_angle) = conn.recv()

@@ -271,12 +271,29 @@ class Renderer:
                                self.far_layer_error, self.layer_face_size, self.chunk_size, lod,
                                lambda eye, radius: self._meshes.near_chunks(eye, radius))
 
+    def wait_far_layer(self, pose, timeout_s: float = 60.0) -> bool:
+        """Block until a far layer usable at `pose` is in (at once when there is no far layer); False on timeout
+        or a builder error. Call before the first frame, so that the experiment does not start with frames
+        drawn in full."""
+        scene = self._require_scene()
+        if self._layer is None:
+            return True
+        eye = self._scene_eye(scene, _check_pose(pose))
+        deadline = time.monotonic() + timeout_s
+        while self._layer.current(eye) is None:
+            if self._layer.error or time.monotonic() > deadline:
+                return False
+            time.sleep(0.005)
+        return True
+
     def far_layer_status(self) -> dict:
-        """Mode, frames drawn with the far layer and in full, layers built, and the builder's error ("" if none)."""
+        """Mode, frames drawn with the far layer and in full, layers built, the builder's error ("" if none) and
+        process id (None unless async)."""
         layer = self._layer
         return {"mode": self.far_layer_mode if layer is not None else "off", "layer_frames": self.layer_frames,
                 "full_frames": self.full_frames, "builds": layer.builds if layer is not None else 0,
-                "error": (layer.error or "") if layer is not None else ""}
+                "error": (layer.error or "") if layer is not None else "",
+                "pid": layer.pid if layer is not None else None}
 
     def _layer_edit(self, edit: tuple) -> None:
         if self._layer is not None:
