@@ -32,8 +32,9 @@ DEFAULTS: dict[str, dict[str, Any]] = {
         "ball_radius": 0.05,  # metres
         "stats_every": 19,  # publish frame statistics every N frames
         "pose_every": 1,  # publish the pose every N frames
-        "realtime_priority": 0,  # 1..99: run the frame loop (and the spawned emulator) SCHED_FIFO; 0: off
-        "cpu": -1,  # a CPU for the frame loop's thread alone (the rest of the rig on the others); -1: no pinning
+        "realtime_priority": 10,  # 1..99: run the frame loop (and the spawned emulator) SCHED_FIFO; 0: off
+        "cpu": "auto",  # a CPU for the frame loop's thread alone, the rest of the rig on the others: a CPU number,
+        # "auto" (the last one, when there are two or more) or "off"
     },
     "locomotion": {"source": "scripted"},  # other keys are passed to the source as keyword arguments
     "link": {
@@ -85,7 +86,6 @@ _RANGES = {
     ("loop", "stats_every"): (1, 100000),
     ("loop", "pose_every"): (1, 100000),
     ("loop", "realtime_priority"): (0, 99),
-    ("loop", "cpu"): (-1, 4095),
     ("link", "port"): (0, 65535),
     ("render", "face_size"): (0, 2048),
     ("render", "near_radius_m"): (0.01, 1000.0),
@@ -117,6 +117,9 @@ def check_value(section: str, key: str, value: Any) -> Any:
     elif (section, key) == ("render", "scene"):
         if not isinstance(value, (str, dict)) or (isinstance(value, dict) and "scene" not in value):
             raise ConfigError(f"{where} must be a scene name, a file path or a table with 'scene', got {value!r}")
+    elif (section, key) == ("loop", "cpu"):
+        if not (value in ("auto", "off") or (isinstance(value, int) and not isinstance(value, bool) and value >= 0)):
+            raise ConfigError(f"{where} must be a CPU number (>= 0), \"auto\" or \"off\", got {value!r}")
     elif isinstance(default, str):
         if not isinstance(value, str):
             raise ConfigError(f"{where} must be a string, got {value!r}")

@@ -39,11 +39,14 @@ def _descendants(pid: int) -> list[int]:
 class Isolation:
     """The frame loop's thread on `cpu`, everything else of ours on the other CPUs this process may use now.
 
-    Raises ValueError if `cpu` is not one this process may use, or it is the only one.
+    cpu: a CPU number, or "auto": the highest usable one. Raises ValueError if `cpu` is not one this process
+    may use, or it is the only one.
     """
 
-    def __init__(self, cpu: int):
-        usable = os.sched_getaffinity(0)
+    def __init__(self, cpu: int | str):
+        self.usable = usable = os.sched_getaffinity(0)
+        if cpu == "auto":
+            cpu = max(usable)
         if cpu not in usable:
             raise ValueError(f"[loop] cpu {cpu} is not one this process may use; allowed: {sorted(usable)}")
         self.cpu, self.others = cpu, set(usable) - {cpu}
@@ -53,14 +56,21 @@ class Isolation:
     def apply(self, loop_thread_id: int) -> None:
         """Pin thread `loop_thread_id` (a native thread id of this process) to the loop's CPU, every other
         thread of this process and every descendant process to the others."""
+        self._place(lambda tid: {self.cpu} if tid == loop_thread_id else self.others, self.others)
+
+    def release(self) -> None:
+        """Every thread of this process and every descendant back on all the CPUs it could use before."""
+        self._place(lambda tid: self.usable, self.usable)
+
+    @staticmethod
+    def _place(thread_cpus, process_cpus: set) -> None:
         for task in Path("/proc/self/task").iterdir():
-            tid = int(task.name)
             try:
-                os.sched_setaffinity(tid, {self.cpu} if tid == loop_thread_id else self.others)
+                os.sched_setaffinity(int(task.name), thread_cpus(int(task.name)))
             except OSError:  # the thread ended meanwhile
                 pass
         for pid in _descendants(os.getpid()):
             try:
-                os.sched_setaffinity(pid, self.others)
+                os.sched_setaffinity(pid, process_cpus)
             except OSError:
                 pass

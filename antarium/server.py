@@ -155,6 +155,7 @@ class Server:
         self.final_stats: dict[str, Any] = {}
         self._isolation = None  # antarium.cpu.Isolation when [loop] cpu pins the frame loop
         self._loop_tid = 0
+        self._realtime_set = False
         self.final_frame = None  # the last LED frame sent, kept after the loop stopped
         self._entities: list = []
         self._pose_pub = self._stats_pub = None
@@ -259,8 +260,9 @@ class Server:
 
     def _status_loop(self) -> None:
         while not self._stopping.wait(1.0):
-            if self._isolation is not None:  # threads and processes started since inherit their starter's CPUs
-                self._isolation.apply(self._loop_tid)
+            isolation = self._isolation
+            if isolation is not None:  # threads and processes started since inherit their starter's CPUs
+                isolation.apply(self._loop_tid)
             try:
                 status = self.status()
                 if self.session is not None:
@@ -566,19 +568,21 @@ class Server:
         finally:
             self._shutdown()
 
-    def _isolate_loop(self, cpu: int) -> None:
-        """[loop] cpu >= 0: this (the frame loop's) thread alone on that CPU; warns if that cannot be done."""
-        if cpu < 0:
+    def _isolate_loop(self, cpu: int | str) -> None:
+        """[loop] cpu: this (the frame loop's) thread alone on that CPU; warns if that cannot be done."""
+        if cpu == "off":
             return
         from antarium import cpu as cpus
 
         if not cpus.supported():
-            self.echo("antarium serve: [loop] cpu needs Linux (sched_setaffinity, /proc); running unpinned")
+            if cpu != "auto":
+                self.echo("antarium serve: [loop] cpu needs Linux (sched_setaffinity, /proc); running unpinned")
             return
         try:
             self._isolation = cpus.Isolation(cpu)
         except ValueError as exc:
-            self.echo(f"antarium serve: {exc}; running unpinned")
+            if cpu != "auto":  # "auto" on a one-CPU machine: nothing to say
+                self.echo(f"antarium serve: {exc}; running unpinned")
             return
         self._loop_tid = threading.get_native_id()
         self._isolation.apply(self._loop_tid)
@@ -589,6 +593,7 @@ class Server:
 
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+            self._realtime_set = True
         except (AttributeError, PermissionError, OSError) as exc:
             self.echo(f"antarium serve: realtime priority {priority} not granted ({exc}); running without it")
 
@@ -651,6 +656,23 @@ class Server:
         release = getattr(self.renderer, "release", None)
         if release is not None:
             release()
+        self._unpin()
+
+    def _unpin(self) -> None:
+        """Undo [loop] cpu and realtime_priority for this thread and process (a script goes on running)."""
+        isolation, self._isolation = self._isolation, None
+        if isolation is not None:
+            if self._status_thread is not None and self._status_thread is not threading.current_thread():
+                self._status_thread.join(2.0)  # it re-applies the placement once a second
+            isolation.release()
+        if self._realtime_set:
+            import os
+
+            self._realtime_set = False
+            try:
+                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+            except OSError:
+                pass
 
     def __enter__(self) -> Server:
         return self.start_thread()
