@@ -211,20 +211,23 @@ class MeshBuffers:
         *_, c0, c1 = self._ranges[name]
         self._active[c0:c1] = False
 
-    def visible_chunks(self, q: np.ndarray, eye: np.ndarray) -> np.ndarray:
-        """(n_chunks, 6) bool: chunk bounding sphere intersects the face's 90° frustum."""
-        rel = (self._centre - eye) @ q  # dome (cube) frame
+    def visible_chunks(self, q: np.ndarray, eye: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
+        """(n, 6) bool: the bounding sphere of chunk ids[i] (default: every chunk) meets face k's 90° frustum."""
+        ids = slice(None) if ids is None else ids
+        radius = self._radius[ids]
+        rel = (self._centre[ids] - eye) @ q  # dome (cube) frame
         f = rel @ FACES[:, 0].T
         r = np.abs(rel @ FACES[:, 1].T)
         u = np.abs(rel @ FACES[:, 2].T)
-        slack = -math.sqrt(2.0) * self._radius[:, None]
-        return (f - r >= slack) & (f - u >= slack) & self._active[:, None]
+        slack = -math.sqrt(2.0) * radius[:, None]
+        return (f - r >= slack) & (f - u >= slack) & self._active[ids, None]
 
-    def levels(self, eye: np.ndarray) -> np.ndarray:
-        """(n_chunks,) level of detail of each chunk for an eye position (m)."""
+    def levels(self, eye: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
+        """(n,) level of detail of chunks `ids` (default: every chunk) for an eye position (m)."""
+        ids = slice(None) if ids is None else ids
+        dist = np.maximum(np.linalg.norm(self._centre[ids] - eye, axis=1) - self._radius[ids], 1e-6)
         if self.lod_angle <= 0:
-            return np.zeros(self.n_chunks, dtype=np.int64)
-        dist = np.maximum(np.linalg.norm(self._centre - eye, axis=1) - self._radius, 1e-6)
+            return np.zeros(len(dist), dtype=np.int64)
         allowed = self.lod_angle * dist / LOD_CELLS[0]
         return np.clip(np.floor(np.log2(np.maximum(allowed, 1e-9))) + 1, 0, len(LOD_CELLS)).astype(np.int64)
 
@@ -236,26 +239,26 @@ class MeshBuffers:
              chunks: np.ndarray | None = None) -> int:
         """Draw every face's visible chunks (only those where `chunks` (n_chunks,) bool is set, if given) into
         the atlas; returns the number of chunk draws."""
-        level = self.levels(eye)
-        rows = np.arange(self.n_chunks)
-        counts = self._count[rows, level]
-        firsts = self._first[rows, level]
-        keep = counts > 0 if chunks is None else (counts > 0) & chunks
-        vis = self.visible_chunks(q, eye) & keep[:, None]
+        ids = np.arange(self.n_chunks) if chunks is None else np.flatnonzero(chunks)
+        level = self.levels(eye, ids)
+        counts = self._count[ids, level]
+        firsts = self._first[ids, level]
+        vis = self.visible_chunks(q, eye, ids) & (counts > 0)[:, None]
         # commands ordered by (face, culled or not), so each face needs at most two indirect draws
-        face, chunk = np.nonzero(vis.T)
+        face, local = np.nonzero(vis.T)
+        chunk = ids[local]
         batch = 2 * face + self._single_sided[chunk]
         # front to back within each batch, so that hidden fragments fail the depth test early
         near = np.linalg.norm(self._centre[chunk] - eye, axis=1) - self._radius[chunk]
         order = np.lexsort((near, batch))
-        chunk, batch = chunk[order], batch[order]
+        chunk, local, batch = chunk[order], local[order], batch[order]
         total = len(chunk)
-        self.last_triangles = int(counts[chunk].sum()) // 3
+        self.last_triangles = int(counts[local].sum()) // 3
         if total == 0:
             return 0
         cmds = self._cmds[:total]
-        cmds[:, 0] = counts[chunk]
-        cmds[:, 2] = firsts[chunk]
+        cmds[:, 0] = counts[local]
+        cmds[:, 2] = firsts[local]
         self._indirect.write(cmds.tobytes())
         per_batch = np.bincount(batch, minlength=12)
         offsets = np.concatenate([[0], np.cumsum(per_batch)[:-1]])
