@@ -33,6 +33,8 @@ from antarium.pose import Pose
 #: events that are also printed on stderr: an operator must notice them
 ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "frame_rejected")
 COMMAND_TIMEOUT_S = 60.0
+#: how long another thread may keep the GIL while the frame loop waits for it (s); Python's default is 5 ms
+GIL_SWITCH_INTERVAL_S = 2e-4
 
 
 class ServerError(RuntimeError):
@@ -156,6 +158,7 @@ class Server:
         self._isolation = None  # antarium.cpu.Isolation when [loop] cpu pins the frame loop
         self._loop_tid = 0
         self._realtime_set = False
+        self._switch_interval: float | None = None
         self.final_frame = None  # the last LED frame sent, kept after the loop stopped
         self._entities: list = []
         self._pose_pub = self._stats_pub = None
@@ -552,6 +555,10 @@ class Server:
         # over these object graphs would stall a frame for milliseconds.
         gc.collect()
         gc.freeze()
+        # Another thread of ours (the log sender, the status thread, the bus' callbacks) holding the GIL when a
+        # frame is due keeps it until it blocks or this interval passes: 5 ms by default, a whole frame period.
+        self._switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
         self._status_thread = threading.Thread(target=self._status_loop, name="status", daemon=True)
         self._status_thread.start()
         self._loop_thread = threading.current_thread()
@@ -659,7 +666,10 @@ class Server:
         self._unpin()
 
     def _unpin(self) -> None:
-        """Undo [loop] cpu and realtime_priority for this thread and process (a script goes on running)."""
+        """Undo [loop] cpu, realtime_priority and the GIL switch interval (a script goes on running)."""
+        if self._switch_interval is not None:
+            sys.setswitchinterval(self._switch_interval)
+            self._switch_interval = None
         isolation, self._isolation = self._isolation, None
         if isolation is not None:
             if self._status_thread is not None and self._status_thread is not threading.current_thread():

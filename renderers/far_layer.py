@@ -242,6 +242,7 @@ class _Worker:
     """The async builder: a child interpreter with its own GL context, two table slots in shared memory."""
 
     def __init__(self, far_field: FarFieldTable, args: tuple):
+        import os
         import subprocess
         import sys
         from multiprocessing import Pipe, shared_memory
@@ -258,7 +259,10 @@ class _Worker:
         self._proc = subprocess.Popen([sys.executable, "-m", __name__, str(child.fileno())],
                                       pass_fds=(child.fileno(),))
         child.close()
-        self._conn.send(([s.name for s in self._shm], far_field.table_gb, far_field.table_uv, g, args))
+        # below a real-time frame loop (pinned apart) the builder may take its share; beside an ordinary one, less
+        realtime = hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR)
+        self._conn.send(([s.name for s in self._shm], far_field.table_gb, far_field.table_uv, g, args,
+                         0 if realtime else 10))
         self.busy = False
         self.error: str | None = None
 
@@ -313,13 +317,13 @@ def _serve(fd: int) -> None:  # pragma: no cover - runs in the child process
 
     from .gl import create_context
 
-    try:  # the frame loop comes first: an ordinary, lowered priority even if the loop's thread is real-time
+    conn = Connection(fd)
+    shm_names, static_gb, static_uv, grid, (objects, radius, face_size, chunk_size, lod_angle), nice = conn.recv()
+    try:  # the frame loop comes first: ordinary scheduling even if the loop's thread is real-time
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-        os.nice(10)
+        os.nice(nice)
     except (AttributeError, OSError):
         pass
-    conn = Connection(fd)
-    shm_names, static_gb, static_uv, grid, (objects, radius, face_size, chunk_size, lod_angle) = conn.recv()
     shms = [shared_memory.SharedMemory(name=name) for name in shm_names]
     for s in shms:  # the renderer owns the tables: this interpreter's resource tracker must not unlink them
         resource_tracker.unregister(s._name, "shared_memory")
