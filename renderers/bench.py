@@ -118,7 +118,7 @@ def run(args) -> int:
     print(f"{'workload':<14}{'triangles':>10}{'frames/s':>10}{'x190 Hz':>9}{'goal':>7}{'render ms':>11}"
           f"{'sample ms':>11}{'convert ms':>12}{'CPU ms':>8}")
     for name, (make, kwargs) in workloads().items():
-        renderer = Renderer(dome, **kwargs)  # one at a time: each owns the thread's current GL context
+        renderer = Renderer(dome, **kwargs)
         try:
             r = measure(renderer, make(), frames)
             r["renderer"] = {"face_size": renderer.face_size,

@@ -10,6 +10,7 @@ world-aligned cube texture sampled by the background pass. Scenes without meshes
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 
@@ -55,6 +56,17 @@ def lowpass_fwhm(cutoff_deg: float) -> float:
     return sigma * math.sqrt(8.0 * math.log(2.0))
 
 
+def _gl_current(method):
+    """Run a Renderer method with its own GL context current, so that several renderers can share a thread."""
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        with self.ctx:
+            return method(self, *args, **kwargs)
+
+    return wrapper
+
+
 def _check_pose(pose) -> Pose:
     if isinstance(pose, Pose):
         return pose
@@ -69,7 +81,8 @@ def _check_pose(pose) -> Pose:
 
 class Renderer:
     """Off-screen cube-map renderer for the dome. Use it from the thread that built it: its EGL context is
-    current there only (the server builds it in the frame loop's thread and runs commands there).
+    current there only (the server builds it in the frame loop's thread and runs commands there). Each method
+    makes its context current, so several renderers can share a thread.
 
     dome: `antarium.geometry.Dome` (default: `load_dome()`); face_size: cube face side in texels (default
     from the LED pitch); footprint_deg: FWHM of each LED's acceptance; brightness: global drive scale
@@ -225,6 +238,7 @@ class Renderer:
         return self._fwhm
 
     # ------------------------------------------------------------------------------------------ scenes
+    @_gl_current
     def set_scene(self, scene) -> Scene:
         """Load a `Scene`, a scene name, a spec dict or a file path. On any error the previous scene stays."""
         from .library import build_scene
@@ -271,6 +285,7 @@ class Renderer:
                                self.far_layer_error, self.layer_face_size, self.chunk_size, lod,
                                lambda eye, radius: self._meshes.near_chunks(eye, radius))
 
+    @_gl_current
     def wait_far_layer(self, pose, timeout_s: float = 60.0) -> bool:
         """Block until a far layer usable at `pose` is in (at once when there is no far layer); False on timeout
         or a builder error. Call before the first frame, so that the experiment does not start with frames
@@ -327,6 +342,7 @@ class Renderer:
             scene.pivot = (float(p[0]), float(p[1]))
         scene.rotation = float(angle)
 
+    @_gl_current
     def move_object(self, name: str, position=None, yaw: float | None = None) -> None:
         """Move a named object to `position` (3,) m and/or turn it to `yaw` (rad)."""
         scene = self._require_scene()
@@ -339,6 +355,7 @@ class Renderer:
         scene.objects[name] = moved
         self._layer_edit(("move", name, moved))
 
+    @_gl_current
     def remove_object(self, name: str) -> None:
         """Remove a named object from the scene (instantly: its chunks are no longer drawn)."""
         self._object(name)
@@ -346,6 +363,7 @@ class Renderer:
         del self.scene.objects[name]
         self._layer_edit(("hide", name))
 
+    @_gl_current
     def add_object(self, name: str, obj) -> None:
         """Add (or replace) a named `SceneObject`; the mesh buffers are rebuilt (previous kept on error)."""
         scene = self._require_scene()
@@ -383,6 +401,7 @@ class Renderer:
         scene.swap_green_blue = bool(swap)
         self._convert.configure(swap_green_blue=scene.swap_green_blue)
 
+    @_gl_current
     def set_lowpass(self, cutoff_deg: float | None) -> None:
         """Angular low-pass: spatial periods shorter than `cutoff_deg` are attenuated below 1/2 (None: off)."""
         scene = self._require_scene()
@@ -422,6 +441,7 @@ class Renderer:
         """(3, 3) dome frame -> world frame for this pose and the scene's rotation."""
         return _rot_z(pose.heading - self._require_scene().rotation)
 
+    @_gl_current
     def render(self, pose, out: np.ndarray | None = None, t: float | None = None) -> np.ndarray:
         """The LED frame (20350, 2) uint16 the dome shows for an eye at `pose` at time `t` (s since set_scene).
 
@@ -537,6 +557,7 @@ class Renderer:
         e_dome = e_vector(world, sky.sun) @ q
         return polariser_angles(self._uv_dirs, e_dome, self._uv_axes).reshape(N_PANELS, UV_PER_PANEL)
 
+    @_gl_current
     def cube_map(self, pose, t: float | None = None) -> np.ndarray:
         """(6, N, N, 4) float32 linear [G, B, UV, polarised UV] atlas for `pose` (rows bottom-up, faces in
         `cubemap.FACES` order), rendered through GL whatever path `render` takes."""
@@ -548,11 +569,12 @@ class Renderer:
         return (self._texels.astype(np.float32) / 65535.0).reshape(6, n, n, 4)
 
     def release(self) -> None:
-        if self._layer is not None:
-            self._layer.release()
-            self._layer = None
-        for res in (self._far_tex, self._meshes):
-            if res is not None:
-                res.release()
+        with self.ctx:
+            if self._layer is not None:
+                self._layer.release()
+                self._layer = None
+            for res in (self._far_tex, self._meshes):
+                if res is not None:
+                    res.release()
         self.ctx.release()
 

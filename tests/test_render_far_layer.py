@@ -37,8 +37,7 @@ def drive_to_radiance(frame: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def reference(dome):
-    """Full renders at the default face size (no far layer) at the CHECK poses. One renderer at a time: each
-    owns a GL context, current in its thread while it is the newest."""
+    """Full renders at the default face size (no far layer) at the CHECK poses."""
     r = Renderer(dome)
     r.set_scene(small_habitat())
     frames = [drive_to_radiance(r.render(WALK[k], t=0.0)) for k in CHECK]
@@ -89,7 +88,7 @@ def test_sync_far_layer_matches_full_renders_along_a_walk(dome, reference):
     frames = walk(r, WALK)
     status = r.far_layer_status()
     r.release()
-    diff = np.concatenate([np.abs(a - b).sum(axis=1) for a, b in zip(frames, reference)])
+    diff = np.concatenate([np.abs(a - b).sum(axis=1) for a, b in zip(frames, reference, strict=True)])
     # near meshes at 96 texels, far ones from the layer at 192: LED values within a few % of the full render
     assert diff.mean() < 0.004 and np.percentile(diff, 99) < 0.06
     # every frame used a layer; a 10 cm walk needs a new one every <= 13 mm (0.25 deg at 3 m)

@@ -238,3 +238,24 @@ def test_missing_egl_names_the_system_packages(monkeypatch):
     monkeypatch.setattr(moderngl, "create_context", no_egl)
     with pytest.raises(RuntimeError, match="libegl1.*libgl1-mesa-dri"):
         gl.create_context()
+
+
+def test_two_renderers_in_one_thread_each_draw_their_own_scene(dome):
+    """Each renderer makes its own GL context current: interleaved use gives what each gives alone."""
+    pose = Pose(0.3, -0.2, 0.01, 0.4)
+    alone = []
+    for face in (128, 96):
+        r = Renderer(dome, face_size=face)
+        r.set_scene("habitat")
+        alone.append(r.render(pose, t=0.0).copy())
+        r.release()
+    a, b = Renderer(dome, face_size=128), Renderer(dome, face_size=96)  # b's context is the newest
+    try:
+        a.set_scene("habitat")
+        b.set_scene("habitat")
+        for _ in range(2):
+            np.testing.assert_array_equal(a.render(pose, t=0.0), alone[0])
+            np.testing.assert_array_equal(b.render(pose, t=0.0), alone[1])
+    finally:
+        a.release()
+        b.release()
