@@ -1,6 +1,7 @@
 """The virtual ant in the real closed loop: habitat -> Renderer -> frame loop -> virtual link -> emulated panels
 -> eye -> model -> legs -> ball rotations -> frame loop (real EGL rendering, simulated clock)."""
 
+import json
 import math
 
 import numpy as np
@@ -112,3 +113,48 @@ def test_the_ants_steps_can_travel_as_ball_rotations_over_the_bus(trained):
     direct = _release(trained, decisions=8)
     np.testing.assert_allclose(bus_result.track.arrays()[0], direct.track.arrays()[0], atol=1e-9)
     assert bus_result.summary.distance > 0.05
+
+
+def _example(name):
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "examples" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"example_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_homing_example_stops_near_the_nest_with_the_papers_threshold(tmp_path, capsys):
+    assert _example("ant_homing").main(["--short", "--out", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    stop_cm = float(text.split("stopped ")[1].split(" cm")[0])
+    # lambda_N < p = 0.2 on a 0.8 m route home: it stops by itself, before running over the nest, well short of
+    # where it was released
+    assert 0.0 <= stop_cm < 45.0
+    assert (tmp_path / "homing.h5").exists() and (tmp_path / "homing_paths.png").stat().st_size > 10_000
+
+
+def test_shuttle_example_walks_forward_and_backward_between_the_places(tmp_path, capsys):
+    assert _example("ant_shuttle").main(["--short", "--out", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert "M = -1 (backward to the nest)" in text and "M = +1 (forward to the feeder)" in text
+    events = read_table(tmp_path / "shuttle.h5", "events")
+    decisions = [json.loads(d) for k, d in zip(events["kind"], events["data"], strict=True)
+                 if (k.decode() if isinstance(k, bytes) else k) == "ant_decision"]
+    forward = np.array([d["forward"] for d in decisions])
+    assert (forward > 0).sum() > 10 and (forward < 0).sum() > 3
+
+
+def test_motivation_switches_say_where_the_ant_turned_back():
+    from antarium.ant.metrics import motivation_switches
+    from antarium.ant.routes import Route
+
+    route = Route([(0.0, 0.0), (1.0, 0.0)])
+    xy = [(0.1, 0.0), (0.8, 0.0), (0.9, 0.0), (0.5, 0.0), (0.2, 0.0), (0.3, 0.0)]
+    switches = motivation_switches(route, xy, [1, 1, -1, -1, 1, 1])
+    assert [(i, m) for i, m, _, _ in switches] == [(2, -1), (4, 1)]
+    assert switches[0][3] == pytest.approx(0.1) and switches[1][2] == pytest.approx(0.2)
+    with pytest.raises(ValueError, match="one value per position"):
+        motivation_switches(route, xy, [1, 1])

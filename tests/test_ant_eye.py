@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from antarium.ant.eye import Eye, EyeParams, sobel_magnitude
+from antarium.ant.eye import Eye, EyeParams, View, row_gain_control, sobel_magnitude
 from antarium.geometry import load_dome
 
 
@@ -85,6 +85,20 @@ def test_sobel_is_zero_on_a_uniform_panorama_and_wraps_in_azimuth():
     step[:, :25] = 1.0
     edges = sobel_magnitude(step)
     assert edges[8, 49] > 0 and edges[8, 0] > 0 and edges[8, 24] > 0 and edges[8, 12] == 0
+
+
+def test_row_gain_control_evens_out_the_rows_and_commutes_with_rotation():
+    rng = np.random.default_rng(0)
+    edges = rng.random((16, 50)).astype(np.float32) * np.linspace(0.01, 2.0, 16, dtype=np.float32)[:, None]
+    out = row_gain_control(edges)
+    # every row then has a mean of about 1 whatever its contrast (up to the floor), and turning commutes with it
+    np.testing.assert_allclose(out.mean(axis=1), 1.0 / (1.0 + 0.01 * edges.mean() / edges.mean(axis=1)), rtol=1e-5)
+    np.testing.assert_allclose(row_gain_control(np.roll(edges, 7, axis=1)), np.roll(out, 7, axis=1), rtol=1e-6)
+    band = rng.random((16, 300)).astype(np.float32)
+    plain, gained = View(band, 6, 50), View(band, 6, 50, row_gain=True)
+    angles = np.radians([0.0, 7.2, -30.0])
+    expected = row_gain_control(plain.pns(angles).reshape(3, 16, 50)).reshape(3, -1)
+    np.testing.assert_allclose(gained.pns(angles), expected, rtol=1e-6)
 
 
 def test_bad_input_is_refused_with_a_clear_error(eye):

@@ -49,8 +49,14 @@ def test_wrong_version_shape_or_kind_is_refused(tmp_path):
     model = make_model("antcar", N_PN)
     path = save_model(tmp_path / "m.npz", model, EyeParams())
     _rewrite(path, version=np.array(FORMAT_VERSION + 1))
-    with pytest.raises(ModelFileError, match=f"version {FORMAT_VERSION + 1} cannot be read; allowed: 1"):
+    with pytest.raises(ModelFileError, match=f"version {FORMAT_VERSION + 1} cannot be read; allowed: 1, 2"):
         load_model(path)
+    # a version 1 file (eye without row_gain) is still read, with the plain eye
+    path = save_model(tmp_path / "m.npz", model, EyeParams(row_gain=True))
+    eye = json.loads(str(np.load(path)["eye"]))
+    del eye["row_gain"]
+    _rewrite(path, version=np.array(1), eye=np.array(json.dumps(eye)))
+    assert load_model(path)[1] == EyeParams()
     path = save_model(tmp_path / "m.npz", model, EyeParams())
     _rewrite(path, mbon_left=np.zeros(100, np.uint8))
     with pytest.raises(ModelFileError, match=r"must be \(1875,\) uint8"):

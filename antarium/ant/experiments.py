@@ -27,6 +27,12 @@ from antarium.ant.world import virtual_rig
 #: metres between learned views: Antcar learns continuously (every frame of a 1 cm/frame walk), Ardin and
 #: perfect memory at intervals
 LEARN_SPACING_M = {"antcar": 0.01, "ardin": 0.04, "perfect_memory": 0.04}
+#: the eye each model sees with. Antcar's is ours, not the paper's: photoreceptor compression (gamma 0.25) and a
+#: gain control per elevation row after the Sobel filter (`eye.row_gain_control`), so that the nearby grass and
+#: stones, not the far field alone, decide which KCs fire (docs/virtual_ant.md, "Models")
+MODEL_EYES = {"antcar": EyeParams(gamma=0.25, row_gain=True), "ardin": EyeParams(), "perfect_memory": EyeParams()}
+#: Antcar learns its nest place views on the first and its feeder views on the last this many metres of the route
+PLACE_LENGTH_M = 0.05
 #: the ant has arrived within this distance of the route's end (m)
 ARRIVE_RADIUS_M = 0.10
 #: cube-face side the ant's rig renders with: 1.8 deg texels, finer than the eye's 4.4 deg acceptance and
@@ -140,7 +146,7 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
     Writes `<name>.h5` (trial log of the whole session), `<name>_paths.png`, `<name>_traces.png` and
     `<name>_model.npz` into `out_dir` (nothing when it is None).
     """
-    eye_params = eye_params or EyeParams()
+    eye_params = eye_params or MODEL_EYES[kind]
     model = make_model(kind, eye_params.n_pn, **(model_params or {}))
     out = Path(out_dir) if out_dir is not None else None
     log_path = out / f"{name}.h5" if out is not None else None
@@ -150,7 +156,7 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
                      renderer_kwargs={"face_size": face_size}) as ant:
         ant.loop.event("ant_learning_walk", spacing=spacing, route_length=route.length)
         kept: list = []
-        learning_walk(ant, route, spacing, progress=progress, keep=kept)
+        learning_walk(ant, route, spacing, place_length=PLACE_LENGTH_M, progress=progress, keep=kept)
         result, wall, model_ms = _follow(ant, route, max_decisions or _decision_limit(model, route), start_offset,
                                          progress, put_back)
         top = scene_top_view(ant.loop.renderer.scene)

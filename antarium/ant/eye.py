@@ -38,6 +38,7 @@ class EyeParams:
     fine_elevation_deg: float = 1.0
     neighbours: int = 4            # LEDs averaged into each fine sample
     gamma: float = 1.0             # photoreceptor compression: response = intensity ** gamma (1 = linear)
+    row_gain: bool = False         # divide each elevation row of the Sobel image by its mean over azimuth
 
     def __post_init__(self) -> None:
         if self.channel not in CHANNELS:
@@ -64,13 +65,14 @@ class View:
     eye would see them if the ant had turned by each angle (radians, counter-clockwise) from where it looked.
     """
 
-    __slots__ = ("band", "yaw", "_per_col", "_cols")
+    __slots__ = ("band", "yaw", "_per_col", "_cols", "_row_gain")
 
-    def __init__(self, band: np.ndarray, per_col: int, cols: int, yaw: float = 0.0) -> None:
+    def __init__(self, band: np.ndarray, per_col: int, cols: int, yaw: float = 0.0, row_gain: bool = False) -> None:
         self.band = band        # dome-frame band: column 0 faces the dome's azimuth 0
         self.yaw = float(yaw)   # azimuth (rad, dome frame) the ant faced when it looked
         self._per_col = per_col
         self._cols = cols
+        self._row_gain = bool(row_gain)
 
     def rotated_panoramas(self, angles) -> np.ndarray:
         """Low-resolution panoramas (len(angles), rows, cols) float32 after turning by `angles` (rad)."""
@@ -87,9 +89,13 @@ class View:
         return band[:, i0].transpose(1, 0, 2) * (1.0 - w[:, None, :]) + band[:, i1].transpose(1, 0, 2) * w[:, None, :]
 
     def pns(self, angles=(0.0,)) -> np.ndarray:
-        """Projection-neuron vectors (len(angles), rows * cols) float32: Sobel magnitude of the panoramas."""
+        """Projection-neuron vectors (len(angles), rows * cols) float32: Sobel magnitude of the panoramas
+        (divided row by row by its mean over azimuth when the eye has `row_gain`)."""
         pano = self.rotated_panoramas(angles)
-        return sobel_magnitude(pano).reshape(pano.shape[0], -1)
+        edges = sobel_magnitude(pano)
+        if self._row_gain:
+            edges = row_gain_control(edges)
+        return edges.reshape(pano.shape[0], -1)
 
 
 def sobel_magnitude(pano: np.ndarray) -> np.ndarray:
@@ -101,6 +107,17 @@ def sobel_magnitude(pano: np.ndarray) -> np.ndarray:
     gx = smooth_r[..., :, 2:] - smooth_r[..., :, :-2]
     gy = smooth_c[..., 2:, :] - smooth_c[..., :-2, :]
     return np.sqrt(gx * gx + gy * gy).astype(np.float32)
+
+
+def row_gain_control(edges: np.ndarray, floor: float = 0.01) -> np.ndarray:
+    """Edge images (..., rows, cols) divided row by row by the row's mean over azimuth (plus `floor` times the
+    image's mean, so that an empty row stays near 0). Rotation about the vertical commutes with it.
+
+    A gain control per elevation: without it the bright sky around the sun and the horizon, the same wherever
+    the ant stands, win the KCs' k-WTA over the nearby grass and stones seen below and just above the horizon.
+    """
+    row_mean = edges.mean(axis=-1, keepdims=True)
+    return (edges / (row_mean + floor * row_mean.mean(axis=-2, keepdims=True) + 1e-12)).astype(np.float32)
 
 
 def _gaussian_rows(centres: np.ndarray, grid: np.ndarray, sigma: float, periodic: bool) -> np.ndarray:
@@ -192,7 +209,7 @@ class Eye:
             raise ValueError(f"yaw must be a finite angle in radians, got {yaw!r}")
         fine = (self._sample @ intensity).reshape(self._fine_shape).astype(np.float32)
         band = self._blur_el @ fine @ self._blur_az
-        return View(band, self.params.fine_per_col, self.params.cols, yaw)
+        return View(band, self.params.fine_per_col, self.params.cols, yaw, self.params.row_gain)
 
     @property
     def channel_pixels(self) -> np.ndarray:

@@ -109,3 +109,16 @@ class RunSummary:
         am, amad = median_mad(np.degrees(ang))
         dist = float(np.hypot(*np.diff(xy, axis=0).T).sum()) if len(xy) > 1 else 0.0
         return cls(lm, lmad, am, amad, bool(arrived_), int(errors), int(len(xy)), dist, float(stop_distance))
+
+
+def motivation_switches(route: Route, xy, motivation) -> list[tuple[int, int, float, float]]:
+    """Where a shuttling (or homing) ant changed its motivation M: (decision index, new M, distance to the nest,
+    distance to the feeder) per change; xy (m, 2) positions, motivation (m,) the M of each decision.
+    The nest is the route's start, the feeder its end (metres)."""
+    xy = np.atleast_2d(np.asarray(xy, np.float64))
+    m = np.asarray(motivation, np.float64)
+    if m.shape != (xy.shape[0],):
+        raise ValueError(f"motivation {m.shape} must have one value per position ({xy.shape[0]},)")
+    changes = np.flatnonzero(np.diff(m) != 0) + 1
+    return [(int(i), int(m[i]), float(np.hypot(*(xy[i] - route.start))), float(np.hypot(*(xy[i] - route.end))))
+            for i in changes]

@@ -29,7 +29,9 @@ from antarium.ant.models import MODELS, PerfectMemoryModel
 from antarium.ant.mushroom_body import MBON
 
 FORMAT = "antarium-ant-model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: versions this code reads: 1 lacks the eye's `row_gain` (False then), otherwise the same
+READABLE_VERSIONS = (1, 2)
 
 
 class ModelFileError(ValueError):
@@ -72,8 +74,9 @@ def load_model(path: str | os.PathLike):
         if "format" not in data.files or str(data["format"]) != FORMAT:
             raise ModelFileError(f"{path}: not an antarium ant model file (no format tag {FORMAT!r})")
         version = int(data["version"])
-        if version != FORMAT_VERSION:
-            raise ModelFileError(f"{path}: model file version {version} cannot be read; allowed: {FORMAT_VERSION}")
+        if version not in READABLE_VERSIONS:
+            raise ModelFileError(f"{path}: model file version {version} cannot be read; "
+                                 f"allowed: {', '.join(map(str, READABLE_VERSIONS))}")
         kind = str(data["kind"])
         if kind not in MODELS:
             raise ModelFileError(f"{path}: model kind {kind!r} not known; allowed: {', '.join(MODELS)}")

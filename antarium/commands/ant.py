@@ -105,8 +105,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _learn(args: argparse.Namespace) -> int:
     from antarium.ant.agent import learning_walk
-    from antarium.ant.experiments import FACE_SIZE, LEARN_SPACING_M, parse_route
-    from antarium.ant.eye import EyeParams
+    from antarium.ant.experiments import FACE_SIZE, LEARN_SPACING_M, MODEL_EYES, PLACE_LENGTH_M, parse_route
     from antarium.ant.models import make_model
     from antarium.ant.storage import mbon_bytes, save_model
     from antarium.ant.world import virtual_rig
@@ -115,13 +114,13 @@ def _learn(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if not out.parent.is_dir():
         raise FileNotFoundError(f"folder {str(out.parent)!r} for the model file does not exist")
-    eye_params = EyeParams()
+    eye_params = MODEL_EYES[args.model]
     model = make_model(args.model, eye_params.n_pn, **_params(args.param))
     spacing = args.spacing or LEARN_SPACING_M[args.model]
     bar = _bar("learning walk", total=int(math.ceil(route.length / spacing)) + 1)
     with virtual_rig(model, scene=args.scene, eye_params=eye_params, tether=args.tether, log_path=args.log,
                      renderer_kwargs={"face_size": FACE_SIZE}) as ant:
-        views = learning_walk(ant, route, spacing, progress=bar.update)
+        views = learning_walk(ant, route, spacing, place_length=PLACE_LENGTH_M, progress=bar.update)
     bar.close()
     save_model(out, model, eye_params, route.points)
     print(f"learned {views} views along {route.length:.2f} m; memory {mbon_bytes(model)} bytes; wrote {out}")
