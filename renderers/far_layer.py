@@ -259,10 +259,11 @@ class _Worker:
         self._proc = subprocess.Popen([sys.executable, "-m", __name__, str(child.fileno())],
                                       pass_fds=(child.fileno(),))
         child.close()
-        # below a real-time frame loop (pinned apart) the builder may take its share; beside an ordinary one, less
+        # below a real-time frame loop the builder takes a full share; beside an ordinary one, a smaller one (nice 5:
+        # a quarter of a core against one busy process, enough for a layer every ~0.3 s; nice 10 starved it)
         realtime = hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR)
         self._conn.send(([s.name for s in self._shm], far_field.table_gb, far_field.table_uv, g, args,
-                         0 if realtime else 10))
+                         0 if realtime else 5))
         self.busy = False
         self.error: str | None = None
 
