@@ -33,12 +33,12 @@ def walk_with_rotations(scene: str, decisions: int, seed: int):
     """
     rng = np.random.default_rng(seed)
     route = curved_route(seed, length=4.0)
-    model = make_model("antcar", 800)
+    model = make_model("antcar", 800, amplitude_deg=45.0)  # the paper's operating range: the scene turns by 90 deg
     with virtual_rig(model, scene=scene, renderer_kwargs={"face_size": FACE_SIZE}) as ant:
         learning_walk(ant, route, 0.01)
         model.reset()
         ant.place(*route.start, float(route.at([0.0])[1][0]))
-        times = np.sort(rng.choice(np.arange(25, decisions - 30, 35), size=3, replace=False))
+        times = np.sort(rng.choice(np.arange(25, decisions - 35, 40), size=3, replace=False))
         angles = rng.choice([-math.pi / 2, math.pi / 2], size=len(times))
         ball_xy, ball_heading = [np.zeros(2)], []
         last = np.array(ant.position)
@@ -54,7 +54,7 @@ def walk_with_rotations(scene: str, decisions: int, seed: int):
             ball_heading.append(ant.legs.yaw)
             last = here
     heading = np.unwrap(np.asarray(ball_heading))
-    turned = np.array([heading[min(t + 25, decisions - 1)] - heading[t - 1] for t in times])
+    turned = np.array([heading[min(t + 30, decisions - 1)] - heading[t - 1] for t in times])
     return np.asarray(ball_xy), times, angles, turned
 
 

@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 
 from antarium.ant.agent import follow_route, learning_walk
+from antarium.ant.experiments import MODEL_EYES
 from antarium.ant.models import make_model
 from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
 from antarium.trial_log import read_table
 
 FACE = 64  # 1.8 deg texels: finer than the eye's 4.4 deg acceptance, and fast on llvmpipe
+EYE = MODEL_EYES["antcar"]
 ROUTE = curved_route(4, length=0.8, start=(0.5, -0.3))
 
 
@@ -21,33 +23,51 @@ ROUTE = curved_route(4, length=0.8, start=(0.5, -0.3))
 def trained():
     """An Antcar model that learned ROUTE (1 cm spacing) in the habitat."""
     model = make_model("antcar", 800)
-    with virtual_rig(model, renderer_kwargs={"face_size": FACE}) as ant:
+    with virtual_rig(model, eye_params=EYE, renderer_kwargs={"face_size": FACE}) as ant:
         views = learning_walk(ant, ROUTE, 0.01)
     assert 81 <= views <= 82
     return model
 
 
-def _release(model, tether="free_yaw", decisions=60, **kw):
-    with virtual_rig(model, tether=tether, renderer_kwargs={"face_size": FACE}, **kw) as ant:
-        return follow_route(ant, ROUTE, decisions, arrive_radius=0.05, start_offset=(0.04, math.radians(25)))
+def _release(model, tether="free_yaw", decisions=60, start_offset=(0.0, 0.0), **kw):
+    with virtual_rig(model, tether=tether, eye_params=EYE, renderer_kwargs={"face_size": FACE}, **kw) as ant:
+        return follow_route(ant, ROUTE, decisions, arrive_radius=0.05, start_offset=start_offset)
 
 
-def test_antcar_closed_loop_converges_onto_the_route(trained):
-    result = _release(trained)
+def _errors(result):
+    """Lateral error d (m, left > 0) and heading error (deg, CCW > 0) of every decision."""
     xy, heading = result.track.arrays()
     _, d, route_heading = ROUTE.project(xy)
-    theta = np.degrees(np.remainder(heading - route_heading + math.pi, math.tau) - math.pi)
-    # Released 4 cm left of the route and turned 25 deg left: lambda_L - lambda_R steers it right at once; then
-    # it walks along the route, heading errors within +-20 deg that average out (the Antcar gains can make it
-    # oscillate about the route, as the paper's robot did), and its lateral error shrinks toward the end.
+    return d, np.degrees(np.remainder(heading - route_heading + math.pi, math.tau) - math.pi)
+
+
+@pytest.mark.parametrize("turned_deg", [25.0, -25.0])
+def test_antcar_closed_loop_converges_onto_the_route(trained, turned_deg):
+    result = _release(trained, start_offset=(0.0, math.radians(turned_deg)))
+    d, theta = _errors(result)
+    # Released on the route's start turned 25 deg off it: lambda_L - lambda_R steers it back at once; then it
+    # walks along the route, its heading error dithering within +-20 deg about 0 (Antcar's gains make it
+    # oscillate about the route, as the paper's robot did), never more than 2 cm off the route, and arrives.
     assert abs(theta[0]) == pytest.approx(25.0)
-    assert np.all(np.abs(theta[2:]) < 20.0) and abs(theta[2:].mean()) < 5.0
-    assert np.abs(d).max() < 0.05 and abs(d[-1]) < 0.03
+    assert np.abs(theta[1:6]).min() < 10.0    # the turn is proportional to the (slow, unfamiliar) speed (eq. 10)
+    assert np.all(np.abs(theta[6:]) < 20.0) and abs(theta[6:].mean()) < 3.0
+    assert np.abs(d).max() < 0.02
     assert result.summary.arrived and result.summary.errors == 0
 
 
+def test_a_lateral_offset_is_held_not_corrected_at_ant_scale(trained):
+    # Released 3 cm left of the route and turned 20 deg: the heading comes back, but a 3 cm offset is nearly
+    # invisible to a 7 deg eye 1 cm above the ground, so the ant walks on parallel to the route (it neither
+    # returns to it nor drifts away) and passes within 5 cm of the route's end.
+    result = _release(trained, start_offset=(0.03, math.radians(20)))
+    d, theta = _errors(result)
+    assert abs(theta[1:].mean()) < 3.0
+    assert np.all((d > 0.0) & (d < 0.05))
+    assert result.summary.arrived
+
+
 def test_an_untrained_ant_released_the_same_way_walks_off_the_route():
-    result = _release(make_model("antcar", 800), decisions=40)
+    result = _release(make_model("antcar", 800), decisions=40, start_offset=(0.04, math.radians(25)))
     xy, heading = result.track.arrays()
     _, d, route_heading = ROUTE.project(xy)
     theta = np.degrees(np.remainder(heading - route_heading + math.pi, math.tau) - math.pi)
@@ -57,15 +77,26 @@ def test_an_untrained_ant_released_the_same_way_walks_off_the_route():
     assert result.track.traces[-1]["lambda_max"] == 1.0
 
 
-def test_both_tether_modes_walk_the_same_path(trained):
-    free = _release(trained, "free_yaw", decisions=12).track.arrays()
-    fixed = _release(trained, "fixed", decisions=12).track.arrays()
-    assert np.abs(free[0] - fixed[0]).max() < 0.01
-    assert np.degrees(np.abs(np.remainder(free[1] - fixed[1] + math.pi, math.tau) - math.pi)).max() < 5
+def test_both_tether_modes_walk_the_same_path():
+    # The tethers render the habitat a little differently (the scene turns, or the eye does), which can flip a KC
+    # or two; the row-gain eye and the default's high steering gain amplify that, so the plumbing is compared with
+    # the paper's plain eye, A = 45 deg and a gentle gain.
+    from antarium.ant.eye import EyeParams
+
+    model = make_model("antcar", 800, amplitude_deg=45.0, k_phi=2.0, phi_max=1.0)
+    paths = []
+    for tether in ("free_yaw", "fixed"):
+        with virtual_rig(model, tether=tether, eye_params=EyeParams(), renderer_kwargs={"face_size": FACE}) as ant:
+            if not paths:
+                learning_walk(ant, ROUTE, 0.01)
+            paths.append(follow_route(ant, ROUTE, 12, start_offset=(0.04, math.radians(25))).track.arrays())
+    (free_xy, free_h), (fixed_xy, fixed_h) = paths
+    assert np.abs(free_xy - fixed_xy).max() < 0.01
+    assert np.degrees(np.abs(np.remainder(free_h - fixed_h + math.pi, math.tau) - math.pi)).max() < 5
 
 
 def test_the_ant_sees_what_the_panels_show_and_leaves_a_trial_log(trained, tmp_path):
-    with virtual_rig(trained, renderer_kwargs={"face_size": FACE}, log_path=tmp_path / "ant.h5") as ant:
+    with virtual_rig(trained, eye_params=EYE, renderer_kwargs={"face_size": FACE}, log_path=tmp_path / "ant.h5") as ant:
         ant.place(*ROUTE.start, 0.0)
         ant.frame()
         rendered = ant.loop._frame_buf.copy()
@@ -88,7 +119,7 @@ def test_the_ant_sees_what_the_panels_show_and_leaves_a_trial_log(trained, tmp_p
 def test_after_a_90_degree_scene_rotation_the_ant_restores_its_heading_only_in_a_structured_scene(scene, restores):
     # The Antarium's proof of concept (Kocsi et al. 2020, Fig. 4) in silico; examples/ant_scene_rotation.py plots it.
     route = curved_route(6, length=0.6, start=(-1.0, 0.5))
-    model = make_model("antcar", 800)
+    model = make_model("antcar", 800, amplitude_deg=45.0)  # the paper's operating range: the scene turns by 90 deg
     with virtual_rig(model, scene=scene, renderer_kwargs={"face_size": FACE}) as ant:
         learning_walk(ant, route, 0.01)
         ant.place(*route.start, float(route.at([0.0])[1][0]))
@@ -96,7 +127,7 @@ def test_after_a_90_degree_scene_rotation_the_ant_restores_its_heading_only_in_a
             ant.decide()
         yaw_before, world_before = ant.legs.yaw, ant.heading
         ant.loop.rotate_scene(math.pi / 2)
-        for _ in range(12):
+        for _ in range(30):  # slow when all is novel: sat(1 - lambda_max) >= 0.25, and the turn is ~ speed (eq. 10)
             ant.decide()
         turned = math.degrees(math.remainder(ant.legs.yaw - yaw_before, math.tau))
         lost = math.degrees(math.remainder(ant.heading - world_before, math.tau))

@@ -74,8 +74,11 @@ def pi_error(lambda_diff, theta_e) -> np.ndarray:
     return np.cumsum(e) / np.arange(1, e.size + 1)
 
 
-def memory_pi_error(model, views, half_range_deg: float = 45.0, step_deg: float = 1.0) -> float:
-    """PI_error over learned views rotated by +-`half_range_deg` in `step_deg` steps (|theta| < 1 deg left out)."""
+def memory_pi_error(model, views, half_range_deg: float | None = None, step_deg: float = 1.0) -> float:
+    """PI_error over learned views rotated by +-`half_range_deg` in `step_deg` steps (|theta| < 1 deg left out).
+    The range defaults to the model's oscillation amplitude: the operating area its learning defines."""
+    if half_range_deg is None:
+        half_range_deg = model.params.amplitude_deg
     angles = np.radians(np.arange(-half_range_deg, half_range_deg + 1e-9, step_deg))
     angles = angles[np.abs(angles) >= math.radians(1.0) - 1e-12]
     diffs, thetas = [], []

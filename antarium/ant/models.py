@@ -59,14 +59,14 @@ class AntcarParams:
     pn_per_kc: int = 4
     kappa: float = 0.01
     place_n_kc: int = 5_000
-    amplitude_deg: float = 45.0
+    amplitude_deg: float = 20.0       # the paper's 45 deg: see docs/virtual_ant.md, Models
     step_deg: float = 5.0
     phase_deg: float = 0.0            # 180: learn looking back along the route (homing)
     place_amplitude_deg: float = 30.0
     k_v: float = 0.02                 # m per decision at full throttle
     sat_min: float = 0.25             # minimum throttle of sat(1 - lambda_max)
-    k_phi: float = 2.0                # steering gain, rad per unit lambda_diff
-    phi_max: float = 1.0              # steering limit (rad)
+    k_phi: float = 8.0                # steering gain, rad per unit lambda_diff
+    phi_max: float = 0.3              # steering limit (rad)
     turn_length: float = 0.02         # m: turn = step * tan(phi) / turn_length (Antcar's wheelbase, eq. 10)
     threshold: float = 0.2            # place-MBON lambda below which the place is recognised (p)
     task: str = "route"               # route | homing | shuttle
