@@ -20,7 +20,7 @@ import math
 from pathlib import Path
 
 from antarium.ant.agent import follow_route, learning_walk
-from antarium.ant.experiments import FACE_SIZE, MODEL_EYES, PLACE_LENGTH_M
+from antarium.ant.experiments import FACE_SIZE, MODEL_EYES, MODEL_PARAMS, PLACE_LENGTH_M
 from antarium.ant.models import make_model
 from antarium.ant.plots import plot_paths, plot_traces, scene_top_view
 from antarium.ant.routes import curved_route
@@ -40,7 +40,8 @@ def main(argv: list[str] | None = None) -> int:
     length = 0.8 if args.short else args.length
     outbound = curved_route(args.seed, length=length)
     eye = MODEL_EYES["antcar"]
-    model = make_model("antcar", eye.n_pn, task="homing", phase_deg=180.0, threshold=args.threshold)
+    model = make_model("antcar", eye.n_pn, **MODEL_PARAMS["antcar"], task="homing", phase_deg=180.0,
+                       threshold=args.threshold)
     rig = virtual_rig(model, eye_params=eye, renderer_kwargs={"face_size": FACE_SIZE}, log_path=out / "homing.h5")
     with rig as ant:
         learning_walk(ant, outbound, 0.01, place_length=PLACE_LENGTH_M)  # outbound, learning views looking back

@@ -33,7 +33,7 @@ def walk_with_rotations(scene: str, decisions: int, seed: int):
     """
     rng = np.random.default_rng(seed)
     route = curved_route(seed, length=4.0)
-    model = make_model("antcar", 800, amplitude_deg=45.0)  # the paper's operating range: the scene turns by 90 deg
+    model = make_model("antcar", 800)  # the paper's A = 45 deg: the scene turns by 90 deg, beyond our route's 20
     with virtual_rig(model, scene=scene, renderer_kwargs={"face_size": FACE_SIZE}) as ant:
         learning_walk(ant, route, 0.01)
         model.reset()

@@ -16,7 +16,7 @@ import math
 from pathlib import Path
 
 from antarium.ant.agent import follow_route, learning_walk
-from antarium.ant.experiments import FACE_SIZE, MODEL_EYES, PLACE_LENGTH_M
+from antarium.ant.experiments import FACE_SIZE, MODEL_EYES, MODEL_PARAMS, PLACE_LENGTH_M
 from antarium.ant.metrics import motivation_switches
 from antarium.ant.models import make_model
 from antarium.ant.plots import plot_paths, plot_traces, scene_top_view
@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     length, trips = (0.8, 1.0) if args.short else (args.length, args.trips)
     route = curved_route(args.seed, length=length)
     eye = MODEL_EYES["antcar"]
-    model = make_model("antcar", eye.n_pn, task="shuttle", threshold=args.threshold)
+    model = make_model("antcar", eye.n_pn, **MODEL_PARAMS["antcar"], task="shuttle", threshold=args.threshold)
     decisions = int(trips * 2 * length / model.params.k_v) + 20
     rig = virtual_rig(model, eye_params=eye, renderer_kwargs={"face_size": FACE_SIZE}, log_path=out / "shuttle.h5")
     with rig as ant:

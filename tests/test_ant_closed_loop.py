@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from antarium.ant.agent import follow_route, learning_walk
-from antarium.ant.experiments import MODEL_EYES
+from antarium.ant.experiments import MODEL_EYES, MODEL_PARAMS
 from antarium.ant.models import make_model
 from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
@@ -22,7 +22,7 @@ ROUTE = curved_route(4, length=0.8, start=(0.5, -0.3))
 @pytest.fixture(scope="module")
 def trained():
     """An Antcar model that learned ROUTE (1 cm spacing) in the habitat."""
-    model = make_model("antcar", 800)
+    model = make_model("antcar", 800, **MODEL_PARAMS["antcar"])
     with virtual_rig(model, eye_params=EYE, renderer_kwargs={"face_size": FACE}) as ant:
         views = learning_walk(ant, ROUTE, 0.01)
     assert 81 <= views <= 82
@@ -67,7 +67,8 @@ def test_a_lateral_offset_is_held_not_corrected_at_ant_scale(trained):
 
 
 def test_an_untrained_ant_released_the_same_way_walks_off_the_route():
-    result = _release(make_model("antcar", 800), decisions=40, start_offset=(0.04, math.radians(25)))
+    untrained = make_model("antcar", 800, **MODEL_PARAMS["antcar"])
+    result = _release(untrained, decisions=40, start_offset=(0.04, math.radians(25)))
     xy, heading = result.track.arrays()
     _, d, route_heading = ROUTE.project(xy)
     theta = np.degrees(np.remainder(heading - route_heading + math.pi, math.tau) - math.pi)
@@ -83,7 +84,7 @@ def test_both_tether_modes_walk_the_same_path():
     # the paper's plain eye, A = 45 deg and a gentle gain.
     from antarium.ant.eye import EyeParams
 
-    model = make_model("antcar", 800, amplitude_deg=45.0, k_phi=2.0, phi_max=1.0)
+    model = make_model("antcar", 800, k_phi=2.0, phi_max=1.0)
     paths = []
     for tether in ("free_yaw", "fixed"):
         with virtual_rig(model, tether=tether, eye_params=EyeParams(), renderer_kwargs={"face_size": FACE}) as ant:
@@ -119,7 +120,7 @@ def test_the_ant_sees_what_the_panels_show_and_leaves_a_trial_log(trained, tmp_p
 def test_after_a_90_degree_scene_rotation_the_ant_restores_its_heading_only_in_a_structured_scene(scene, restores):
     # The Antarium's proof of concept (Kocsi et al. 2020, Fig. 4) in silico; examples/ant_scene_rotation.py plots it.
     route = curved_route(6, length=0.6, start=(-1.0, 0.5))
-    model = make_model("antcar", 800, amplitude_deg=45.0)  # the paper's operating range: the scene turns by 90 deg
+    model = make_model("antcar", 800)  # the paper's A = 45 deg: the scene turns by 90 deg
     with virtual_rig(model, scene=scene, renderer_kwargs={"face_size": FACE}) as ant:
         learning_walk(ant, route, 0.01)
         ant.place(*route.start, float(route.at([0.0])[1][0]))

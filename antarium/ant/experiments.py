@@ -31,6 +31,9 @@ LEARN_SPACING_M = {"antcar": 0.01, "ardin": 0.04, "perfect_memory": 0.04}
 #: gain control per elevation row after the Sobel filter (`eye.row_gain_control`), so that the nearby grass and
 #: stones, not the far field alone, decide which KCs fire (docs/virtual_ant.md, "Models")
 MODEL_EYES = {"antcar": EyeParams(gamma=0.25, row_gain=True), "ardin": EyeParams(), "perfect_memory": EyeParams()}
+#: model parameters of the route-following experiments, unless given: Antcar's oscillation amplitude A = 20 deg
+#: is ours (the paper's 45 deg is the model's default; docs/virtual_ant.md, "Models")
+MODEL_PARAMS = {"antcar": {"amplitude_deg": 20.0}, "ardin": {}, "perfect_memory": {}}
 #: Antcar learns its nest place views on the first and its feeder views on the last this many metres of the route
 PLACE_LENGTH_M = 0.05
 #: the ant has arrived within this distance of the route's end (m)
@@ -147,7 +150,7 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
     `<name>_model.npz` into `out_dir` (nothing when it is None).
     """
     eye_params = eye_params or MODEL_EYES[kind]
-    model = make_model(kind, eye_params.n_pn, **(model_params or {}))
+    model = make_model(kind, eye_params.n_pn, **{**MODEL_PARAMS[kind], **(model_params or {})})
     out = Path(out_dir) if out_dir is not None else None
     log_path = out / f"{name}.h5" if out is not None else None
     spacing = learn_spacing or LEARN_SPACING_M[kind]

@@ -59,7 +59,7 @@ class AntcarParams:
     pn_per_kc: int = 4
     kappa: float = 0.01
     place_n_kc: int = 5_000
-    amplitude_deg: float = 20.0       # the paper's 45 deg: see docs/virtual_ant.md, Models
+    amplitude_deg: float = 45.0
     step_deg: float = 5.0
     phase_deg: float = 0.0            # 180: learn looking back along the route (homing)
     place_amplitude_deg: float = 30.0

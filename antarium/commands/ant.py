@@ -105,7 +105,14 @@ def run(args: argparse.Namespace) -> int:
 
 def _learn(args: argparse.Namespace) -> int:
     from antarium.ant.agent import learning_walk
-    from antarium.ant.experiments import FACE_SIZE, LEARN_SPACING_M, MODEL_EYES, PLACE_LENGTH_M, parse_route
+    from antarium.ant.experiments import (
+        FACE_SIZE,
+        LEARN_SPACING_M,
+        MODEL_EYES,
+        MODEL_PARAMS,
+        PLACE_LENGTH_M,
+        parse_route,
+    )
     from antarium.ant.models import make_model
     from antarium.ant.storage import mbon_bytes, save_model
     from antarium.ant.world import virtual_rig
@@ -115,7 +122,7 @@ def _learn(args: argparse.Namespace) -> int:
     if not out.parent.is_dir():
         raise FileNotFoundError(f"folder {str(out.parent)!r} for the model file does not exist")
     eye_params = MODEL_EYES[args.model]
-    model = make_model(args.model, eye_params.n_pn, **_params(args.param))
+    model = make_model(args.model, eye_params.n_pn, **{**MODEL_PARAMS[args.model], **_params(args.param)})
     spacing = args.spacing or LEARN_SPACING_M[args.model]
     bar = _bar("learning walk", total=int(math.ceil(route.length / spacing)) + 1)
     with virtual_rig(model, scene=args.scene, eye_params=eye_params, tether=args.tether, log_path=args.log,
