@@ -8,7 +8,7 @@ this project (`experiments.MODEL_EYES`): gain control per elevation row, so that
 nest, not the far field that looks the same metres away, make the nest familiar.
 
     .venv/bin/python examples/ant_homing.py --out ant-homing/          # 3 m route, about a minute
-    .venv/bin/python examples/ant_homing.py --short --out ant-homing/  # 0.8 m route, seconds
+    .venv/bin/python examples/ant_homing.py --short --out ant-homing/  # 1.2 m route, seconds
 
 Writes `homing.h5` (trial log), `homing_paths.png`, `homing_traces.png` and prints the stopping distance.
 """
@@ -33,11 +33,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--length", type=float, default=3.0, help="outbound route length (m)")
     parser.add_argument("--seed", type=int, default=5)
     parser.add_argument("--threshold", type=float, default=0.2, help="lambda_N below which the nest is recognised")
-    parser.add_argument("--short", action="store_true", help="a 0.8 m route (for tests)")
+    parser.add_argument("--short", action="store_true", help="a 1.2 m route (for tests)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    length = 0.8 if args.short else args.length
+    length = 1.2 if args.short else args.length
     outbound = curved_route(args.seed, length=length)
     eye = MODEL_EYES["antcar"]
     model = make_model("antcar", eye.n_pn, **MODEL_PARAMS["antcar"], task="homing", phase_deg=180.0,

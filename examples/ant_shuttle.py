@@ -4,7 +4,7 @@ walks to the feeder, and when the feeder MBON recognises the feeder (lambda_F < 
 walks backward, still facing the feeder, to the nest, where lambda_N < p switches M back to 1, and so on.
 
     .venv/bin/python examples/ant_shuttle.py --out ant-shuttle/          # 2 m route, two round trips
-    .venv/bin/python examples/ant_shuttle.py --short --out ant-shuttle/  # 0.8 m route, seconds
+    .venv/bin/python examples/ant_shuttle.py --short --out ant-shuttle/  # 1.2 m route, seconds
 
 Writes `shuttle.h5` (trial log), `shuttle_paths.png`, `shuttle_traces.png` and prints where M switched.
 """
@@ -31,11 +31,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=5)
     parser.add_argument("--trips", type=float, default=2.0, help="round trips' worth of decisions to run")
     parser.add_argument("--threshold", type=float, default=0.2, help="lambda below which a place is recognised")
-    parser.add_argument("--short", action="store_true", help="a 0.8 m route, one round trip (for tests)")
+    parser.add_argument("--short", action="store_true", help="a 1.2 m route, one round trip (for tests)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    length, trips = (0.8, 1.0) if args.short else (args.length, args.trips)
+    length, trips = (1.2, 1.0) if args.short else (args.length, args.trips)
     route = curved_route(args.seed, length=length)
     eye = MODEL_EYES["antcar"]
     model = make_model("antcar", eye.n_pn, **MODEL_PARAMS["antcar"], task="shuttle", threshold=args.threshold)

@@ -162,9 +162,9 @@ def test_homing_example_stops_near_the_nest_with_the_papers_threshold(tmp_path, 
     assert _example("ant_homing").main(["--short", "--out", str(tmp_path)]) == 0
     text = capsys.readouterr().out
     stop_cm = float(text.split("stopped ")[1].split(" cm")[0])
-    # lambda_N < p = 0.2 on a 0.8 m route home: it stops by itself, before running over the nest, well short of
-    # where it was released
-    assert 0.0 <= stop_cm < 45.0
+    # lambda_N < p = 0.2 on a 1.2 m route home: it stops by itself, in the half of the route nearer the nest (the
+    # nest views generalise over some decimetres at 1 cm eye height: about 30-40 cm)
+    assert 0.0 <= stop_cm < 60.0
     assert (tmp_path / "homing.h5").exists() and (tmp_path / "homing_paths.png").stat().st_size > 10_000
 
 
