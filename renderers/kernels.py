@@ -2,8 +2,9 @@
 
 Each LED's values are "pairs": [green, blue] for a GB pixel, [UV, polarised UV] for a UV pixel, so every
 loop touches only the two channels that pixel needs. Compiled once per machine (cached next to this file
-or in NUMBA_CACHE_DIR); no allocation inside. Single-threaded on purpose: the GL rasteriser (llvmpipe)
-already uses every core, and a parallel loop competing with it was measured 6x slower on 2 cores.
+or in NUMBA_CACHE_DIR); no allocation inside. Each loop is single-threaded (numba's parallel loops competing
+with the GL rasteriser (llvmpipe) were measured 6x slower on 2 cores); the far-field lookup and the sampling
+release the GIL, so that the renderer can run them on a helper thread beside its own work.
 """
 
 from __future__ import annotations
@@ -34,12 +35,13 @@ def sample_pairs(indptr, indices, weights, texels, channel, out):  # pragma: no 
         out[i, 1] = a1
 
 
-@njit(cache=True, fastmath=True)
-def sample_over_far(indptr, indices, weights, texels, channel, far, out):  # pragma: no cover - compiled
-    """Meshes over a far field: like `sample_pairs`, with texel channel 3 the meshes' coverage (0..1) and
-    `far` (n, 2) the far field already integrated over each LED's footprint, seen where nothing covers it:
-    out = meshes + (1 - coverage) * far. Meshes carry no polarisation (UV pixels: polarised = far share)."""
-    for i in range(len(indptr) - 1):
+@njit(cache=True, fastmath=True, nogil=True)
+def sample_over_far(indptr, indices, weights, texels, channel, far, out, lo, hi):  # pragma: no cover - compiled
+    """Meshes over a far field, for LEDs lo..hi-1: like `sample_pairs`, with texel channel 3 the meshes'
+    coverage (0..1) and `far` (n, 2) the far field already integrated over each LED's footprint, seen where
+    nothing covers it: out = meshes + (1 - coverage) * far. Meshes carry no polarisation (UV pixels: polarised
+    = far share). Runs without the GIL: two threads may each take a range."""
+    for i in range(lo, hi):
         c = channel[i]
         a0 = np.float32(0.0)
         a1 = np.float32(0.0)
@@ -58,7 +60,7 @@ def sample_over_far(indptr, indices, weights, texels, channel, far, out):  # pra
             out[i, 1] = u * far[i, 1]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def lookup_pairs(table, order, row, row_frac, col0, shift, out):  # pragma: no cover - compiled
     """Bilinear lookup in a far-field table for the LEDs in `order` (sorted by row: cache friendly).
 
@@ -133,7 +135,7 @@ def warm_up() -> None:
     weights, texels, channel = np.ones(1, f32), np.zeros((1, 4), np.uint16), np.zeros(1, i64)
     pairs = np.zeros((1, 2), f32)
     sample_pairs(indptr, indices, weights, texels, channel, pairs)
-    sample_over_far(indptr, indices, weights, texels, channel, pairs, pairs.copy())
+    sample_over_far(indptr, indices, weights, texels, channel, pairs, pairs.copy(), 0, 1)
     lookup_pairs(np.zeros((2, 2, 2), np.uint16), np.zeros(1, i64), np.zeros(1, i64), np.zeros(1, f32),
                  np.zeros(1), 0.0, pairs)
     convert_pairs(pairs, pairs.copy(), np.zeros(1, np.bool_), False, np.zeros((1, 2), np.uint16))

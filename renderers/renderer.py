@@ -164,6 +164,7 @@ class Renderer:
         self._meshes: MeshBuffers | None = None
         self._table = None
         self._layer = None
+        self._helper = None
         #: frames drawn with the far layer, and in full (no usable layer: start-up, edits, a jump of the eye)
         self.layer_frames = self.full_frames = 0
         self._t0 = 0.0
@@ -475,12 +476,19 @@ class Renderer:
                     self.full_frames += 1
                 else:
                     self.layer_frames += 1
+            if over_table:  # the far field's lookup needs no GL: the helper thread does it meanwhile
+                helper = self._helper_thread()
+                looked_up = helper.submit((self._table if layer is None else layer[0]).lookup, psi, self._far_pairs)
             self._render_cube(scene, pose, q, t, level, texels, background=not over_table,
                               chunks=None if layer is None else layer[1])
             t1 = time.perf_counter()
-            if over_table:
-                (self._table if layer is None else layer[0]).lookup(psi, self._far_pairs)
-                sample_over_far(indptr, indices, weights, texels, self._channel, self._far_pairs, pairs)
+            if over_table:  # then each thread samples half of the LEDs
+                looked_up.result()
+                n = len(indptr) - 1
+                args = (indptr, indices, weights, texels, self._channel, self._far_pairs, pairs)
+                half = helper.submit(sample_over_far, *args, 0, n // 2)
+                sample_over_far(*args, n // 2, n)
+                half.result()
             else:
                 sample_pairs(indptr, indices, weights, texels, self._channel, pairs)
         t2 = time.perf_counter()
@@ -488,6 +496,15 @@ class Renderer:
         t3 = time.perf_counter()
         self.last_timings = {"render": t1 - t0, "sample": t2 - t1, "convert": t3 - t2}
         return out
+
+    def _helper_thread(self):
+        """One worker thread for the per-LED loops that release the GIL (started on first use; its priority and
+        CPUs are those of the thread that starts it, the frame loop's)."""
+        if self._helper is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._helper = ThreadPoolExecutor(max_workers=1, thread_name_prefix="renderer-helper")
+        return self._helper
 
     @staticmethod
     def _scene_eye(scene: Scene, pose: Pose) -> np.ndarray:
@@ -569,6 +586,9 @@ class Renderer:
         return (self._texels.astype(np.float32) / 65535.0).reshape(6, n, n, 4)
 
     def release(self) -> None:
+        if self._helper is not None:
+            self._helper.shutdown()
+            self._helper = None
         with self.ctx:
             if self._layer is not None:
                 self._layer.release()
