@@ -17,23 +17,46 @@ def supported() -> bool:
     return hasattr(os, "sched_setaffinity") and Path("/proc/self/task").is_dir()
 
 
-def _descendants(pid: int) -> list[int]:
-    """Process ids of every descendant of `pid` (from /proc/*/stat)."""
-    parent_of: dict[int, int] = {}
+def _children(pid: int) -> list[int]:
+    """Process ids of the children of `pid` (/proc/PID/task/*/children; a full scan of /proc where the kernel
+    lacks that file)."""
+    tasks = list(Path(f"/proc/{pid}/task").glob("*/children"))
+    if tasks:
+        kids = []
+        for path in tasks:
+            try:
+                kids += [int(k) for k in path.read_text().split()]
+            except OSError:  # the thread ended meanwhile
+                pass
+        return kids
+    kids = []
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
             text = stat.read_text()
         except OSError:  # the process ended meanwhile
             continue
-        fields = text[text.rindex(")") + 2:].split()
-        parent_of[int(stat.parent.name)] = int(fields[1])
+        if int(text[text.rindex(")") + 2:].split()[1]) == pid:
+            kids.append(int(stat.parent.name))
+    return kids
+
+
+def _descendants(pid: int) -> list[int]:
+    """Process ids of every descendant of `pid`."""
     found, frontier = [], [pid]
     while frontier:
-        p = frontier.pop()
-        kids = [c for c, parent in parent_of.items() if parent == p]
+        kids = _children(frontier.pop())
         found += kids
         frontier += kids
     return found
+
+
+def _place(target: int, cpus: set) -> None:
+    """Move thread or process `target` to `cpus` unless it is there already (a move migrates it)."""
+    try:
+        if os.sched_getaffinity(target) != cpus:
+            os.sched_setaffinity(target, cpus)
+    except OSError:  # it ended meanwhile
+        pass
 
 
 class Isolation:
@@ -65,12 +88,7 @@ class Isolation:
     @staticmethod
     def _place(thread_cpus, process_cpus: set) -> None:
         for task in Path("/proc/self/task").iterdir():
-            try:
-                os.sched_setaffinity(int(task.name), thread_cpus(int(task.name)))
-            except OSError:  # the thread ended meanwhile
-                pass
+            _place(int(task.name), thread_cpus(int(task.name)))
         for pid in _descendants(os.getpid()):
-            try:
-                os.sched_setaffinity(pid, process_cpus)
-            except OSError:
-                pass
+            for task in Path(f"/proc/{pid}/task").glob("*"):  # every thread of it (a GL driver's among them)
+                _place(int(task.name), process_cpus)

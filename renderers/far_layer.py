@@ -25,6 +25,7 @@ tables over in shared memory (double-buffered); frames never wait for it.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -35,6 +36,8 @@ from .meshbuffers import MeshBuffers
 MODES = ("off", "sync", "async")
 #: the eye may move this fraction of the allowed displacement before an async rebuild is asked for
 REFRESH_FRACTION = 0.25
+#: weight of the newest frame in the eye's velocity estimate (an exponential average over ~20 frames)
+VELOCITY_SMOOTHING = 0.05
 
 
 def allowed_displacement(radius: float, error: float) -> float:
@@ -168,6 +171,11 @@ class FarLayer:
         self._gen_ready = -1
         self._index = 0
         self.builds = 0
+        #: seconds from asking for a layer to using it: the latest and the largest
+        self.latency = self.max_latency = 0.0
+        self._asked = 0.0
+        self._last = None  # (eye, time) of the previous frame, and the eye's smoothed velocity (m/s)
+        self._velocity = np.zeros(3)
         args = (objects, radius, face_size, chunk_size, lod_angle)
         if mode == "sync":
             self._builder = FarLayerBuilder(ctx, objects, far_field, *args[1:])
@@ -203,15 +211,29 @@ class FarLayer:
         eye = np.asarray(eye, dtype=np.float64)
         if self.mode == "sync":
             if not self._usable(eye):
+                self._asked = time.perf_counter()
                 self._builder.build(eye, self._tables[0])
                 self._adopt(eye, self.generation, 0)
         else:
+            now = time.perf_counter()
+            if self._last is not None and now > self._last[1]:
+                step = (eye - self._last[0]) / (now - self._last[1])
+                self._velocity += VELOCITY_SMOOTHING * (step - self._velocity)
+            self._last = (eye, now)
             for eye_built, gen, index in self._worker.results():
                 self._adopt(eye_built, gen, index)
             stale = (self._eye is None or self._gen_ready != self.generation
                      or np.linalg.norm(eye - self._eye) > REFRESH_FRACTION * self.max_shift)
             if stale and not self._worker.busy:
-                self._worker.send(("build", eye, self.generation, 1 - self._index if self._eye is not None else 0))
+                # for where the eye will be when the layer is in: ahead by the last build's latency (at most
+                # half the allowed shift), so that a walking ant stays near the middle of the layer's range
+                lead = self._velocity * self.latency
+                norm = float(np.linalg.norm(lead))
+                if norm > 0.5 * self.max_shift:
+                    lead *= 0.5 * self.max_shift / norm
+                self._asked = now
+                self._worker.send(("build", eye + lead, self.generation,
+                                   1 - self._index if self._eye is not None else 0))
         if not self._usable(eye):
             return None
         return self._tables[self._index], self._near
@@ -220,6 +242,8 @@ class FarLayer:
         self._eye, self._gen_ready, self._index = np.asarray(eye, dtype=np.float64), generation, index
         self._near = self._near_chunks(self._eye, self.radius)
         self.builds += 1
+        self.latency = time.perf_counter() - self._asked
+        self.max_latency = max(self.max_latency, self.latency)
 
     def release(self) -> None:
         if self.mode == "sync":

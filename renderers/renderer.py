@@ -303,13 +303,15 @@ class Renderer:
         return True
 
     def far_layer_status(self) -> dict:
-        """Mode, frames drawn with the far layer and in full, layers built, the builder's error ("" if none) and
-        process id (None unless async)."""
+        """Mode, frames drawn with the far layer and in full, layers built, the builder's error ("" if none),
+        process id (None unless async), and the latest and largest time from asking for a layer to using it (s)."""
         layer = self._layer
         return {"mode": self.far_layer_mode if layer is not None else "off", "layer_frames": self.layer_frames,
                 "full_frames": self.full_frames, "builds": layer.builds if layer is not None else 0,
                 "error": (layer.error or "") if layer is not None else "",
-                "pid": layer.pid if layer is not None else None}
+                "pid": layer.pid if layer is not None else None,
+                "latency_s": layer.latency if layer is not None else 0.0,
+                "max_latency_s": layer.max_latency if layer is not None else 0.0}
 
     def _layer_edit(self, edit: tuple) -> None:
         if self._layer is not None:

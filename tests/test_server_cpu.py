@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import threading
+import time
 
 import pytest
 
@@ -21,14 +22,19 @@ def test_isolation_places_the_loop_thread_alone_and_everything_else_elsewhere():
     stop = threading.Event()
     other = threading.Thread(target=stop.wait, daemon=True)
     other.start()
-    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    # a child with a second thread: both threads of it must move
+    child = subprocess.Popen([sys.executable, "-c", "import threading, time; threading.Thread(target=time.sleep, "
+                              "args=(30,)).start(); time.sleep(30)"])
+    time.sleep(0.5)
     isolation = cpu.Isolation("auto")
     try:
         assert isolation.cpu == max(usable) and isolation.others == usable - {max(usable)}
         isolation.apply(threading.get_native_id())
         assert os.sched_getaffinity(0) == {isolation.cpu}  # this (the "loop") thread
         assert os.sched_getaffinity(other.native_id) == isolation.others
-        assert os.sched_getaffinity(child.pid) == isolation.others
+        child_threads = [int(t) for t in os.listdir(f"/proc/{child.pid}/task")]
+        assert len(child_threads) == 2
+        assert all(os.sched_getaffinity(t) == isolation.others for t in child_threads)
         isolation.release()
         for target in (0, other.native_id, child.pid):
             assert os.sched_getaffinity(target) == usable
