@@ -47,7 +47,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
         "scene": "habitat",  # a scene name, a file path, or a table {scene = name, ...parameters} (renderers)
         "face_size": 0,  # cube face side in texels; 0: the renderer's default (96 with a far layer, else 192)
         "far_layer": "async",  # "off", "sync" or "async": meshes beyond near_radius_m from a recent eye position
-        "near_radius_m": 3.0,  # meshes within this distance are drawn every frame
+        "near_radius_m": 2.0,  # meshes within this distance are drawn every frame
         "far_layer_error_deg": 0.25,  # largest parallax error of the far layer before a frame is drawn in full
     },
     "bus": {

@@ -3,7 +3,7 @@ table, so that each frame draws only the meshes near the eye.
 
 Seen from an eye that moved by |delta| since the layer was rendered, content at distance D >= R (the near
 radius) is displaced by at most |delta| / (R - |delta|) radians. The layer is used while that bound stays under
-`error` (default 0.25°, a sixth of the LED pitch: about 13 mm of walking at R = 3 m); otherwise, and until a
+`error` (default 0.25°, a sixth of the LED pitch: about 9 mm of walking at R = 2 m); otherwise, and until a
 layer for the current scene edits exists, the frame is rendered in full. A frame using the layer:
 
 1. draws (at the near face size) the chunks that lie within R of the layer's eye, with their coverage;

@@ -99,7 +99,7 @@ class Renderer:
     def __init__(self, dome=None, face_size: int | None = None, footprint_deg: float = LED_PITCH_DEG,
                  brightness: float = 1.0, near: float = 1e-3, far: float = 1e3, far_face_size: int | None = None,
                  chunk_size: float = 1.0, lod_texels: float = 1.0, clock=None, fast_far_field: bool = True,
-                 far_layer: str = "off", near_radius: float = 3.0, far_layer_error_deg: float = 0.25,
+                 far_layer: str = "off", near_radius: float = 2.0, far_layer_error_deg: float = 0.25,
                  layer_face_size: int | None = None):
         if dome is None:
             from antarium.geometry import load_dome

@@ -2,7 +2,7 @@
 ant's process stands in for the dome and the insect.
 
     antarium serve --config ant_rig.toml                                  # renders, sends frames over UDP
-    python -m antarium.ant.served ant.npz --config ant_rig.toml --out run/   # the ant (model from `ant learn`)
+    antarium ant serve ant.npz --config ant_rig.toml --out run/   # the ant (model from `antarium ant learn`)
 
 The ant's process hosts the dome: the distributor and its 55 panels (the `antarium.firmware_proto` emulator) listen
 on `[link] host:port`, where the server sends its LED frames (`spawn_emulator = false`), and the ant's eye reads
@@ -17,7 +17,6 @@ and `follow_route` run on it unchanged, in real time (`MonotonicClock`).
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import math
@@ -32,8 +31,6 @@ from antarium.ant.eye import Eye, EyeParams
 from antarium.ant.locomotion import TrackballLegs
 from antarium.clock import Clock, MonotonicClock
 from antarium.pose import Pose
-
-HELP = "put a trained virtual ant on a served rig (`antarium serve --config`): it hosts the dome and walks a route"
 
 
 def served_config(config: str | Path | dict[str, Any]) -> dict[str, Any]:
@@ -248,31 +245,3 @@ def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out:
          f"lateral error median {100 * summary['lateral_median']:.1f} cm\n  trial log (server): {log}\n"
          f"  summary: {out / 'served.json'}\n  picture: {picture}")
     return summary
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("model_file", help="model file written by 'antarium ant learn' (holds its route)")
-    parser.add_argument("--config", required=True, help="the rig config `antarium serve` runs with (TOML)")
-    parser.add_argument("--out", required=True, help="folder for served.json and served_paths.png")
-    parser.add_argument("--lateral-cm", type=float, default=0.0, help="release this far left of the route start")
-    parser.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
-    parser.add_argument("--max-decisions", type=int, default=None)
-
-
-def run(args: argparse.Namespace) -> int:
-    run_served(args.model_file, args.config, args.out, (args.lateral_cm / 100.0, math.radians(args.heading_deg)),
-               args.max_decisions)
-    return 0
-
-
-if __name__ == "__main__":
-    import sys
-
-    parser = argparse.ArgumentParser(prog="python -m antarium.ant.served", description=HELP)
-    add_arguments(parser)
-    _args = parser.parse_args()
-    try:
-        sys.exit(run(_args))
-    except (ValueError, FileNotFoundError, RuntimeError) as exc:
-        print(f"antarium.ant.served: error: {exc}", file=sys.stderr)
-        sys.exit(2)

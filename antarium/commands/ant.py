@@ -1,4 +1,4 @@
-"""`antarium ant learn | run | evaluate | demo`: the virtual ant on an emulated rig (no hardware needed)."""
+"""`antarium ant learn | run | evaluate | demo | serve`: the virtual ant on an emulated rig (no hardware needed)."""
 
 from __future__ import annotations
 
@@ -69,6 +69,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("demo", help="train on a short route, follow it; log and picture of both paths")
     p.add_argument("--out", required=True)
     p.add_argument("--scene", default="habitat")
+    p = sub.add_parser("serve", help="put a trained ant on a served rig (`antarium serve --config`): it hosts the "
+                                     "dome, walks through the emulated USB trackball and follows its route")
+    p.add_argument("model_file", help="model file written by 'antarium ant learn' (holds its route)")
+    p.add_argument("--config", required=True, help="the rig config `antarium serve` runs with (TOML)")
+    p.add_argument("--out", required=True, help="folder for served.json and served_paths.png")
+    p.add_argument("--lateral-cm", type=float, default=0.0, help="release this far left of the route start")
+    p.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
+    p.add_argument("--max-decisions", type=int, default=None)
 
 
 def _bar(desc: str, total=None):
@@ -84,6 +92,12 @@ def run(args: argparse.Namespace) -> int:
         return _learn(args)
     if args.action == "run":
         return _run(args)
+    if args.action == "serve":
+        from antarium.ant.served import run_served
+
+        run_served(args.model_file, args.config, args.out, (args.lateral_cm / 100.0, math.radians(args.heading_deg)),
+                   args.max_decisions)
+        return 0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.action == "evaluate":
