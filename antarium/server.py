@@ -14,6 +14,7 @@ from __future__ import annotations
 import gc
 import json
 import math
+import os
 import subprocess
 import sys
 import threading
@@ -523,6 +524,10 @@ class Server:
             loop_cfg = self.config["loop"]
             if loop_cfg["realtime_priority"]:
                 self._set_realtime(loop_cfg["realtime_priority"])
+            if loop_cfg["cpu"] != "off" and len(getattr(os, "sched_getaffinity", lambda _: ())(0)) > 1:
+                # llvmpipe (software GL) rasterises in the calling thread: the frame's GL work stays on the
+                # loop's own CPU instead of waiting for raster threads on the other (no effect on a GPU driver)
+                os.environ.setdefault("LP_NUM_THREADS", "0")
             self.link = self._open_link()
             self.renderer = self._renderer_factory(self.config["render"], self.clock) if self._renderer_factory \
                 else None
@@ -596,8 +601,6 @@ class Server:
 
     def _set_realtime(self, priority: int) -> None:
         """SCHED_FIFO for this (the frame loop's) thread; processes it starts inherit it. Warns if not allowed."""
-        import os
-
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
             self._realtime_set = True
@@ -676,8 +679,6 @@ class Server:
                 self._status_thread.join(2.0)  # it re-applies the placement once a second
             isolation.release()
         if self._realtime_set:
-            import os
-
             self._realtime_set = False
             try:
                 os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
