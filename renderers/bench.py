@@ -121,8 +121,7 @@ def run(args) -> int:
         renderer = Renderer(dome, **kwargs)
         try:
             r = measure(renderer, make(), frames)
-            r["renderer"] = {"face_size": renderer.face_size,
-                             "gl": describe(renderer.ctx), **kwargs}
+            r["renderer"] = {"face_size": renderer.face_size, "gl": describe(renderer.ctx), **kwargs}
             r["far_layer"] = renderer.far_layer_status()
         finally:
             renderer.release()

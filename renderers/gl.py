@@ -33,4 +33,5 @@ def create_context():
 
 def describe(ctx) -> str:
     """'renderer, version' of a context, e.g. 'llvmpipe (LLVM 15.0.6, 256 bits), 4.5 (Core Profile) Mesa'."""
-    return f"{ctx.info['GL_RENDERER']}, {ctx.info['GL_VERSION']}"
+    with ctx:  # the strings are the current context's
+        return f"{ctx.info['GL_RENDERER']}, {ctx.info['GL_VERSION']}"
