@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from antarium.ant.agent import follow_route, learning_walk
+from antarium.ant.experiments import MODEL_EYES, MODEL_PARAMS
 from antarium.ant.locomotion import AntLocomotion, Strides, TrackballLegs
 from antarium.ant.models import make_model
 from antarium.ant.routes import curved_route
@@ -81,15 +82,16 @@ def test_the_frame_loop_moves_as_through_the_ant_source_within_a_count(tether):
 
 @pytest.fixture(scope="module")
 def trained():
-    model = make_model("antcar", 800)
-    with virtual_rig(model, renderer_kwargs={"face_size": FACE}) as ant:
+    """Antcar as the route-following experiments set it up (their eye and oscillation)."""
+    model = make_model("antcar", MODEL_EYES["antcar"].n_pn, **MODEL_PARAMS["antcar"])
+    with virtual_rig(model, eye_params=MODEL_EYES["antcar"], renderer_kwargs={"face_size": FACE}) as ant:
         learning_walk(ant, ROUTE, 0.01)
     return model
 
 
 def _release(model, tether, log_path=None, decisions=45):
-    with virtual_rig(model, tether=tether, renderer_kwargs={"face_size": FACE}, trackball=True,
-                     log_path=log_path) as ant:
+    with virtual_rig(model, eye_params=MODEL_EYES["antcar"], tether=tether, renderer_kwargs={"face_size": FACE},
+                     trackball=True, log_path=log_path) as ant:
         result = follow_route(ant, ROUTE, decisions, arrive_radius=0.05, start_offset=(0.03, math.radians(20)))
         return result, ant.legs.driver.status()
 
@@ -118,8 +120,8 @@ def test_the_same_path_is_walked_again_on_a_simulated_clock(trained):
 
 def test_the_same_code_runs_on_a_real_time_clock(trained):
     clock = MonotonicClock()
-    with virtual_rig(trained, clock=clock, renderer_kwargs={"face_size": FACE}, trackball=True,
-                     frames_per_decision=2) as ant:
+    with virtual_rig(trained, eye_params=MODEL_EYES["antcar"], clock=clock, renderer_kwargs={"face_size": FACE},
+                     trackball=True, frames_per_decision=2) as ant:
         t0 = clock.now()
         result = follow_route(ant, ROUTE, 8, arrive_radius=0.05)
         frames, elapsed = ant.loop.frame, clock.now() - t0
