@@ -92,8 +92,9 @@ class FarLayerBuilder:
         self._texels = np.empty((6 * n * n, 4), dtype=np.uint16)
         self._taps, self._weights = cube_taps(g.directions(), n)
         self._field = np.empty((g.n_rows * g.n_cols, 4), dtype=np.float32)
-        cols = g.n_cols
-        self._static = np.concatenate([far_field.table_gb[:, :cols], far_field.table_uv[:, :cols]], axis=2)
+        cols = g.n_cols  # the far field as radiance [G, B, UV, polarised UV], converted once, not per build
+        self._static = np.concatenate([far_field.table_gb[:, :cols], far_field.table_uv[:, :cols]],
+                                      axis=2).astype(np.float32) / np.float32(65535.0)
         self.meshes: MeshBuffers | None = None
         self.set_objects(objects)
 
@@ -137,7 +138,7 @@ class FarLayerBuilder:
         layer = g.blur(self._field.reshape(g.n_rows, g.n_cols, 4))  # [G, B, UV, coverage]
         uncovered = 1.0 - np.clip(layer[..., 3:4], 0.0, 1.0)
         layer[..., 3] = 0.0  # meshes carry no polarisation
-        layer += uncovered * (self._static * np.float32(1.0 / 65535.0))
+        layer += uncovered * self._static
         g.quantise(layer[..., 0:2], out.table_gb)
         g.quantise(layer[..., 2:4], out.table_uv)
         return out
