@@ -32,7 +32,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
         "ball_radius": 0.05,  # metres
         "stats_every": 19,  # publish frame statistics every N frames
         "pose_every": 1,  # publish the pose every N frames
-        "realtime_priority": 10,  # 1..99: run the frame loop (and the spawned emulator) SCHED_FIFO; 0: off
+        "realtime_priority": 10,  # 1..99: the frame loop SCHED_FIFO (a spawned emulator one below); 0: off
         "cpu": "auto",  # a CPU for the frame loop's thread alone, the rest of the rig on the others: a CPU number,
         # "auto" (the last one, when there are two or more) or "off"
     },
@@ -48,7 +48,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
         "face_size": 0,  # cube face side in texels; 0: the renderer's default (96 with a far layer, else 192)
         "far_layer": "async",  # "off", "sync" or "async": meshes beyond near_radius_m from a recent eye position
         "near_radius_m": 2.0,  # meshes within this distance are drawn every frame
-        "far_layer_error_deg": 0.25,  # largest parallax error of the far layer before a frame is drawn in full
+        "far_layer_error_deg": 0.5,  # largest parallax error of the far layer before a frame is drawn in full
     },
     "bus": {
         "enabled": True,

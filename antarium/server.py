@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from antarium import bus
+from antarium import bus, cpu
 from antarium.clock import Clock, MonotonicClock
 from antarium.control import CommandError, parse_command
 from antarium.frame_loop import FrameLoop, FrameRecord
@@ -43,10 +43,16 @@ class ServerError(RuntimeError):
 
 
 class EmulatorProcess:
-    """`antarium emulate` as a process of its own on loopback (the embedded default's dome)."""
+    """`antarium emulate` as a process of its own on loopback (the embedded default's dome).
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 0, extra_args: list[str] | None = None) -> None:
+    realtime_priority: 1..99 to run it SCHED_FIFO at that priority (as hardware would answer), 0 for ordinary
+    scheduling; not granted, it runs ordinary.
+    """
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, extra_args: list[str] | None = None,
+                 realtime_priority: int = 0) -> None:
         self.host = host
+        self.realtime_priority = realtime_priority
         self.port = port or _free_udp_port(host)
         self.extra_args = list(extra_args or [])
         self.proc: subprocess.Popen | None = None
@@ -62,6 +68,11 @@ class EmulatorProcess:
             self._output.close()
         self._output = tempfile.TemporaryFile(mode="w+b")  # a file, never a pipe that could fill and block it
         self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self._output, stderr=subprocess.STDOUT)
+        if self.realtime_priority:
+            try:
+                cpu.set_realtime(self.realtime_priority, self.proc.pid)
+            except (AttributeError, OSError):
+                pass
 
     def output(self, max_bytes: int = 4000) -> str:
         """The end of what the emulator printed (for error messages)."""
@@ -158,7 +169,7 @@ class Server:
         self.final_stats: dict[str, Any] = {}
         self._isolation = None  # antarium.cpu.Isolation when [loop] cpu pins the frame loop
         self._loop_tid = 0
-        self._realtime_set = False
+        self._realtime_priority = 0  # granted SCHED_FIFO priority of the loop's thread (0: ordinary)
         self._switch_interval: float | None = None
         self.final_frame = None  # the last LED frame sent, kept after the loop stopped
         self._entities: list = []
@@ -203,7 +214,9 @@ class Server:
             return open_link("virtual", clock=self.clock)
         host, port = cfg["host"], cfg["port"]
         if cfg["spawn_emulator"]:
-            self.emulator = EmulatorProcess(host, port)
+            # below the frame loop's threads: it answers as hardware would, but never holds them off
+            priority = self.config["loop"]["realtime_priority"]
+            self.emulator = EmulatorProcess(host, port, realtime_priority=max(1, priority - 2) if priority else 0)
             self.emulator.start()
             port = self.emulator.port
         elif port == 0:
@@ -264,9 +277,7 @@ class Server:
 
     def _status_loop(self) -> None:
         while not self._stopping.wait(1.0):
-            isolation = self._isolation
-            if isolation is not None:  # threads and processes started since inherit their starter's CPUs
-                isolation.apply(self._loop_tid)
+            self._place_threads()
             try:
                 status = self.status()
                 if self.session is not None:
@@ -568,6 +579,7 @@ class Server:
         self._status_thread.start()
         self._loop_thread = threading.current_thread()
         self._isolate_loop(loop_cfg["cpu"])
+        self._place_threads()
         self._ready.set()
         self.loop.event("server_started", rig=self.rig)
         if self._stopping.is_set():  # stopped (a signal) while starting
@@ -580,30 +592,28 @@ class Server:
         finally:
             self._shutdown()
 
-    def _isolate_loop(self, cpu: int | str) -> None:
+    def _isolate_loop(self, which: int | str) -> None:
         """[loop] cpu: this (the frame loop's) thread alone on that CPU; warns if that cannot be done."""
-        if cpu == "off":
+        if which == "off":
             return
-        from antarium import cpu as cpus
-
-        if not cpus.supported():
-            if cpu != "auto":
+        if not cpu.supported():
+            if which != "auto":
                 self.echo("antarium serve: [loop] cpu needs Linux (sched_setaffinity, /proc); running unpinned")
             return
         try:
-            self._isolation = cpus.Isolation(cpu)
+            self._isolation = cpu.Isolation(which)
         except ValueError as exc:
-            if cpu != "auto":  # "auto" on a one-CPU machine: nothing to say
+            if which != "auto":  # "auto" on a one-CPU machine: nothing to say
                 self.echo(f"antarium serve: {exc}; running unpinned")
             return
         self._loop_tid = threading.get_native_id()
-        self._isolation.apply(self._loop_tid)
 
     def _set_realtime(self, priority: int) -> None:
-        """SCHED_FIFO for this (the frame loop's) thread; processes it starts inherit it. Warns if not allowed."""
+        """SCHED_FIFO for this (the frame loop's) thread; the threads and processes it starts begin ordinary
+        (`antarium.cpu.set_realtime`). Warns if not allowed."""
         try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-            self._realtime_set = True
+            cpu.set_realtime(priority)
+            self._realtime_priority = priority
         except (AttributeError, PermissionError, OSError) as exc:
             self.echo(f"antarium serve: realtime priority {priority} not granted ({exc}); running without it")
 
@@ -668,20 +678,31 @@ class Server:
             release()
         self._unpin()
 
+    def _place_threads(self) -> None:
+        """[loop] cpu and realtime_priority for the threads and processes started since (they begin with their
+        starter's CPUs and ordinary scheduling); run at start and then once a second by the status thread."""
+        if self._isolation is not None:
+            self._isolation.apply(self._loop_tid)
+        if self._realtime_priority:
+            try:
+                cpu.raise_ordinary_threads(max(1, self._realtime_priority - 1))
+            except OSError:
+                pass
+
     def _unpin(self) -> None:
         """Undo [loop] cpu, realtime_priority and the GIL switch interval (a script goes on running)."""
         if self._switch_interval is not None:
             sys.setswitchinterval(self._switch_interval)
             self._switch_interval = None
+        if self._status_thread is not None and self._status_thread is not threading.current_thread():
+            self._status_thread.join(2.0)  # it places the threads once a second
         isolation, self._isolation = self._isolation, None
         if isolation is not None:
-            if self._status_thread is not None and self._status_thread is not threading.current_thread():
-                self._status_thread.join(2.0)  # it re-applies the placement once a second
             isolation.release()
-        if self._realtime_set:
-            self._realtime_set = False
+        if self._realtime_priority:
+            self._realtime_priority = 0
             try:
-                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+                cpu.ordinary_threads()
             except OSError:
                 pass
 

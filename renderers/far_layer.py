@@ -3,7 +3,7 @@ table, so that each frame draws only the meshes near the eye.
 
 Seen from an eye that moved by |delta| since the layer was rendered, content at distance D >= R (the near
 radius) is displaced by at most |delta| / (R - |delta|) radians. The layer is used while that bound stays under
-`error` (default 0.25°, a sixth of the LED pitch: about 9 mm of walking at R = 2 m); otherwise, and until a
+`error` (default 0.5°, a third of the LED pitch: about 17 mm of walking at R = 2 m); otherwise, and until a
 layer for the current scene edits exists, the frame is rendered in full. A frame using the layer:
 
 1. draws (at the near face size) the chunks that lie within R of the layer's eye, with their coverage;
@@ -286,7 +286,8 @@ class _Worker:
         child.close()
         # below a real-time frame loop the builder takes a full share; beside an ordinary one, a smaller one (nice 5:
         # a quarter of a core against one busy process, enough for a layer every ~0.3 s; nice 10 starved it)
-        realtime = hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR)
+        realtime = hasattr(os, "sched_getscheduler") and \
+            os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK in (os.SCHED_FIFO, os.SCHED_RR)
         self._conn.send(([s.name for s in self._shm], far_field.table_gb, far_field.table_uv, g, args,
                          0 if realtime else 5))
         self.busy = False

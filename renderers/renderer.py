@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 import time
 
 import numpy as np
@@ -99,7 +100,7 @@ class Renderer:
     def __init__(self, dome=None, face_size: int | None = None, footprint_deg: float = LED_PITCH_DEG,
                  brightness: float = 1.0, near: float = 1e-3, far: float = 1e3, far_face_size: int | None = None,
                  chunk_size: float = 1.0, lod_texels: float = 1.0, clock=None, fast_far_field: bool = True,
-                 far_layer: str = "off", near_radius: float = 2.0, far_layer_error_deg: float = 0.25,
+                 far_layer: str = "off", near_radius: float = 2.0, far_layer_error_deg: float = 0.5,
                  layer_face_size: int | None = None):
         if dome is None:
             from antarium.geometry import load_dome
@@ -500,12 +501,17 @@ class Renderer:
         return out
 
     def _helper_thread(self):
-        """One worker thread for the per-LED loops that release the GIL (started on first use; its priority and
-        CPUs are those of the thread that starts it, the frame loop's)."""
+        """One worker thread for the per-LED loops that release the GIL (started on first use; its scheduling is
+        that of the thread that starts it, the frame loop's, even a real-time one whose children start ordinary)."""
         if self._helper is None:
             from concurrent.futures import ThreadPoolExecutor
 
-            self._helper = ThreadPoolExecutor(max_workers=1, thread_name_prefix="renderer-helper")
+            from antarium.cpu import copy_scheduling
+
+            policy = os.sched_getscheduler(0) if hasattr(os, "sched_getscheduler") else 0
+            priority = os.sched_getparam(0).sched_priority if hasattr(os, "sched_getparam") else 0
+            self._helper = ThreadPoolExecutor(max_workers=1, thread_name_prefix="renderer-helper",
+                                              initializer=copy_scheduling, initargs=(policy, priority))
         return self._helper
 
     @staticmethod

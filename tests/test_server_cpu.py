@@ -59,3 +59,68 @@ def test_cpu_setting_accepts_auto_off_and_numbers(value):
 def test_bad_cpu_setting_names_what_is_allowed(value):
     with pytest.raises(ConfigError, match=r'\[loop\] cpu must be a CPU number \(>= 0\), "auto" or "off"'):
         resolve({"loop": {"cpu": value}})
+
+
+def _realtime_allowed() -> bool:
+    allowed = []
+
+    def probe():
+        try:
+            cpu.set_realtime(1)
+            allowed.append(True)
+        except (AttributeError, OSError):
+            pass
+
+    probe_thread = threading.Thread(target=probe)  # a thread of its own: the test's thread stays as it is
+    probe_thread.start()
+    probe_thread.join()
+    return bool(allowed)
+
+
+def _policy(tid: int) -> tuple[int, int]:
+    return os.sched_getscheduler(tid) & ~os.SCHED_RESET_ON_FORK, os.sched_getparam(tid).sched_priority
+
+
+@pytest.mark.skipif(not _realtime_allowed(), reason="needs permission for SCHED_FIFO (CAP_SYS_NICE or rtprio)")
+def test_real_time_goes_to_the_loop_and_its_helper_the_rest_of_the_rig_below_or_ordinary(tmp_path):
+    from antarium import bus
+    from antarium.server import Server, wait_for
+
+    p = 10
+    config = resolve({
+        "rig": {"name": "tsched"}, "bus": {"listen": [bus.free_tcp_endpoint()]},
+        "log": {"dir": str(tmp_path)},
+        "render": {"scene": {"scene": "habitat", "n_tussocks": 30, "n_stones": 5, "n_bushes": 2, "n_trees": 1}},
+        "link": {"interface": "udp", "spawn_emulator": True},
+        "loop": {"realtime_priority": p, "rate_hz": 100.0},
+    })
+    me = threading.get_native_id()
+    assert _policy(me) == (os.SCHED_OTHER, 0)
+    server = Server(config, record="sched", echo=lambda line: None)
+    server.start_thread()
+    try:
+        assert wait_for(lambda: server.loop.frame > 50, 30.0)
+        time.sleep(1.2)  # the status thread places threads started since the first frame
+        loop_tid = server._loop_thread.native_id
+        assert _policy(loop_tid) == (os.SCHED_FIFO, p)
+        assert os.sched_getscheduler(loop_tid) & os.SCHED_RESET_ON_FORK  # nothing inherits it by accident
+        threads = {int(t): _policy(int(t)) for t in os.listdir("/proc/self/task")}
+        # the renderer's sampling helper runs with the loop; every other thread of the process just below it
+        # (they share the loop's GIL), this test's own thread included; background threads keep their policy
+        helpers = [t for t, pol in threads.items() if t != loop_tid and pol == (os.SCHED_FIFO, p)]
+        assert len(helpers) == 1
+        assert threads[server._status_thread.native_id] == (os.SCHED_FIFO, p - 1)
+        assert threads[me] == (os.SCHED_FIFO, p - 1)
+        assert all(pol[0] in (os.SCHED_BATCH, os.SCHED_IDLE) or pol[1] >= p - 1 for pol in threads.values())
+        # the emulator below the loop's threads; the far-layer builder and the log writer ordinary
+        emulator = server.emulator.proc.pid
+        assert _policy(emulator) == (os.SCHED_FIFO, p - 2)
+        builder = server.renderer.far_layer_status()["pid"]
+        children = cpu._descendants(os.getpid())
+        assert builder in children and len(children) >= 3
+        assert all(_policy(c) == (os.SCHED_OTHER, 0) for c in children if c != emulator)
+    finally:
+        server.stop()
+    # all undone: this process's threads ordinary again
+    assert all(_policy(int(t)) == (os.SCHED_OTHER, 0) for t in os.listdir("/proc/self/task")
+               if os.sched_getscheduler(int(t)) not in (os.SCHED_BATCH, os.SCHED_IDLE))
