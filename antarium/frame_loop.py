@@ -73,13 +73,14 @@ class FrameRecord:
     skipped: int  # frame slots skipped after this frame because it overran
     locomotion_connected: bool
     link_ok: bool
+    full_render: bool  # every mesh drawn this frame (the renderer's slow path: no far layer in use)
 
     def log_row(self) -> tuple:
         p = self.pose
         return (self.frame, self.t_target, self.t_start, self.t_sent, p.x, p.y, p.z, p.heading, self.scene_rotation,
                 int(self.closed_loop), int(self.fixed_tether), self.sample_seq, self.latency, self.render,
                 self.sample, self.convert, self.encode, self.send, self.pacing_error, int(self.late), self.skipped,
-                int(self.locomotion_connected), int(self.link_ok))
+                int(self.locomotion_connected), int(self.link_ok), int(self.full_render))
 
 
 def _check_gain(name: str, value: Any) -> float:
@@ -363,6 +364,7 @@ class FrameLoop:
                 self._integrate(samples)
         pose = self.pose
         render = sample = convert = encode = send = math.nan
+        full_render = False
         if self.renderer is not None:
             try:
                 self._frame_buf = self.renderer.render(pose, out=self._frame_buf)
@@ -370,6 +372,7 @@ class FrameLoop:
                 render = timings.get("render", math.nan)
                 sample = timings.get("sample", math.nan)
                 convert = timings.get("convert", math.nan)
+                full_render = bool(getattr(self.renderer, "last_full_render", False))
             except Exception as exc:  # the dome keeps the previous frame; the loop, the log and the bus go on
                 self.fault("render", t_start, exc)
         if self.link is not None and self._frame_buf is not None:
@@ -401,7 +404,7 @@ class FrameLoop:
         rec = FrameRecord(self.frame, t_target, t_start, t_sent, pose, self.scene_rotation, self.closed_loop,
                           self.tether == "fixed", newest.seq if newest is not None else -1, latency, render, sample,
                           convert, encode, send, t_start - t_target, late, skipped, self.locomotion_connected,
-                          self.link_ok)
+                          self.link_ok, full_render)
         self._stats[self.frame % STATS_WINDOW] = (t_start, latency, render, sample, convert, encode, send,
                                                   t_start - t_target)
         self.frame += 1

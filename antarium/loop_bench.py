@@ -40,7 +40,9 @@ def summarise(frames: dict[str, np.ndarray], rate_hz: float) -> dict[str, Any]:
     latency = _pct(f["latency"])
     return {
         "frames": n, "seconds": span, "target_rate_hz": rate_hz, "achieved_rate_hz": achieved,
-        "rate_ratio": achieved / rate_hz, "late_frames": int(f["late"].sum()), "skipped_slots": int(f["skipped"].sum()),
+        "rate_ratio": achieved / rate_hz, "late_frames": int(f["late"].sum()),
+        "late_full_render": int((f["late"].astype(bool) & f["full_render"].astype(bool)).sum()),
+        "full_render_frames": int(f["full_render"].sum()), "skipped_slots": int(f["skipped"].sum()),
         "latency": latency,
         "latency_p99_over_period": None if latency is None else latency["p99_ms"] / (1e3 * period),
         "stages": {k: _pct(f[k]) for k in ("render", "sample", "convert", "encode", "send")},
@@ -88,8 +90,8 @@ def _print(r: dict[str, Any]) -> None:
           f"scene {r['config']['render']['scene']!r}, face size {r['config']['render']['face_size'] or 'default'}")
     print(f"  frame rate      {r['achieved_rate_hz']:.1f} / {r['target_rate_hz']:.0f} Hz = {r['rate_ratio']:.3f} x "
           f"target")
-    print(f"  late frames     {r['late_frames']}   skipped slots {r['skipped_slots']}   rejected frames "
-          f"{r['rejected_frames']}   link outages {r['link_outages']}")
+    print(f"  late frames     {r['late_frames']} ({r['late_full_render']} of them drawn in full)   skipped slots "
+          f"{r['skipped_slots']}   rejected frames {r['rejected_frames']}   link outages {r['link_outages']}")
     layer = r.get("far_layer")
     if layer and layer["mode"] != "off":
         error = f", ERROR {layer['error']}" if layer["error"] else ""

@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-FORMAT_VERSION = 1
+#: 2: the frames table has `full_render`
+FORMAT_VERSION = 2
 
 #: HDF5 format bounds: 1.10 is the oldest format with SWMR and the newest that HDF5 1.10 libraries (MATLAB's,
 #: Debian 12's tools) read; h5py's "latest" (HDF5 2.0 here) writes datatype messages that 1.10 cannot decode
@@ -33,6 +34,7 @@ FRAME_DTYPE = np.dtype([
     ("closed_loop", "u1"), ("fixed_tether", "u1"), ("sample_seq", "<i8"), ("latency", "<f8"),
     ("render", "<f8"), ("sample", "<f8"), ("convert", "<f8"), ("encode", "<f8"), ("send", "<f8"),
     ("pacing_error", "<f8"), ("late", "u1"), ("skipped", "<i4"), ("locomotion_connected", "u1"), ("link_ok", "u1"),
+    ("full_render", "u1"),
 ])
 #: per-sample locomotion table: ball rotation increments in radians about the dome axes
 SAMPLE_DTYPE = np.dtype([

@@ -168,6 +168,8 @@ class Renderer:
         self._helper = None
         #: frames drawn with the far layer, and in full (no usable layer: start-up, edits, a jump of the eye)
         self.layer_frames = self.full_frames = 0
+        #: whether the last frame drew every mesh (no far layer in use): the slow path
+        self.last_full_render = False
         self._t0 = 0.0
         self._last_q = np.eye(3)
         self.last_timings = {"render": 0.0, "sample": 0.0, "convert": 0.0}
@@ -465,6 +467,7 @@ class Renderer:
         pairs = self._pairs
         psi = pose.heading - scene.rotation - scene.yaw_rate * t
         meshes = self._meshes is not None and self._meshes.drawable
+        self.last_full_render = False
         if self._table is not None and not meshes:
             t1 = time.perf_counter()
             self._table.lookup(psi, pairs)
@@ -474,6 +477,7 @@ class Renderer:
             level, texels, indptr, indices, weights = self._sampling()
             over_table = self._table is not None
             layer = None if self._layer is None else self._layer.current(self._scene_eye(scene, pose))
+            self.last_full_render = layer is None and meshes
             if self._layer is not None:
                 if layer is None:
                     self.full_frames += 1

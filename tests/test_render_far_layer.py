@@ -41,6 +41,7 @@ def reference(dome):
     r = Renderer(dome)
     r.set_scene(small_habitat())
     frames = [drive_to_radiance(r.render(WALK[k], t=0.0)) for k in CHECK]
+    assert r.last_full_render  # no far layer: every mesh drawn each frame
     r.release()
     return frames
 
@@ -87,6 +88,7 @@ def test_sync_far_layer_matches_full_renders_along_a_walk(dome, reference):
     r.set_scene(small_habitat())
     frames = walk(r, WALK)
     status = r.far_layer_status()
+    assert not r.last_full_render
     r.release()
     diff = np.concatenate([np.abs(a - b).sum(axis=1) for a, b in zip(frames, reference, strict=True)])
     # near meshes at 96 texels, far ones from the layer at 192: LED values within a few % of the full render

@@ -12,14 +12,16 @@ from antarium.pose import Pose
 
 
 class SlowRenderer:
-    """A renderer whose work takes `cost` seconds of the simulated clock (the seam the loop times)."""
+    """A renderer whose work takes `cost` seconds of the simulated clock (the seam the loop times); work longer
+    than a frame period is its slow path (`last_full_render`)."""
 
     def __init__(self, clock, cost):
-        self.clock, self.cost, self.last_timings = clock, cost, {}
+        self.clock, self.cost, self.last_timings, self.last_full_render = clock, cost, {}, False
 
     def render(self, pose, out=None):
         self.clock.advance(self.cost)
         self.last_timings = {"render": self.cost, "sample": 0.0, "convert": 0.0}
+        self.last_full_render = self.cost > 1 / 190
         return np.zeros((20350, 2), np.uint16) if out is None else out
 
 
@@ -128,8 +130,10 @@ def test_late_frames_are_counted_and_skipped_not_queued():
     renderer.cost = 2.5 * period  # three slots' worth of work: late, and two slots skipped
     rec = loop.step()
     assert rec.late and rec.skipped == 2
+    assert rec.full_render and rec.log_row()[-1] == 1  # the log says which path the late frame took
     renderer.cost = 0.2 * period
     nxt = loop.step()
+    assert not nxt.full_render and nxt.log_row()[-1] == 0
     assert nxt.t_start == pytest.approx(rec.t_target + 3 * period)  # back on the grid, no backlog
     assert nxt.pacing_error == pytest.approx(0.0) and not nxt.late
     assert loop.late_frames == 1 and loop.skipped_frames == 2
