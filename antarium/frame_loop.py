@@ -47,6 +47,8 @@ LOCOMOTION_CHECK_EVERY = 10
 TELEMETRY_EVERY_S = 0.1
 LINK_TIMEOUT_S = 0.5
 LINK_STARTUP_S = 5.0
+#: `when_idle` work runs after a frame only when at least this much time (s) is left before the next slot
+IDLE_MARGIN_S = 2.5e-3
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,6 +131,7 @@ class FrameLoop:
         self._next_t: float | None = None
         self._frame_buf = None
         self._pending: queue.SimpleQueue = queue.SimpleQueue()
+        self._idle: queue.SimpleQueue = queue.SimpleQueue()
         self._stop = threading.Event()
         self._loop_thread: threading.Thread | None = None
         # per recent frame: t_start, latency, render, sample, convert, encode, send, pacing error (s)
@@ -168,12 +171,23 @@ class FrameLoop:
         self._pending.put((future, fn, args, kwargs))
         return future
 
-    def _run_pending(self) -> None:
-        while True:
+    def when_idle(self, fn: Callable, *args: Any, **kwargs: Any) -> concurrent.futures.Future:
+        """Run `fn(*args, **kwargs)` in the loop's thread after a frame that leaves IDLE_MARGIN_S before the next
+        slot, one such call per frame; thread-safe. For housekeeping (status, CPU placement) that would
+        otherwise take the GIL from the frame in another thread."""
+        future: concurrent.futures.Future = concurrent.futures.Future()
+        self._idle.put((future, fn, args, kwargs))
+        return future
+
+    def _run_pending(self, calls: queue.SimpleQueue | None = None, limit: int | None = None) -> None:
+        calls = self._pending if calls is None else calls
+        while limit is None or limit > 0:
             try:
-                future, fn, args, kwargs = self._pending.get_nowait()
+                future, fn, args, kwargs = calls.get_nowait()
             except queue.Empty:
                 return
+            if limit is not None:
+                limit -= 1
             if not future.set_running_or_notify_cancel():
                 continue
             try:
@@ -419,6 +433,8 @@ class FrameLoop:
                 self._last_late_event_t, self._late_since_event, self._worst_overrun = t_sent, 0, 0.0
         if self.on_frame is not None:
             self.on_frame(rec)
+        if self._next_t - clock.now() >= IDLE_MARGIN_S:
+            self._run_pending(self._idle, limit=1)
         return rec
 
     def run(self, until: float | None = None, frames: int | None = None) -> int:

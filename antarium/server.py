@@ -276,14 +276,31 @@ class Server:
             self.loop.fault("bus", rec.t_sent, exc)
 
     def _status_loop(self) -> None:
+        """Once a second: place new threads and processes, publish the status. Both run in the frame loop's idle
+        time (`FrameLoop.when_idle`), so that they never take the GIL from a frame; this thread runs what the
+        loop has not run within a second (a loop blocked, e.g. by a scene load)."""
         while not self._stopping.wait(1.0):
-            self._place_threads()
-            try:
-                status = self.status()
-                if self.session is not None:
-                    self.session.put(bus.status_key(self.rig), json.dumps(status, default=_json_default))
-            except Exception as exc:  # the status thread must outlive any one bad status  # noqa: BLE001
-                self.echo(f"antarium serve: status failed: {exc}")
+            for task in (self._place_threads, self._publish_status):
+                claim = threading.Lock()  # whoever takes it runs the task: the loop's idle time or this thread
+
+                def once(task=task, claim=claim) -> None:
+                    if claim.acquire(blocking=False):
+                        try:
+                            task()
+                        except Exception as exc:  # the status thread must outlive any one failure  # noqa: BLE001
+                            self.echo(f"antarium serve: {task.__name__.strip('_')} failed: {exc}")
+
+                try:
+                    self.loop.when_idle(once).result(1.0)
+                except TimeoutError:
+                    if self._stopping.is_set():  # the loop ended: nothing to place or publish any more
+                        return
+                    once()
+
+    def _publish_status(self) -> None:
+        status = self.status()
+        if self.session is not None:
+            self.session.put(bus.status_key(self.rig), json.dumps(status, default=_json_default))
 
     def status(self) -> dict[str, Any]:
         """Frame rate, late frames, latency percentiles, distributor telemetry, trial and log state."""

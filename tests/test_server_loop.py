@@ -213,3 +213,23 @@ def test_a_raising_source_or_renderer_never_stops_the_loop():
     loop.run(frames=5)
     assert loop.faults["render"] == 5 and loop.link.frames == sent + 5  # the previous frame is sent again
     assert "render_error" in kinds
+
+
+def test_idle_work_runs_between_frames_only_with_time_to_spare_one_call_a_frame():
+    clock = SimulatedClock()
+    period = 1 / 190
+    renderer = SlowRenderer(clock, 0.7 * period)  # 1.6 ms left before the next slot: no time to spare
+    loop = make_loop(clock, renderer=renderer, link=RecordingLink())
+    ran = []
+    first = loop.when_idle(lambda: ran.append(("first", loop.frame)) or "done")
+    second = loop.when_idle(lambda: ran.append(("second", loop.frame)))
+    loop.run(frames=5)
+    assert ran == [] and not first.done()
+    renderer.cost = 0.2 * period  # 4.2 ms to spare: one call after each frame, in order, in the loop's thread
+    loop.step()
+    assert ran == [("first", 6)] and first.result(0) == "done"
+    rec = loop.step()
+    assert ran == [("first", 6), ("second", 7)] and not rec.late
+    failing = loop.when_idle(lambda: 1 / 0)  # an error goes to the caller, never into the loop
+    loop.step()
+    assert isinstance(failing.exception(0), ZeroDivisionError)
