@@ -188,12 +188,16 @@ class TrialLog:
                 self.rows_lost += n
 
     def status(self) -> dict[str, Any]:
-        with self._send_lock:
-            if self._conn is not None:
-                try:
+        """Path, rows written and lost so far, and the error, if any. Never waits: while a batch is being handed
+        over (a slow disk can hold that up), it answers with what the writer had reported before."""
+        if self._send_lock.acquire(blocking=False):
+            try:
+                if self._conn is not None:
                     self._collect_replies()
-                except (OSError, EOFError):
-                    self.error = self.error or f"trial log writer for {str(self.path)!r} died"
+            except (OSError, EOFError):
+                self.error = self.error or f"trial log writer for {str(self.path)!r} died"
+            finally:
+                self._send_lock.release()
         return {"path": str(self.path), "rows_written": dict(self.rows_written), "rows_lost": self.rows_lost,
                 "error": self.error}
 

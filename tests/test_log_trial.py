@@ -132,3 +132,19 @@ def test_disk_full_is_loud_while_the_stimulus_continues(tmp_path):
     (path,) = tmp_path.glob("*.h5")
     with open_log(path) as f:  # every batch written before the disk filled is still readable
         assert len(f["frames"]) >= result["written"] > 0
+
+
+def test_status_never_waits_for_a_batch_being_handed_over(tmp_path):
+    import threading
+
+    with TrialLog(tmp_path / "s.h5", {}, "status") as log:
+        log.add_event(0.0, "one", {})
+        log.flush(wait=True)
+        before = log.status()
+        assert before["rows_written"]["events"] == 1
+        answers = []
+        with log._send_lock:  # a hand-over held up (the writer's pipe full behind a slow disk)
+            asking = threading.Thread(target=lambda: answers.append(log.status()))  # e.g. the frame loop
+            asking.start()
+            asking.join(10.0)
+        assert answers == [before]  # answered at once, with what the writer had reported
