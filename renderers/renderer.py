@@ -170,6 +170,8 @@ class Renderer:
         self.layer_frames = self.full_frames = 0
         #: whether the last frame drew every mesh (no far layer in use): the slow path
         self.last_full_render = False
+        #: pieces of work the helper thread had not started when the frame needed them (done by the caller)
+        self.helper_misses = 0
         self._t0 = 0.0
         self._last_q = np.eye(3)
         self.last_timings = {"render": 0.0, "sample": 0.0, "convert": 0.0}
@@ -485,17 +487,18 @@ class Renderer:
                     self.layer_frames += 1
             if over_table:  # the far field's lookup needs no GL: the helper thread does it meanwhile
                 helper = self._helper_thread()
-                looked_up = helper.submit((self._table if layer is None else layer[0]).lookup, psi, self._far_pairs)
+                far = self._table if layer is None else layer[0]
+                looked_up = helper.submit(far.lookup, psi, self._far_pairs)
             self._render_cube(scene, pose, q, t, level, texels, background=not over_table,
                               chunks=None if layer is None else layer[1])
             t1 = time.perf_counter()
             if over_table:  # then each thread samples half of the LEDs
-                looked_up.result()
+                self._finish(looked_up, far.lookup, psi, self._far_pairs)
                 n = len(indptr) - 1
                 args = (indptr, indices, weights, texels, self._channel, self._far_pairs, pairs)
                 half = helper.submit(sample_over_far, *args, 0, n // 2)
                 sample_over_far(*args, n // 2, n)
-                half.result()
+                self._finish(half, sample_over_far, *args, 0, n // 2)
             else:
                 sample_pairs(indptr, indices, weights, texels, self._channel, pairs)
         t2 = time.perf_counter()
@@ -503,6 +506,15 @@ class Renderer:
         t3 = time.perf_counter()
         self.last_timings = {"render": t1 - t0, "sample": t2 - t1, "convert": t3 - t2}
         return out
+
+    def _finish(self, future, fn, *args) -> None:
+        """Wait for work handed to the helper thread; if it has not even started (the helper held off its CPU or
+        the GIL), take it back and do it here instead of waiting (counted in `helper_misses`)."""
+        if future.cancel():
+            self.helper_misses += 1
+            fn(*args)
+        else:
+            future.result()
 
     def _helper_thread(self):
         """One worker thread for the per-LED loops that release the GIL (started on first use; its scheduling is

@@ -195,3 +195,23 @@ def test_scenes_without_meshes_or_with_a_turning_far_field_have_no_layer(dome):
         assert r.far_layer_status()["mode"] == "sync"
     finally:
         r.release()
+
+
+def test_a_frame_never_waits_for_a_helper_that_has_not_started_its_work(dome):
+    import threading
+
+    r = Renderer(dome, far_layer="sync")
+    r.set_scene(small_habitat())
+    expected = r.render(WALK[3], t=0.0).copy()
+    assert r.helper_misses == 0
+    release = threading.Event()
+    r._helper_thread().submit(release.wait, 30.0)  # the helper held off (on a rig: its CPU or the GIL taken)
+    try:
+        held_off = r.render(WALK[3], t=0.0).copy()
+    finally:
+        release.set()
+    # the far-field lookup and the helper's half of the sampling were taken back and done by the caller
+    assert r.helper_misses == 2
+    np.testing.assert_array_equal(held_off, expected)
+    np.testing.assert_array_equal(r.render(WALK[3], t=0.0), expected)
+    r.release()
