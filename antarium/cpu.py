@@ -1,5 +1,5 @@
-"""CPU placement and scheduling (Linux): the frame loop's thread alone on one CPU, real-time, the rest of the
-rig on the others, ordinary.
+"""CPU placement and scheduling (Linux): the frame loop's thread alone on one CPU and real-time, the rest of
+the rig on the other CPUs.
 
 On a small machine the frame loop shares its cores with the emulator, the far-layer builder, the bus and the
 log writer. Giving the loop's thread a CPU of its own (`[loop] cpu`) keeps their bursts out of its frames:
@@ -8,11 +8,10 @@ remaining CPUs. Threads and processes started later inherit the mask of the thre
 the server applies it again once a second.
 
 `set_realtime` makes the calling thread SCHED_FIFO with SCHED_RESET_ON_FORK: the threads and processes it
-starts begin ordinary, so that none of them can hold off a real-time thread of the same priority. The server
-then gives each its place: the renderer's sampling helper copies its starter's scheduling, the other threads
-of the loop's process run real-time just below it (`raise_ordinary_threads`: they share its GIL, and a thread
-holding the GIL must never wait for a CPU behind ordinary work), a spawned emulator below them, and the
-far-layer builder and log writer stay ordinary.
+starts begin ordinary, so that none of them can hold off a real-time thread of the same priority, and a
+process that embeds the server keeps its own threads as they are. Only what must be real-time is made so by
+name: the renderer's sampling helper takes its starter's scheduling, and a spawned emulator runs two
+priorities below the loop.
 """
 
 from __future__ import annotations
@@ -35,37 +34,6 @@ def set_realtime(priority: int, pid: int = 0) -> None:
 def set_ordinary(pid: int = 0) -> None:
     """Back to ordinary scheduling (SCHED_OTHER) for thread or process `pid` (0: the calling thread)."""
     os.sched_setscheduler(pid, os.SCHED_OTHER, os.sched_param(0))
-
-
-def copy_scheduling(policy: int, priority: int) -> None:
-    """Give the calling thread `policy` (as `os.sched_getscheduler` returned it) and `priority`; nothing where
-    that is not allowed or not Linux (the thread then stays as it started)."""
-    try:
-        os.sched_setscheduler(0, policy, os.sched_param(priority))
-    except (AttributeError, OSError):
-        pass
-
-
-def raise_ordinary_threads(priority: int) -> None:
-    """Every thread of this process with ordinary scheduling (SCHED_OTHER) to SCHED_FIFO `priority` (children
-    they start begin ordinary); real-time and background (batch, idle) ones keep theirs. Raises OSError where
-    that is not allowed."""
-    for task in Path("/proc/self/task").iterdir():
-        tid = int(task.name)
-        try:
-            if os.sched_getscheduler(tid) == os.SCHED_OTHER:
-                set_realtime(priority, tid)
-        except ProcessLookupError:  # it ended meanwhile
-            pass
-
-
-def ordinary_threads() -> None:
-    """Every thread of this process back to ordinary scheduling (SCHED_OTHER)."""
-    for task in Path("/proc/self/task").iterdir():
-        try:
-            set_ordinary(int(task.name))
-        except ProcessLookupError:  # it ended meanwhile
-            pass
 
 
 def _children(pid: int) -> list[int]:

@@ -214,7 +214,7 @@ class Server:
             return open_link("virtual", clock=self.clock)
         host, port = cfg["host"], cfg["port"]
         if cfg["spawn_emulator"]:
-            # below the frame loop's threads: it answers as hardware would, but never holds them off
+            # real-time as hardware would answer, but below the frame loop and its helper: never holds them off
             priority = self.config["loop"]["realtime_priority"]
             self.emulator = EmulatorProcess(host, port, realtime_priority=max(1, priority - 2) if priority else 0)
             self.emulator.start()
@@ -696,15 +696,10 @@ class Server:
         self._unpin()
 
     def _place_threads(self) -> None:
-        """[loop] cpu and realtime_priority for the threads and processes started since (they begin with their
-        starter's CPUs and ordinary scheduling); run at start and then once a second by the status thread."""
+        """[loop] cpu for the threads and processes started since (they begin with their starter's CPUs); run at
+        start and then once a second."""
         if self._isolation is not None:
             self._isolation.apply(self._loop_tid)
-        if self._realtime_priority:
-            try:
-                cpu.raise_ordinary_threads(max(1, self._realtime_priority - 1))
-            except OSError:
-                pass
 
     def _unpin(self) -> None:
         """Undo [loop] cpu, realtime_priority and the GIL switch interval (a script goes on running)."""
@@ -719,7 +714,7 @@ class Server:
         if self._realtime_priority:
             self._realtime_priority = 0
             try:
-                cpu.ordinary_threads()
+                cpu.set_ordinary()
             except OSError:
                 pass
 

@@ -284,12 +284,13 @@ class _Worker:
         self._proc = subprocess.Popen([sys.executable, "-m", __name__, str(child.fileno())],
                                       pass_fds=(child.fileno(),))
         child.close()
-        # below a real-time frame loop the builder takes a full share; beside an ordinary one, a smaller one (nice 5:
-        # a quarter of a core against one busy process, enough for a layer every ~0.3 s; nice 10 starved it)
+        # below a real-time frame loop, nice 10: it still has most of the idle time of the loop's other CPU, but
+        # yields it at once to the server's ordinary threads, which may hold the loop's GIL; beside an ordinary
+        # loop, nice 5: a quarter of a core against it, enough for a layer every ~0.3 s (nice 10 starved it)
         realtime = hasattr(os, "sched_getscheduler") and \
             os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK in (os.SCHED_FIFO, os.SCHED_RR)
         self._conn.send(([s.name for s in self._shm], far_field.table_gb, far_field.table_uv, g, args,
-                         0 if realtime else 5))
+                         10 if realtime else 5))
         self.busy = False
         self.error: str | None = None
 

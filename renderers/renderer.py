@@ -522,12 +522,10 @@ class Renderer:
         if self._helper is None:
             from concurrent.futures import ThreadPoolExecutor
 
-            from antarium.cpu import copy_scheduling
-
             policy = os.sched_getscheduler(0) if hasattr(os, "sched_getscheduler") else 0
             priority = os.sched_getparam(0).sched_priority if hasattr(os, "sched_getparam") else 0
             self._helper = ThreadPoolExecutor(max_workers=1, thread_name_prefix="renderer-helper",
-                                              initializer=copy_scheduling, initargs=(policy, priority))
+                                              initializer=_set_scheduling, initargs=(policy, priority))
         return self._helper
 
     @staticmethod
@@ -622,3 +620,11 @@ class Renderer:
                     res.release()
         self.ctx.release()
 
+
+def _set_scheduling(policy: int, priority: int) -> None:
+    """The calling thread gets `policy` (as `os.sched_getscheduler` gives it) and `priority`; where that is not
+    allowed or not Linux it stays as it started."""
+    try:
+        os.sched_setscheduler(0, policy, os.sched_param(priority))
+    except (AttributeError, OSError):
+        pass

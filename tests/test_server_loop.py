@@ -229,7 +229,7 @@ def test_idle_work_runs_between_frames_only_with_time_to_spare_one_call_a_frame(
     loop.step()
     assert ran == [("first", 6)] and first.result(0) == "done"
     rec = loop.step()
-    assert ran == [("first", 6), ("second", 7)] and not rec.late
+    assert ran == [("first", 6), ("second", 7)] and second.done() and not rec.late
     failing = loop.when_idle(lambda: 1 / 0)  # an error goes to the caller, never into the loop
     loop.step()
     assert isinstance(failing.exception(0), ZeroDivisionError)
