@@ -32,7 +32,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
         "ball_radius": 0.05,  # metres
         "stats_every": 19,  # publish frame statistics every N frames
         "pose_every": 1,  # publish the pose every N frames
-        "realtime_priority": 10,  # 1..99: the frame loop SCHED_FIFO (a spawned emulator one below); 0: off
+        "realtime_priority": 10,  # 1..99: the frame loop SCHED_FIFO (a spawned emulator two below); 0: off
         "cpu": "auto",  # a CPU for the frame loop's thread alone, the rest of the rig on the others: a CPU number,
         # "auto" (the last one, when there are two or more) or "off"
     },

@@ -169,7 +169,7 @@ class Server:
         self.final_stats: dict[str, Any] = {}
         self._isolation = None  # antarium.cpu.Isolation when [loop] cpu pins the frame loop
         self._loop_tid = 0
-        self._realtime_priority = 0  # granted SCHED_FIFO priority of the loop's thread (0: ordinary)
+        self._realtime_set = False
         self._switch_interval: float | None = None
         self.final_frame = None  # the last LED frame sent, kept after the loop stopped
         self._entities: list = []
@@ -630,7 +630,7 @@ class Server:
         (`antarium.cpu.set_realtime`). Warns if not allowed."""
         try:
             cpu.set_realtime(priority)
-            self._realtime_priority = priority
+            self._realtime_set = True
         except (AttributeError, PermissionError, OSError) as exc:
             self.echo(f"antarium serve: realtime priority {priority} not granted ({exc}); running without it")
 
@@ -711,8 +711,8 @@ class Server:
         isolation, self._isolation = self._isolation, None
         if isolation is not None:
             isolation.release()
-        if self._realtime_priority:
-            self._realtime_priority = 0
+        if self._realtime_set:
+            self._realtime_set = False
             try:
                 cpu.set_ordinary()
             except OSError:
