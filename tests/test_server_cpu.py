@@ -81,6 +81,17 @@ def _policy(tid: int) -> tuple[int, int]:
     return os.sched_getscheduler(tid) & ~os.SCHED_RESET_ON_FORK, os.sched_getparam(tid).sched_priority
 
 
+def _thread_policies() -> dict[int, tuple[int, int]]:
+    """Scheduling of every thread of this process that still runs (one may end between listing and asking)."""
+    policies = {}
+    for name in os.listdir("/proc/self/task"):
+        try:
+            policies[int(name)] = _policy(int(name))
+        except ProcessLookupError:
+            pass
+    return policies
+
+
 @pytest.mark.skipif(not _realtime_allowed(), reason="needs permission for SCHED_FIFO (CAP_SYS_NICE or rtprio)")
 def test_real_time_goes_to_the_loop_and_its_helper_the_emulator_below_the_rest_ordinary(tmp_path):
     from antarium import bus
@@ -104,7 +115,7 @@ def test_real_time_goes_to_the_loop_and_its_helper_the_emulator_below_the_rest_o
         loop_tid = server._loop_thread.native_id
         assert _policy(loop_tid) == (os.SCHED_FIFO, p)
         assert os.sched_getscheduler(loop_tid) & os.SCHED_RESET_ON_FORK  # nothing inherits it by accident
-        threads = {int(t): _policy(int(t)) for t in os.listdir("/proc/self/task")}
+        threads = _thread_policies()
         # the renderer's sampling helper runs with the loop; every other thread of the process (this test's own,
         # the status thread, the bus') stays as it started
         helpers = [t for t, pol in threads.items() if t != loop_tid and pol == (os.SCHED_FIFO, p)]
@@ -124,5 +135,4 @@ def test_real_time_goes_to_the_loop_and_its_helper_the_emulator_below_the_rest_o
     finally:
         server.stop()
     # all undone: no thread of this process real-time any more
-    assert all(os.sched_getscheduler(int(t)) & ~os.SCHED_RESET_ON_FORK not in (os.SCHED_FIFO, os.SCHED_RR)
-               for t in os.listdir("/proc/self/task"))
+    assert all(policy not in (os.SCHED_FIFO, os.SCHED_RR) for policy, _ in _thread_policies().values())
