@@ -14,6 +14,7 @@ TARGETS: dict[str, str] = {
     "trackball": "antarium.trackball.bench:run",
     "protocol": "antarium.firmware_proto.bench:run",
     "render": "antarium.renderers.bench:run",
+    "jitter": "antarium.jitter_bench:run",
 }
 
 DOME_RATE_HZ = 190.0
@@ -24,6 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("target", choices=sorted(TARGETS), help="what to measure")
     parser.add_argument("--frames", type=int, default=None, help="number of frames (target-specific default)")
     parser.add_argument("--seconds", type=float, default=None, help="duration (target-specific default)")
+    parser.add_argument("--work-ms", type=float, default=2.5,
+                        help="jitter: busy time standing for one frame's work (ms; default 2.5)")
     parser.add_argument("--json", dest="json_out", default=None, help="also write the results to this JSON file")
 
 

@@ -1,0 +1,164 @@
+"""`antarium bench jitter`: how late this machine wakes the frame loop's thread, and how long it stops it.
+
+No frame loop can be steadier than the machine under it. This benchmark runs the loop's skeleton, nothing else:
+a thread with the loop's CPU and real-time priority (from the rig config, as `antarium serve` sets them) waits
+for each frame slot on the loop's clock, then stays busy for `--work-ms` (the frame's work; default 2.5 ms,
+the embedded default's median on a 2-core machine with software GL). It measures
+
+- the wake-up lateness: how long after its slot the thread runs again (the kernel's timer, the CPU's way
+  out of idle and, in a virtual machine, the hypervisor's scheduling of the virtual CPU);
+- the stalls: gaps of more than STALL_S in the busy thread's reading of the clock, times when it did not run
+  although it wanted to (interrupts, the kernel, a hypervisor running something else on that core);
+- the slots a frame of that work would miss: wake-up lateness + work + stalls > one frame period. A frame
+  loop on this machine cannot have fewer late frames than that, whatever it draws.
+
+Compare it with `antarium bench loop` over the same time: late frames beyond the missed slots here are the
+loop's own; those within them are the machine's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from antarium.clock import Clock, MonotonicClock
+
+#: a gap longer than this (s) between two clock readings of the busy thread counts as a stall
+STALL_S = 100e-6
+#: the summary counts wake-ups at least this late (s)
+LATENESS_EDGES_S = (0.5e-3, 1e-3, 2e-3, 5e-3)
+
+
+def measure(clock: Clock, period: float, work: float, slots: int) -> tuple[np.ndarray, np.ndarray]:
+    """Wait for `slots` frame slots of `period` s on `clock`, each followed by `work` s of busy reading of the
+    clock; in the calling thread.
+
+    Returns (lateness, stalled): (slots,) float64 s, how late the thread ran after each slot's start; and
+    (slots,) float64 s, the sum of its gaps longer than STALL_S while busy. Slots that have passed when the
+    previous one's work ends are skipped (as the frame loop does) and not measured.
+    """
+    lateness = np.empty(slots)
+    stalled = np.zeros(slots)
+    t_slot = clock.now() + period
+    for i in range(slots):
+        clock.sleep_until(t_slot)
+        last = start = clock.now()
+        lateness[i] = start - t_slot
+        end = start + work
+        while last < end:
+            now = clock.now()
+            if now - last > STALL_S:
+                stalled[i] += now - last
+            last = now
+        t_slot += period
+        if last > t_slot:  # slots passed meanwhile: skipped, as the frame loop skips them
+            t_slot += math.ceil((last - t_slot) / period) * period
+    return lateness, stalled
+
+
+def summarise(lateness: np.ndarray, stalled: np.ndarray, period: float, work: float) -> dict[str, Any]:
+    """Figures from `measure`'s arrays (times in ms in the result)."""
+    missed = lateness + work + stalled > period
+    p50, p99 = np.percentile(lateness, [50, 99])
+    return {
+        "slots": int(len(lateness)), "period_ms": 1e3 * period, "work_ms": 1e3 * work,
+        "lateness": {"p50_ms": 1e3 * float(p50), "p99_ms": 1e3 * float(p99), "max_ms": 1e3 * float(lateness.max())},
+        "lateness_at_least_ms": {f"{1e3 * edge:g}": int((lateness >= edge).sum()) for edge in LATENESS_EDGES_S},
+        "slots_with_stalls": int((stalled > 0).sum()), "stall_max_ms": 1e3 * float(stalled.max()),
+        "missed_slots": int(missed.sum()),
+    }
+
+
+def machine() -> dict[str, Any]:
+    """What the kernel says about idle states and real-time throttling (Linux; empty where unknown)."""
+    def read(path: str) -> str | None:
+        try:
+            return Path(path).read_text().strip()
+        except OSError:
+            return None
+
+    return {"cpuidle_driver": read("/sys/devices/system/cpu/cpuidle/current_driver"),
+            "cpuidle_governor": read("/sys/devices/system/cpu/cpuidle/current_governor_ro")
+            or read("/sys/devices/system/cpu/cpuidle/current_governor"),
+            "rt_runtime_us": read("/proc/sys/kernel/sched_rt_runtime_us"),
+            "rt_period_us": read("/proc/sys/kernel/sched_rt_period_us")}
+
+
+def _steal_s() -> float | None:
+    """Seconds of steal time (the hypervisor ran something else) summed over all CPUs, from /proc/stat."""
+    try:
+        fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def run(args: argparse.Namespace) -> int:
+    from antarium import cpu
+    from antarium.config import load_config
+
+    loop_cfg = load_config(os.environ.get("ANTARIUM_RIG_CONFIG") or None)["loop"]
+    rate = loop_cfg["rate_hz"]
+    period = 1.0 / rate
+    seconds = 30.0 if args.seconds is None and args.frames is None else args.seconds
+    slots = args.frames if args.frames is not None else int(seconds * rate)
+    work = args.work_ms / 1e3
+    if not 0.0 <= work < period:
+        raise SystemExit(f"antarium bench jitter: --work-ms must be in [0, {1e3 * period:.2f}) ms (one frame "
+                         f"period at {rate:g} Hz), got {args.work_ms}")
+    setup: dict[str, Any] = {"cpu": None, "realtime_priority": 0, "notes": []}
+    out: dict[str, Any] = {}
+
+    def probe() -> None:
+        if loop_cfg["cpu"] != "off" and cpu.supported() and len(os.sched_getaffinity(0)) > 1:
+            target = max(os.sched_getaffinity(0)) if loop_cfg["cpu"] == "auto" else loop_cfg["cpu"]
+            try:
+                os.sched_setaffinity(0, {target})  # this thread only; it ends with the benchmark
+                setup["cpu"] = target
+            except OSError as exc:
+                setup["notes"].append(f"not on [loop] cpu {target} ({exc.strerror})")
+        if loop_cfg["realtime_priority"]:
+            try:
+                cpu.set_realtime(loop_cfg["realtime_priority"])
+                setup["realtime_priority"] = loop_cfg["realtime_priority"]
+            except (AttributeError, OSError) as exc:
+                setup["notes"].append(f"not real-time ({type(exc).__name__}: {exc})")
+        out["arrays"] = measure(MonotonicClock(), period, work, slots)
+
+    steal0 = _steal_s()
+    thread = threading.Thread(target=probe, name="jitter-probe")
+    thread.start()
+    thread.join()
+    steal1 = _steal_s()
+    result = summarise(*out["arrays"], period, work)
+    result.update(rate_hz=rate, setup=setup, machine=machine(),
+                  steal_s=None if steal0 is None or steal1 is None else steal1 - steal0)
+    _print(result)
+    if args.json_out:
+        with open(args.json_out, "w") as fh:
+            json.dump(result, fh, indent=2)
+    return 0
+
+
+def _print(r: dict[str, Any]) -> None:
+    s, m, lat = r["setup"], r["machine"], r["lateness"]
+    where = f"CPU {s['cpu']}" if s["cpu"] is not None else "any CPU"
+    how = f"SCHED_FIFO {s['realtime_priority']}" if s["realtime_priority"] else "ordinary scheduling"
+    print(f"jitter bench: {r['slots']} slots of {r['period_ms']:.2f} ms ({r['rate_hz']:g} Hz) on {where}, {how}, "
+          f"{r['work_ms']:.2f} ms of work each" + "".join(f"; {n}" for n in s["notes"]))
+    print(f"  machine         cpuidle {m['cpuidle_driver']}/{m['cpuidle_governor']}, real-time throttling "
+          f"{m['rt_runtime_us']} of {m['rt_period_us']} us"
+          + ("" if r["steal_s"] is None else f", steal {1e3 * r['steal_s']:.0f} ms during the run"))
+    print(f"  wake-up late    p50 {lat['p50_ms']:.3f}  p99 {lat['p99_ms']:.3f}  max {lat['max_ms']:.2f} ms;  "
+          + ", ".join(f">= {k} ms: {v}" for k, v in r["lateness_at_least_ms"].items()))
+    print(f"  stalls          {r['slots_with_stalls']} slots with gaps > {1e3 * STALL_S:g} ms while busy, the "
+          f"longest {r['stall_max_ms']:.2f} ms")
+    print(f"  missed slots    {r['missed_slots']}: a frame of {r['work_ms']:.2f} ms would have been late "
+          f"that often on this machine, whatever the loop does")
