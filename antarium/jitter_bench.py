@@ -13,7 +13,9 @@ the embedded default's median on a 2-core machine with software GL). It measures
   loop on this machine cannot have fewer late frames than that, whatever it draws.
 
 Compare it with `antarium bench loop` over the same time: late frames beyond the missed slots here are the
-loop's own; those within them are the machine's.
+loop's own; those within them are the machine's. `StallProbes` does that comparison during the loop bench
+itself (`antarium bench loop --machine-probe`): one small process per CPU, real-time above the loop, wakes every
+two milliseconds and records when the machine woke it late; a late frame that overlaps such a stall was the machine's.
 """
 
 from __future__ import annotations
@@ -21,8 +23,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import multiprocessing
 import os
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -74,6 +78,90 @@ def summarise(lateness: np.ndarray, stalled: np.ndarray, period: float, work: fl
         "slots_with_stalls": int((stalled > 0).sum()), "stall_max_ms": 1e3 * float(stalled.max()),
         "missed_slots": int(missed.sum()),
     }
+
+
+#: a stall probe wakes this often (s; a stall this long or longer always delays one of its wake-ups) and records
+#: the wake-ups at least PROBE_THRESHOLD_S late
+PROBE_PERIOD_S = 2e-3
+PROBE_THRESHOLD_S = 0.5e-3
+
+
+def _probe(cpu: int, priority: int, stop, conn) -> None:
+    """Child process: wake every PROBE_PERIOD_S on `cpu` (SCHED_FIFO `priority` where allowed, else ordinary) until
+    `stop` is set; send back (n, 2) float64 [slot time, lateness] (s, time.monotonic) of the late wake-ups."""
+    from antarium.cpu import set_realtime
+
+    os.sched_setaffinity(0, {cpu})
+    realtime = False
+    if priority:
+        try:
+            set_realtime(priority)
+            realtime = True
+        except OSError:
+            pass
+    events = []
+    t = time.monotonic()
+    wakeups = 0
+    while wakeups % 100 or not stop.is_set():  # asking `stop` costs system calls: every 0.1 s is enough
+        wakeups += 1
+        t += PROBE_PERIOD_S
+        delay = t - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        late = time.monotonic() - t
+        if late >= PROBE_THRESHOLD_S:
+            events.append((t, late))
+            t += (late // PROBE_PERIOD_S) * PROBE_PERIOD_S  # the wake-ups that passed meanwhile are skipped
+    conn.send((realtime, np.array(events, dtype=np.float64).reshape(-1, 2)))
+
+
+class StallProbes:
+    """One probe process on each of `cpus`, SCHED_FIFO `priority` (above the frame loop's, so that nothing of ours
+    delays it; 0: ordinary), from construction until `stop()`. Each costs its CPU about 2 %."""
+
+    def __init__(self, cpus: list[int], priority: int) -> None:
+        ctx = multiprocessing.get_context("spawn")
+        self._stop = ctx.Event()
+        self._procs = {}
+        for c in cpus:
+            receive, send = ctx.Pipe(duplex=False)
+            proc = ctx.Process(target=_probe, args=(c, priority, self._stop, send), name=f"stall-probe-{c}",
+                               daemon=True)
+            proc.start()
+            self._procs[c] = (proc, receive)
+
+    def stop(self) -> dict[int, tuple[bool, np.ndarray]]:
+        """Stop the probes; per CPU: (ran real-time, (n, 2) [slot time, lateness] s of its late wake-ups).
+        Raises RuntimeError naming the CPUs whose probe ended without a report (its stalls are unknown)."""
+        self._stop.set()
+        out, failed = {}, []
+        for c, (proc, receive) in self._procs.items():
+            try:
+                if not receive.poll(10.0):
+                    raise EOFError
+                out[c] = receive.recv()
+            except (EOFError, OSError):
+                failed.append(c)
+            proc.join(5.0)
+        if failed:
+            raise RuntimeError(f"the stall probe on CPU {', '.join(map(str, failed))} ended without a report")
+        return out
+
+
+def overlapping(t0: np.ndarray, t1: np.ndarray, stalls: np.ndarray) -> np.ndarray:
+    """(n,) bool: which of the n intervals [t0, t1] (s) overlap a stall [slot time, slot time + lateness] of
+    `stalls` (m, 2) s, sorted by slot time."""
+    if not len(stalls):
+        return np.zeros(len(t0), dtype=bool)
+    ends = stalls[:, 0] + stalls[:, 1]
+    order = np.argsort(ends)
+    starts, ends = stalls[order, 0], ends[order]
+    first = np.searchsorted(ends, t0)  # the first stall that ends at or after the interval starts
+    hit = np.zeros(len(t0), dtype=bool)
+    inside = first < len(ends)
+    # stalls do not overlap each other (one probe), so ordering by end orders the starts too
+    hit[inside] = starts[first[inside]] <= t1[inside]
+    return hit
 
 
 def machine() -> dict[str, Any]:

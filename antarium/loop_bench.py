@@ -5,6 +5,10 @@ log being recorded) — or the rig config named by `$ANTARIUM_RIG_CONFIG` — fo
 the goal is stated for 600) or `--frames`, then reads the recorded per-frame table and reports achieved
 frame rate against target, late and skipped frames, closed-loop latency p50/p99/max and per-stage times,
 as ratios to the dome's needs (190 frames/s, 5.3 ms frame period). The first second (warm-up) is excluded.
+
+With `--machine-probe`, a stall probe runs on every CPU beside it (`antarium.jitter_bench.StallProbes`, real-time
+above the loop): the report then says how often the machine itself stopped a CPU, and how many late frames
+overlap such a stall (the machine's) and how many do not (the loop's own).
 """
 
 from __future__ import annotations
@@ -28,8 +32,10 @@ def _pct(values: np.ndarray) -> dict[str, float] | None:
     return {"p50_ms": 1e3 * float(p50), "p99_ms": 1e3 * float(p99), "max_ms": 1e3 * float(values.max())}
 
 
-def summarise(frames: dict[str, np.ndarray], rate_hz: float) -> dict[str, Any]:
-    """Figures from a trial log's per-frame table (see docs/logs.md)."""
+def summarise(frames: dict[str, np.ndarray], rate_hz: float,
+              stalls: dict[int, tuple[bool, np.ndarray]] | None = None) -> dict[str, Any]:
+    """Figures from a trial log's per-frame table (see docs/logs.md), and from `StallProbes.stop()`'s `stalls`
+    when given."""
     t = frames["t_start"]
     keep = t >= t[0] + WARMUP_S if len(t) and t[-1] - t[0] > 2 * WARMUP_S else np.ones(len(t), bool)
     f = {k: v[keep] for k, v in frames.items()}
@@ -49,7 +55,31 @@ def summarise(frames: dict[str, np.ndarray], rate_hz: float) -> dict[str, Any]:
         "frame_work": _pct(f["t_sent"] - f["t_start"]),
         "pacing_error": _pct(f["pacing_error"]),
         "link_down_frames": int((f["link_ok"] == 0).sum()),
+        "machine": None if stalls is None else _machine_stalls(f, stalls, period),
     }
+
+
+def _machine_stalls(f: dict[str, np.ndarray], stalls: dict[int, tuple[bool, np.ndarray]],
+                    period: float) -> dict[str, Any]:
+    """Per CPU, the probe's late wake-ups during the frames; and the late frames that overlap one. A frame spans
+    from a probe period before its slot (the loop wakes 0.5 ms before it, and a stall may begin up to a probe
+    period before the wake-up it delays) to its last datagram."""
+    from antarium.jitter_bench import LATENESS_EDGES_S, PROBE_PERIOD_S, overlapping
+
+    t0, t1 = f["t_target"] - PROBE_PERIOD_S, f["t_sent"]
+    span = (t0[0], t1[-1]) if len(t0) else (0.0, 0.0)
+    late = f["late"].astype(bool)
+    in_stall = np.zeros(len(t0), dtype=bool)
+    probes = {}
+    for cpu, (realtime, events) in sorted(stalls.items()):
+        events = events[(events[:, 0] >= span[0]) & (events[:, 0] <= span[1])]
+        in_stall |= overlapping(t0, t1, events)
+        lateness = events[:, 1]
+        probes[str(cpu)] = {"realtime": realtime, "max_ms": 1e3 * float(lateness.max()) if len(lateness) else 0.0,
+                            "late_wakeups_at_least_ms": {f"{1e3 * e:g}": int((lateness >= e).sum())
+                                                         for e in LATENESS_EDGES_S}}
+    return {"probes": probes, "late_frames_in_stalls": int((late & in_stall).sum()),
+            "late_frames_own": int((late & ~in_stall).sum()), "frames_in_stalls": int(in_stall.sum())}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -65,9 +95,14 @@ def run(args: argparse.Namespace) -> int:
         if config["bus"]["enabled"] and config["bus"]["listen"] == ["tcp/127.0.0.1:7447"]:
             config["bus"]["listen"] = [free_tcp_endpoint()]  # never collide with a running `antarium serve`
         server = Server(config, record="bench-loop", echo=lambda line: None)
-        server.run(seconds=seconds, frames=args.frames)
+        probes = _start_probes(config["loop"]["realtime_priority"]) if getattr(args, "machine_probe", False) \
+            else None
+        try:
+            server.run(seconds=seconds, frames=args.frames)
+        finally:
+            stalls = probes.stop() if probes is not None else None
         frames = read_table(server.trial_paths[0], "frames")
-        result = summarise(frames, config["loop"]["rate_hz"])
+        result = summarise(frames, config["loop"]["rate_hz"], stalls)
         result["rejected_frames"] = server.final_stats.get("rejected_frames", 0)
         result["link_outages"] = server.final_stats.get("link_outages", 0)
         result["far_layer"] = server.final_stats.get("far_layer")
@@ -78,6 +113,15 @@ def run(args: argparse.Namespace) -> int:
         with open(args.json_out, "w") as fh:
             json.dump(result, fh, indent=2)
     return 0
+
+
+def _start_probes(loop_priority: int):
+    """A stall probe on every CPU this process may use, ten real-time priorities above the loop (ordinary when
+    the loop is)."""
+    from antarium.jitter_bench import StallProbes
+
+    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else [0]
+    return StallProbes(cpus, min(loop_priority + 10, 99) if loop_priority else 0)
 
 
 def _fmt(p: dict | None) -> str:
@@ -104,3 +148,11 @@ def _print(r: dict[str, Any]) -> None:
     for stage, p in r["stages"].items():
         print(f"    {stage:<12}  {_fmt(p)}")
     print(f"  pacing error    {_fmt(r['pacing_error'])}")
+    m = r.get("machine")
+    if m is not None:
+        for cpu, p in m["probes"].items():
+            counts = ", ".join(f">= {k} ms: {v}" for k, v in p["late_wakeups_at_least_ms"].items())
+            kind = "" if p["realtime"] else " (probe not real-time: it measures our load too)"
+            print(f"  machine, CPU {cpu}  a probe woken late {counts}; max {p['max_ms']:.2f} ms{kind}")
+        print(f"  late frames     {m['late_frames_in_stalls']} overlap a machine stall (the machine's), "
+              f"{m['late_frames_own']} do not (the loop's own); {m['frames_in_stalls']} frames overlap one in all")

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from antarium.jitter_bench import STALL_S, measure, summarise
+from antarium.jitter_bench import PROBE_PERIOD_S, STALL_S, measure, overlapping, summarise
 
 PERIOD, WORK, STEP = 5e-3, 2.5e-3, 10e-6
 
@@ -77,3 +77,53 @@ def test_work_longer_than_a_frame_is_refused_with_the_allowed_range():
                          capture_output=True, text=True, timeout=60)
     assert run.returncode != 0
     assert "--work-ms must be in [0, 5.26) ms" in run.stderr
+
+
+def test_frames_overlapping_a_stall_are_found():
+    stalls = np.array([[1.0, 0.002], [2.0, 0.010], [3.0, 0.0006]])  # [slot time, lateness] s
+    t0 = np.array([0.990, 0.999, 1.0021, 1.998, 2.005, 2.011, 2.999])
+    t1 = t0 + 0.003
+    np.testing.assert_array_equal(overlapping(t0, t1, stalls), [False, True, False, True, True, False, True])
+    assert not overlapping(t0, t1, np.empty((0, 2))).any()
+
+
+def test_loop_bench_tells_the_machines_late_frames_from_the_loops_own():
+    from antarium.loop_bench import summarise
+
+    period = 1 / 190
+    n = 1000
+    t_target = 10.0 + period * np.arange(n)
+    late = np.zeros(n, dtype=np.int8)
+    late[[300, 600, 900]] = 1
+    frames = {"t_target": t_target, "t_start": t_target + 1e-5, "t_sent": t_target + np.where(late, 6e-3, 2e-3),
+              "late": late, "full_render": np.zeros(n, np.int8), "skipped": late.astype(np.int64),
+              "link_ok": np.ones(n, np.int8), "pacing_error": np.full(n, 1e-5), "latency": np.full(n, 3e-3),
+              **{k: np.full(n, 2e-4) for k in ("render", "sample", "convert", "encode", "send")}}
+    # CPU 1 stopped for 4 ms at frame 300's slot and 0.6 ms between frames; CPU 0 for 7 ms at frame 600's slot
+    stalls = {1: (True, np.array([[t_target[300] + 1e-4, 4e-3], [t_target[450] + 2.5e-3, 0.6e-3]])),
+              0: (True, np.array([[t_target[600] - 5e-4, 7e-3]]))}
+    m = summarise(frames, 190.0, stalls)["machine"]
+    assert m["late_frames_in_stalls"] == 2 and m["late_frames_own"] == 1  # frame 900 is the loop's own
+    # frames from a probe period (2 ms) before their slot to their last datagram: 300 and 301, 600 and 601 (their
+    # windows open 3.3 ms after 300's and 600's slots); the 0.6 ms stall falls between frame 450's last datagram and
+    # frame 451's window
+    assert PROBE_PERIOD_S == 2e-3
+    assert m["frames_in_stalls"] == 4
+    assert m["probes"]["1"]["late_wakeups_at_least_ms"] == {"0.5": 2, "1": 1, "2": 1, "5": 0}
+    assert m["probes"]["0"]["max_ms"] == pytest.approx(7.0)
+
+
+def test_stall_probes_run_on_each_cpu_and_report_their_late_wake_ups():
+    import os
+    import time
+
+    from antarium.jitter_bench import PROBE_THRESHOLD_S, StallProbes
+
+    cpus = sorted(os.sched_getaffinity(0))
+    probes = StallProbes(cpus, priority=0)
+    time.sleep(0.5)
+    out = probes.stop()
+    assert sorted(out) == cpus
+    for realtime, events in out.values():
+        assert realtime is False and events.ndim == 2 and events.shape[1] == 2
+        assert (events[:, 1] >= PROBE_THRESHOLD_S).all()

@@ -27,6 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=float, default=None, help="duration (target-specific default)")
     parser.add_argument("--work-ms", type=float, default=2.5,
                         help="jitter: busy time standing for one frame's work (ms; default 2.5)")
+    parser.add_argument("--machine-probe", action="store_true",
+                        help="loop: also run a stall probe on every CPU and tell the machine's late frames from ours")
     parser.add_argument("--json", dest="json_out", default=None, help="also write the results to this JSON file")
 
 
