@@ -639,7 +639,11 @@ class Server:
         return self._ready.wait(timeout_s) and self._start_error is None
 
     def start_thread(self, timeout_s: float = 60.0) -> Server:
-        """Run the server in a thread of its own; returns when it runs (or raises why it could not start)."""
+        """Run the server in a thread of its own; returns when it runs (or raises why it could not start).
+        A server starts once: a second call raises ServerError (`with Server(...).start_thread():` is fine)."""
+        if self._thread is not None:
+            raise ServerError(f"server {self.rig!r} was started already; a server starts once (start_thread() or "
+                              "`with Server(...)`), stop() ends it")
         self._thread = threading.Thread(target=self._run_quietly, name=f"antarium-server {self.rig}", daemon=True)
         self._thread.start()
         if not self._ready.wait(timeout_s):
@@ -719,7 +723,7 @@ class Server:
                 pass
 
     def __enter__(self) -> Server:
-        return self.start_thread()
+        return self if self._thread is not None else self.start_thread()
 
     def __exit__(self, *exc: object) -> None:
         self.stop()

@@ -180,3 +180,16 @@ def test_locomotion_from_the_bus_drives_the_closed_loop(tmp_path):
             assert server.status()["locomotion"]["received"] == 200
     finally:
         server.stop()
+
+
+def test_a_server_starts_once_and_with_accepts_a_started_one(tmp_path):
+    import threading
+
+    from antarium.server import ServerError
+
+    with Server(_config(tmp_path), renderer_factory=None, link=False).start_thread() as server:
+        assert [t.name for t in threading.enumerate()].count("antarium-server tb") == 1
+        with pytest.raises(ServerError, match="started already; a server starts once"):
+            server.start_thread()
+        assert wait_for(lambda: server.loop.frame > 0, 5.0)  # the one server runs
+    assert not server._thread.is_alive()
