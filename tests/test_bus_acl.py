@@ -9,6 +9,7 @@ refused everything). Every variant is the doc's text with one substitution, chec
 import math
 import re
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -87,6 +88,19 @@ def test_a_peer_on_a_lab_interface_watches_and_sends_locomotion_but_cannot_comma
             for seq in range(50):
                 publisher.put(wire.encode(BallSample(0.0, seq, (0.0, -0.001, 0.0))))
             assert wait_for(lambda: server.source.received == 50, 5.0)
+            # the server takes the lab's puts on the locomotion key, and refuses them on any other key of the rig's
+            # (subscribers in the server's own session, where the access control is enforced, tell)
+            heard = {"locomotion": threading.Event(), "other": threading.Event()}
+            subscribers = [
+                server.session.declare_subscriber(bus.locomotion_key("rig1"), lambda s: heard["locomotion"].set()),
+                server.session.declare_subscriber(bus.rig_key("rig1", "fake"), lambda s: heard["other"].set())]
+            time.sleep(0.5)  # declarations reach the lab peer
+            session.put(bus.rig_key("rig1", "fake"), b"not allowed")
+            publisher.put(wire.encode(BallSample(0.0, 50, (0.0, -0.001, 0.0))))
+            assert heard["locomotion"].wait(5.0)
+            assert not heard["other"].wait(1.0), "a lab peer's put on another key is refused"
+            for subscriber in subscribers:
+                subscriber.undeclare()
             refused_command(server, session)
             with antarium.Rig("rig1", config=config, session=session, timeout_s=1.0) as rig:  # sees the server
                 with pytest.raises(RigError, match="refused by the bus's access control"):
