@@ -117,7 +117,7 @@ def _probe(cpu: int, priority: int, stop, conn) -> None:
 
 class StallProbes:
     """One probe process on each of `cpus`, SCHED_FIFO `priority` (above the frame loop's, so that nothing of ours
-    delays it; 0: ordinary), from construction until `stop()`. Each costs its CPU about 2 %."""
+    delays it; 0: ordinary), from construction until `stop()`. Each takes a few per cent of its CPU."""
 
     def __init__(self, cpus: list[int], priority: int) -> None:
         ctx = multiprocessing.get_context("spawn")
