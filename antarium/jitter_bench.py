@@ -150,7 +150,7 @@ class StallProbes:
 
 def overlapping(t0: np.ndarray, t1: np.ndarray, stalls: np.ndarray) -> np.ndarray:
     """(n,) bool: which of the n intervals [t0, t1] (s) overlap a stall [slot time, slot time + lateness] of
-    `stalls` (m, 2) s, sorted by slot time."""
+    `stalls` (m, 2) s, one probe's (its stalls never overlap each other), in any order."""
     if not len(stalls):
         return np.zeros(len(t0), dtype=bool)
     ends = stalls[:, 0] + stalls[:, 1]
@@ -159,7 +159,7 @@ def overlapping(t0: np.ndarray, t1: np.ndarray, stalls: np.ndarray) -> np.ndarra
     first = np.searchsorted(ends, t0)  # the first stall that ends at or after the interval starts
     hit = np.zeros(len(t0), dtype=bool)
     inside = first < len(ends)
-    # stalls do not overlap each other (one probe), so ordering by end orders the starts too
+    # one probe's stalls do not overlap, so ordering them by end orders their starts too
     hit[inside] = starts[first[inside]] <= t1[inside]
     return hit
 
@@ -204,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
     setup: dict[str, Any] = {"cpu": None, "realtime_priority": 0, "notes": []}
     out: dict[str, Any] = {}
 
-    def probe() -> None:
+    def skeleton() -> None:
         if loop_cfg["cpu"] != "off" and cpu.supported() and len(os.sched_getaffinity(0)) > 1:
             target = max(os.sched_getaffinity(0)) if loop_cfg["cpu"] == "auto" else loop_cfg["cpu"]
             try:
@@ -221,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
         out["arrays"] = measure(MonotonicClock(), period, work, slots)
 
     steal0 = _steal_s()
-    thread = threading.Thread(target=probe, name="jitter-probe")
+    thread = threading.Thread(target=skeleton, name="jitter-skeleton")
     thread.start()
     thread.join()
     steal1 = _steal_s()

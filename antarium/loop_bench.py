@@ -118,10 +118,12 @@ def run(args: argparse.Namespace) -> int:
 def _start_probes(loop_priority: int):
     """A stall probe on every CPU this process may use, ten real-time priorities above the loop (ordinary when
     the loop is)."""
+    from antarium import cpu
     from antarium.jitter_bench import StallProbes
 
-    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else [0]
-    return StallProbes(cpus, min(loop_priority + 10, 99) if loop_priority else 0)
+    if not cpu.supported():
+        raise SystemExit("antarium bench loop: --machine-probe needs Linux (CPU affinity and /proc)")
+    return StallProbes(sorted(os.sched_getaffinity(0)), min(loop_priority + 10, 99) if loop_priority else 0)
 
 
 def _fmt(p: dict | None) -> str:
