@@ -8,7 +8,10 @@ compared). Malformed payloads are counted and dropped. `connected` is False when
 A device driver on another computer also reports on `antarium/<rig>/events` (JSON with "event" and
 "source", e.g. the USB trackball's "locomotion_lost" at an unplug): such a "locomotion_lost" makes
 `connected` False at once, without waiting for `timeout_s`; "locomotion_back" / "locomotion_connected" or
-the next sample clear it. The server's own events (JSON with "kind") are ignored.
+the next sample clear it. Samples and events travel apart (each subscription has its own zenoh thread), so the
+last samples published before the loss may arrive after its event: when the event names the sequence number of
+the driver's last sample (`last_seq`), samples up to that one do not clear it. The server's own events (JSON
+with "kind") are ignored.
 """
 
 from __future__ import annotations
@@ -38,6 +41,8 @@ class BusSource(BufferedSource):
         self._sub = None
         self._events_sub = None
         self._device_lost = False
+        self._last_seq: int | None = None  # the newest sample's sequence number
+        self._straggler_seq: int | None = None  # the driver's last sample before a loss, not arrived yet
         self.received = 0
         self.malformed = 0
         self.last_error = ""
@@ -72,7 +77,11 @@ class BusSource(BufferedSource):
         with self._lock:
             self.received += 1
             self._last_t = t
-            self._device_lost = False
+            self._last_seq = decoded.seq
+            if self._straggler_seq is None:
+                self._device_lost = False
+            elif decoded.seq == self._straggler_seq:  # published before the loss: the next one is from after it
+                self._straggler_seq = None
 
     def _on_event(self, sample) -> None:  # zenoh thread
         try:
@@ -86,8 +95,13 @@ class BusSource(BufferedSource):
             if kind == "locomotion_lost":
                 self._device_lost = True
                 self.last_error = f"{event['source']} reports locomotion_lost: {event.get('reason', '')}".strip()
+                last_seq = event.get("last_seq")
+                pending = isinstance(last_seq, int) and not isinstance(last_seq, bool) \
+                    and last_seq & 0xFFFFFFFF != self._last_seq
+                self._straggler_seq = last_seq & 0xFFFFFFFF if pending else None  # as the wire carries it
             elif kind in ("locomotion_back", "locomotion_connected"):
                 self._device_lost = False
+                self._straggler_seq = None
 
     def status(self) -> dict[str, Any]:
         with self._lock:

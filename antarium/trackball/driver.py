@@ -178,7 +178,7 @@ class UsbTrackball(BufferedSource):
                 self._connected = False
                 self.counters["unplugs"] += 1
                 self.last_error = reason
-                self._emit("locomotion_lost", reason=reason)
+                self._emit("locomotion_lost", reason=reason, last_seq=self._prev_seq)  # its last sample
             else:  # stopped: leave the device idle
                 try:
                     dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_STOP, 0, 0)
