@@ -96,9 +96,11 @@ class BusSource(BufferedSource):
                 self._device_lost = True
                 self.last_error = f"{event['source']} reports locomotion_lost: {event.get('reason', '')}".strip()
                 last_seq = event.get("last_seq")
-                pending = isinstance(last_seq, int) and not isinstance(last_seq, bool) \
-                    and last_seq & 0xFFFFFFFF != self._last_seq
-                self._straggler_seq = last_seq & 0xFFFFFFFF if pending else None  # as the wire carries it
+                if isinstance(last_seq, int) and not isinstance(last_seq, bool):
+                    last_seq &= 0xFFFFFFFF  # as the wire carries it
+                    self._straggler_seq = None if last_seq == self._last_seq else last_seq  # arrived already?
+                else:
+                    self._straggler_seq = None
             elif kind in ("locomotion_back", "locomotion_connected"):
                 self._device_lost = False
                 self._straggler_seq = None
