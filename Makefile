@@ -3,8 +3,14 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 OUT    ?= demo-output
+# The application installs the versions in requirements.lock (tested together); pyproject.toml keeps the loose
+# ranges for library users. `make lock` refreshes the lock with uv and runs the tests on the new versions.
+LOCK   := requirements.lock
+UV_VERSION  := 0.13.9
+PIP_VERSION := 25.3
+LOCK_TOOL   := .lock-tool
 
-.PHONY: demo test lint install system-check clean
+.PHONY: demo test lint install system-check lock clean
 
 # System libraries we cannot pip-install: EGL (libglvnd) and Mesa's software GL driver (llvmpipe).
 system-check:
@@ -14,11 +20,11 @@ system-check:
 	  { echo "Missing system EGL/GL libraries. Install them with:"; \
 	    echo "  sudo apt-get install -y libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri"; exit 1; }
 
-$(VENV)/.installed-test: pyproject.toml
+$(VENV)/.installed-test: pyproject.toml $(LOCK)
 	$(MAKE) system-check
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e '.[test]'
+	$(BIN)/pip install -q pip==$(PIP_VERSION)
+	$(BIN)/pip install -q -c $(LOCK) -e '.[test]'
 	touch $@
 
 install: $(VENV)/.installed-test
@@ -30,5 +36,16 @@ test: install
 	$(BIN)/ruff check .
 	$(BIN)/pytest
 
+# Refresh the lock to the newest versions pyproject.toml allows (every platform, Python 3.11+), then install them
+# into a new .venv and run the tests on them: commit requirements.lock only if that passes.
+lock:
+	$(PYTHON) -m venv $(LOCK_TOOL)
+	$(LOCK_TOOL)/bin/pip install -q uv==$(UV_VERSION)
+	$(LOCK_TOOL)/bin/uv pip compile pyproject.toml --extra test --universal --fork-strategy fewest --python-version 3.11 --upgrade \
+	  --custom-compile-command "make lock" \
+	  --quiet -o $(LOCK)
+	rm -rf $(VENV)
+	$(MAKE) test
+
 clean:
-	rm -rf $(VENV) build *.egg-info $(OUT)
+	rm -rf $(VENV) $(LOCK_TOOL) build *.egg-info $(OUT)

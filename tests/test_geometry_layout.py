@@ -1,12 +1,14 @@
 """The LED layout: counts, symmetry, spacing statistics, regeneration, bad parameters."""
 
+import hashlib
+
 import numpy as np
 import pytest
 
 from antarium.geometry import LayoutParams, generate_layout, load_dome, load_layout
 from antarium.geometry.constants import GB_PER_PANEL, N_GB, N_PIXELS, N_UV, UV_PER_PANEL
 from antarium.geometry.lattice import edge_distance
-from antarium.geometry.layout import save_layout
+from antarium.geometry.layout import SHIPPED_LAYOUT, save_layout
 from antarium.geometry.spacing import layout_summary
 
 
@@ -69,12 +71,33 @@ def test_photometric_gain_darkens_panel_centres(dome):
     np.testing.assert_allclose(np.cos(dome.emission_angle), dome.solid.inradius / d, rtol=1e-12)
 
 
-def test_regenerated_layout_equals_shipped():
+#: SHA-256 of the shipped layout file: any change to it, deliberate or not, must show up here. After a deliberate
+#: `antarium layout --regenerate`, update it (`sha256sum geometry/data/layout.npz`) in the same commit.
+SHIPPED_LAYOUT_SHA256 = "17cf9bf8f2bde79b7b66eb962411492fda1fa5da1fce08b952a78d2c32e3ffbd"
+
+#: How far a regenerated LED may lie from the shipped one (m). The search is deterministic only up to the last bit
+#: of floating point (numpy's SIMD paths differ between CPUs: 3.5e-18 m seen between Intel and AMD); a nanometre is
+#: far below what a layout means (LEDs are placed to about 0.1 mm) and far above that noise.
+LAYOUT_TOLERANCE_M = 1e-9
+
+
+def test_shipped_layout_file_unchanged():
+    assert hashlib.sha256(SHIPPED_LAYOUT.read_bytes()).hexdigest() == SHIPPED_LAYOUT_SHA256
+
+
+def test_regenerated_layout_matches_shipped():
     shipped = load_layout()
     fresh = generate_layout(shipped.params)
-    np.testing.assert_array_equal(fresh.gb, shipped.gb)
-    np.testing.assert_array_equal(fresh.uv, shipped.uv)
-    assert fresh.gb_lattice == shipped.gb_lattice and fresh.uv_lattice == shipped.uv_lattice
+    assert fresh.gb.shape == shipped.gb.shape and fresh.uv.shape == shipped.uv.shape
+    np.testing.assert_allclose(fresh.gb, shipped.gb, rtol=0, atol=LAYOUT_TOLERANCE_M)
+    np.testing.assert_allclose(fresh.uv, shipped.uv, rtol=0, atol=LAYOUT_TOLERANCE_M)
+    for a, b in ((fresh.gb_lattice, shipped.gb_lattice), (fresh.uv_lattice, shipped.uv_lattice)):
+        assert a.variant == b.variant
+        assert a.pitch == pytest.approx(b.pitch, rel=0, abs=LAYOUT_TOLERANCE_M)
+        assert a.offset == pytest.approx(b.offset, rel=0, abs=LAYOUT_TOLERANCE_M)
+    # the addresses follow from the row order: the same LED must sit at the same local index
+    nearest = np.linalg.norm(fresh.local_xy[:, None] - shipped.local_xy[None], axis=2).argmin(axis=1)
+    np.testing.assert_array_equal(nearest, np.arange(len(nearest)))
 
 
 def test_save_load_round_trip(tmp_path):
