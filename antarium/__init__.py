@@ -11,8 +11,8 @@ __version__ = "0.1.0"
 # Public names resolved on first attribute access, so that importing the package never pulls in
 # zenoh, moderngl or pyusb.
 _LAZY = {
-    "Pose": "antarium.pose",
-    "Rig": "antarium.rig",
+    "Pose": "antarium.core.pose",
+    "Rig": "antarium.client",
 }
 
 

@@ -15,12 +15,14 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from antarium.core.rates import DOME_RATE_HZ
+
 #: section -> key -> default value. The type of the default is the type a value must have
 #: (int is accepted where a float is expected).
 DEFAULTS: dict[str, dict[str, Any]] = {
     "rig": {"name": "rig1"},
     "loop": {
-        "rate_hz": 190.0,  # frames per second
+        "rate_hz": DOME_RATE_HZ,  # frames per second
         "closed_loop": True,
         "tether": "free_yaw",  # "free_yaw": ball gives translation only; "fixed": ball gives yaw too
         "gain_translation": 1.0,

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from antarium.rig import add_script_arguments, script_rig
+from antarium.client import add_script_arguments, script_rig
 
 
 def write_panoramas(folder: Path, width: int = 720) -> list[Path]:

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from antarium.rig import add_script_arguments, script_rig
+from antarium.client import add_script_arguments, script_rig
 
 
 def condition_poses(seed: int = 0) -> dict[str, tuple[object, float, float, float]]:

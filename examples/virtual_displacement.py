@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from antarium.rig import add_script_arguments, script_rig
+from antarium.client import add_script_arguments, script_rig
 
 
 def plot(updates, out: Path) -> Path:

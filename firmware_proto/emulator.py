@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from antarium.clock import Clock, MonotonicClock
+from antarium.core.clock import Clock, MonotonicClock
 from antarium.geometry.constants import (
     CHIPS_PER_PANEL,
     LEDS_PER_PANEL,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections import deque
 
-from antarium.clock import Clock
+from antarium.core.clock import Clock
 
 from .emulator import Emulator
 from .link import Link

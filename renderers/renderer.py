@@ -17,8 +17,8 @@ import time
 
 import numpy as np
 
+from antarium.core.pose import Pose
 from antarium.geometry.constants import N_PANELS, N_PIXELS, UV_PER_PANEL
-from antarium.pose import Pose
 
 from . import cubemap, footprint, shaders
 from .farfield import FarFieldTable
@@ -74,7 +74,7 @@ def _check_pose(pose) -> Pose:
     try:
         values = [float(v) for v in pose]
     except (TypeError, ValueError):
-        raise ValueError(f"pose must be an antarium.pose.Pose or (x, y, z, heading), got {pose!r}") from None
+        raise ValueError(f"pose must be an antarium.core.pose.Pose or (x, y, z, heading), got {pose!r}") from None
     if len(values) != 4:
         raise ValueError(f"pose must have 4 values (x, y, z in m, heading in rad), got {pose!r}")
     return Pose(*values)
@@ -89,7 +89,7 @@ class Renderer:
     from the LED pitch); footprint_deg: FWHM of each LED's acceptance; brightness: global drive scale
     in [0, 1]; near, far: clip planes (m); far_face_size: side of the far-field cube texture; chunk_size:
     cell (m) of the culling grid of large meshes; lod_texels: level-of-detail error bound in texels (0: full
-    detail always); clock: an `antarium.clock` clock for drifting stimuli when `render` gets no time;
+    detail always); clock: an `antarium.core.clock` clock for drifting stimuli when `render` gets no time;
     fast_far_field: take static far fields from a footprint-integrated table (`farfield`) instead of drawing
     them into the cube map every frame; far_layer: "off", "sync" or "async": draw only the meshes within
     `near_radius` (m) every frame, the rest from a layer rendered from a recent eye position while its
@@ -140,7 +140,7 @@ class Renderer:
         self.lod_texels = float(lod_texels)
         self.lod_angle = math.radians(lod_texels * cubemap.largest_texel_deg(self.face_size))
         if clock is None:
-            from antarium.clock import MonotonicClock
+            from antarium.core.clock import MonotonicClock
 
             clock = MonotonicClock()
         self.clock = clock

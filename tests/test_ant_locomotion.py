@@ -5,11 +5,11 @@ import math
 import pytest
 
 from antarium.ant.locomotion import AntLocomotion
-from antarium.ball import pole_motion
-from antarium.clock import SimulatedClock
-from antarium.frame_loop import FrameLoop
+from antarium.core.ball import pole_motion
+from antarium.core.clock import SimulatedClock
+from antarium.core.pose import Pose
 from antarium.locomotion import BACKENDS, open_source
-from antarium.pose import Pose
+from antarium.server.frame_loop import FrameLoop
 
 
 def test_the_ant_is_a_registered_locomotion_backend():

@@ -12,10 +12,10 @@ from antarium.ant.locomotion import AntLocomotion, Strides, TrackballLegs
 from antarium.ant.models import make_model
 from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
-from antarium.clock import MonotonicClock, SimulatedClock
-from antarium.frame_loop import FrameLoop
-from antarium.pose import Pose
-from antarium.trackball.emulator import EmulatedTrackball
+from antarium.core.clock import MonotonicClock, SimulatedClock
+from antarium.core.pose import Pose
+from antarium.locomotion.trackball.emulator import EmulatedTrackball
+from antarium.server.frame_loop import FrameLoop
 from antarium.trial_log import read_table
 
 FACE = 64

@@ -13,13 +13,14 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import wait_for
 
 import antarium
 from antarium import bus
+from antarium.client import RigError
 from antarium.config import resolve
 from antarium.locomotion import BallSample, wire
-from antarium.rig import RigError
-from antarium.server import Server, wait_for
+from antarium.server import Server
 
 DOC = (Path(__file__).resolve().parent.parent / "docs" / "bus.md").read_text()
 OPERATORS = '{ id: "operators", interfaces: ["lo", "eth1"] }'

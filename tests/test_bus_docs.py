@@ -3,9 +3,9 @@
 from pathlib import Path
 
 from antarium import bus
-from antarium.control import COMMANDS
 from antarium.locomotion import wire
-from antarium.server import SCENE_EDITS
+from antarium.server.commands import COMMANDS
+from antarium.server.server import SCENE_EDITS
 
 DOC = (Path(__file__).resolve().parent.parent / "docs" / "bus.md").read_text()
 

@@ -6,8 +6,8 @@ import time
 import pytest
 
 from antarium import bus
+from antarium.core.pose import Pose
 from antarium.locomotion import BallSample, wire
-from antarium.pose import Pose
 
 
 def test_keys_share_the_rig_prefix():

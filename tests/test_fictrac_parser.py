@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from antarium.ball import pole_motion
-from antarium.trackball.fictrac import (
+from antarium.core.ball import pole_motion
+from antarium.locomotion.fictrac.protocol import (
     N_FIELDS,
     FicTracFrame,
     FicTracParseError,

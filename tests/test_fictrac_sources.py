@@ -5,10 +5,11 @@ import threading
 import time
 
 import pytest
+from conftest import wait_for
 
-from antarium.clock import SimulatedClock
+from antarium.core.clock import SimulatedClock
 from antarium.locomotion import open_source
-from antarium.trackball.fictrac import FicTracFrame, format_line
+from antarium.locomotion.fictrac.protocol import FicTracFrame, format_line
 
 
 def frame(i: int, t_ms: float = 0.0, dy: float = 0.01) -> FicTracFrame:
@@ -20,11 +21,6 @@ def frame(i: int, t_ms: float = 0.0, dy: float = 0.01) -> FicTracFrame:
     return FicTracFrame(*values)
 
 
-def wait_for(predicate, timeout_s=5.0):
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        assert time.monotonic() < deadline, "condition not reached in time"
-        time.sleep(0.002)
 
 
 def test_udp_stream_with_malformed_lines_and_a_gap():
@@ -37,7 +33,7 @@ def test_udp_stream_with_malformed_lines_and_a_gap():
         tx.sendto((format_line(frame(7)) + "\n" + format_line(frame(8)) + "\n").encode(), src.address)  # 2 in one
         tx.close()
         got = []
-        wait_for(lambda: len(got.extend(src.read()) or got) >= 6)
+        assert wait_for(lambda: len(got.extend(src.read()) or got) >= 6)
         status = src.status()
     assert [s.seq for s in got] == [1, 2, 3, 6, 7, 8]
     assert got[0].rotation == (0.0, -0.01, -0.0)
@@ -51,7 +47,7 @@ def test_connected_goes_false_when_frames_stop():
     with open_source("fictrac", port=0, clock=clock, timeout_s=0.5) as src:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
             tx.sendto(format_line(frame(1)).encode(), src.address)
-        wait_for(lambda: src.status()["frames"] == 1)
+        assert wait_for(lambda: src.status()["frames"] == 1)
         assert src.status()["connected"]
         clock.advance(0.6)
         assert not src.status()["connected"]
@@ -75,12 +71,12 @@ def test_tcp_client_reassembles_lines_and_reconnects():
         t = threading.Thread(target=fictrac, args=(1,))
         t.start()
         got = []
-        wait_for(lambda: len(got.extend(src.read()) or got) >= 5)
+        assert wait_for(lambda: len(got.extend(src.read()) or got) >= 5)
         t.join()
         # FicTrac restarts: the source connects again by itself; the frame counter restarting is a reset
         t = threading.Thread(target=fictrac, args=(1,))
         t.start()
-        wait_for(lambda: len(got.extend(src.read()) or got) >= 10)
+        assert wait_for(lambda: len(got.extend(src.read()) or got) >= 10)
         t.join()
         status = src.status()
     server.close()

@@ -13,9 +13,9 @@ import h5py
 import numpy as np
 import pytest
 
-from antarium.clock import SimulatedClock
-from antarium.frame_loop import FrameLoop
+from antarium.core.clock import SimulatedClock
 from antarium.locomotion import open_source
+from antarium.server.frame_loop import FrameLoop
 from antarium.trial_log import TrialLog
 
 SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -111,8 +111,8 @@ def test_the_byte_check_catches_a_file_too_new_for_1_10(tmp_path):
 
 _IDLE_WRITER = textwrap.dedent("""
     import sys, time
-    from antarium.clock import SimulatedClock
-    from antarium.frame_loop import FrameLoop
+    from antarium.core.clock import SimulatedClock
+    from antarium.server.frame_loop import FrameLoop
     from antarium.locomotion import open_source
     from antarium.trial_log import TrialLog
     clock = SimulatedClock()

@@ -10,10 +10,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from antarium.clock import SimulatedClock
-from antarium.frame_loop import FrameLoop
+from antarium.core.clock import SimulatedClock
 from antarium.locomotion import open_source
 from antarium.locomotion.scripted import BALL_RADIUS_M
+from antarium.server.frame_loop import FrameLoop
 from antarium.trial_log import FRAME_DTYPE, SAMPLE_DTYPE, TrialLog, _text_dtypes
 
 DOC = (Path(__file__).resolve().parent.parent / "docs" / "logs.md").read_text()

@@ -12,9 +12,9 @@ import h5py
 import numpy as np
 import pytest
 
-from antarium.clock import SimulatedClock
-from antarium.frame_loop import FrameLoop
+from antarium.core.clock import SimulatedClock
 from antarium.locomotion import open_source
+from antarium.server.frame_loop import FrameLoop
 from antarium.trial_log import FRAME_DTYPE, LogError, TrialLog, check_log_dir, log_path, open_log, read_table
 
 
@@ -67,8 +67,8 @@ def test_log_path_is_unique(tmp_path):
 
 _WRITER = textwrap.dedent("""
     import sys, time
-    from antarium.clock import MonotonicClock
-    from antarium.frame_loop import FrameLoop
+    from antarium.core.clock import MonotonicClock
+    from antarium.server.frame_loop import FrameLoop
     from antarium.locomotion import open_source
     from antarium.trial_log import TrialLog
     clock = MonotonicClock()

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from antarium.clock import SimulatedClock
+from antarium.core.clock import SimulatedClock
 from antarium.firmware_proto import config, control, led_driver, polariser, video
 from antarium.firmware_proto.actuator import AircoreBank
 from antarium.firmware_proto.emulator import Emulator

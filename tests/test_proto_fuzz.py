@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from antarium.clock import SimulatedClock
+from antarium.core.clock import SimulatedClock
 from antarium.firmware_proto import config, control, panel_link, polariser, replies, video
 from antarium.firmware_proto.emulator import Emulator
 from antarium.firmware_proto.panel_link import SerialFrame

@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 
+from antarium.core.pose import Pose
 from antarium.geometry import load_dome
-from antarium.pose import Pose
 from antarium.renderers import cubemap
 from antarium.renderers.far_layer import allowed_displacement, cube_taps
 from antarium.renderers.habitat import habitat_scene

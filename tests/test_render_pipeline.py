@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from antarium.core.pose import Pose
 from antarium.geometry import load_dome
-from antarium.pose import Pose
 from antarium.renderers import cubemap, footprint
 from antarium.renderers.library import build_scene
 from antarium.renderers.renderer import Renderer

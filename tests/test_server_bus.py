@@ -5,12 +5,13 @@ import json
 import math
 
 import pytest
+from conftest import wait_for
 
 import antarium
 from antarium import bus
+from antarium.client import RigError
 from antarium.config import resolve
-from antarium.rig import RigError
-from antarium.server import Server, wait_for
+from antarium.server import Server
 from antarium.trial_log import read_table
 
 
@@ -185,7 +186,7 @@ def test_locomotion_from_the_bus_drives_the_closed_loop(tmp_path):
 def test_a_server_starts_once_and_with_accepts_a_started_one(tmp_path):
     import threading
 
-    from antarium.server import ServerError
+    from antarium.server.server import ServerError
 
     with Server(_config(tmp_path), renderer_factory=None, link=False).start_thread() as server:
         assert [t.name for t in threading.enumerate()].count("antarium-server tb") == 1

@@ -10,10 +10,10 @@ import time
 
 import pytest
 
-from antarium import cpu
 from antarium.config import ConfigError, resolve
+from antarium.core import realtime
 
-pytestmark = pytest.mark.skipif(not cpu.supported() or len(os.sched_getaffinity(0)) < 2,
+pytestmark = pytest.mark.skipif(not realtime.supported() or len(os.sched_getaffinity(0)) < 2,
                                 reason="needs Linux with two or more usable CPUs")
 
 
@@ -26,7 +26,7 @@ def test_isolation_places_the_loop_thread_alone_and_everything_else_elsewhere():
     child = subprocess.Popen([sys.executable, "-c", "import threading, time; threading.Thread(target=time.sleep, "
                               "args=(30,)).start(); time.sleep(30)"])
     time.sleep(0.5)
-    isolation = cpu.Isolation("auto")
+    isolation = realtime.Isolation("auto")
     try:
         assert isolation.cpu == max(usable) and isolation.others == usable - {max(usable)}
         isolation.apply(threading.get_native_id())
@@ -47,7 +47,7 @@ def test_isolation_places_the_loop_thread_alone_and_everything_else_elsewhere():
 
 def test_a_cpu_the_process_may_not_use_is_refused():
     with pytest.raises(ValueError, match="is not one this process may use"):
-        cpu.Isolation(max(os.sched_getaffinity(0)) + 1000)
+        realtime.Isolation(max(os.sched_getaffinity(0)) + 1000)
 
 
 @pytest.mark.parametrize("value", ["auto", "off", 0, 3])
@@ -66,7 +66,7 @@ def _realtime_allowed() -> bool:
 
     def probe():
         try:
-            cpu.set_realtime(1)
+            realtime.set_realtime(1)
             allowed.append(True)
         except (AttributeError, OSError):
             pass
@@ -94,8 +94,10 @@ def _thread_policies() -> dict[int, tuple[int, int]]:
 
 @pytest.mark.skipif(not _realtime_allowed(), reason="needs permission for SCHED_FIFO (CAP_SYS_NICE or rtprio)")
 def test_real_time_goes_to_the_loop_and_its_helper_the_emulator_below_the_rest_ordinary(tmp_path):
+    from conftest import wait_for
+
     from antarium import bus
-    from antarium.server import Server, wait_for
+    from antarium.server import Server
 
     p = 10
     config = resolve({
@@ -128,7 +130,7 @@ def test_real_time_goes_to_the_loop_and_its_helper_the_emulator_below_the_rest_o
         emulator = server.emulator.proc.pid
         assert _policy(emulator) == (os.SCHED_FIFO, p - 2)
         builder = server.renderer.far_layer_status()["pid"]
-        children = cpu._descendants(os.getpid())
+        children = realtime._descendants(os.getpid())
         assert builder in children and len(children) >= 3
         assert all(_policy(c) == (os.SCHED_OTHER, 0) for c in children if c != emulator)
         assert os.getpriority(os.PRIO_PROCESS, builder) == 10

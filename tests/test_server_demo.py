@@ -6,10 +6,10 @@ import h5py
 import numpy as np
 
 from antarium.ant.experiments import ARRIVE_RADIUS_M, DEMO_ROUTE_SEED
-from antarium.ant.rig_demo import run_ant_demo
 from antarium.ant.routes import curved_route
 from antarium.cli import main
-from antarium.rig_demo import run_demo_rig
+from antarium.demos.served_rig import run_demo_rig
+from antarium.demos.virtual_ant import run_ant_demo
 from antarium.trial_log import read_table
 
 

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from antarium.jitter_bench import PROBE_PERIOD_S, STALL_S, measure, overlapping, summarise
+from antarium.bench.jitter import PROBE_PERIOD_S, STALL_S, measure, overlapping, summarise
 
 PERIOD, WORK, STEP = 5e-3, 2.5e-3, 10e-6
 
@@ -88,7 +88,7 @@ def test_frames_overlapping_a_stall_are_found():
 
 
 def test_loop_bench_tells_the_machines_late_frames_from_the_loops_own():
-    from antarium.loop_bench import summarise
+    from antarium.bench.loop import summarise
 
     period = 1 / 190
     n = 1000
@@ -117,7 +117,7 @@ def test_stall_probes_run_on_each_cpu_and_report_their_late_wake_ups():
     import os
     import time
 
-    from antarium.jitter_bench import PROBE_THRESHOLD_S, StallProbes
+    from antarium.bench.jitter import PROBE_THRESHOLD_S, StallProbes
 
     cpus = sorted(os.sched_getaffinity(0))
     probes = StallProbes(cpus, priority=0)

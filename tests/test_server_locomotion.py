@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from antarium import bus
-from antarium.clock import MonotonicClock, SimulatedClock
+from antarium.core.clock import MonotonicClock, SimulatedClock
 from antarium.locomotion import BallSample, LocomotionSource, open_source, wire
 from antarium.locomotion.scripted import ScriptedSource
 
@@ -96,7 +96,7 @@ def test_scripted_path_is_followed():
     src = ScriptedSource(path=[(0, 0), (0.1, 0), (0.1, 0.1)], speed=0.05, clock=clock)
     src.start()
     clock.advance(10.0)
-    from antarium.ball import pole_motion
+    from antarium.core.ball import pole_motion
 
     moves = np.array([pole_motion(s.rotation)[:2] for s in src.read()])
     end = moves.sum(axis=0)

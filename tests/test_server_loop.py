@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from antarium.clock import SimulatedClock
-from antarium.frame_loop import FrameLoop
+from antarium.core.clock import SimulatedClock
+from antarium.core.pose import Pose
 from antarium.locomotion import BallSample, LocomotionSource, open_source
-from antarium.pose import Pose
+from antarium.server.frame_loop import FrameLoop
 
 
 class SlowRenderer:

@@ -4,12 +4,13 @@ emulator mid-recording, failed scene loads keeping the previous scene, scene edi
 import time
 
 import pytest
+from conftest import wait_for
 
 import antarium
 from antarium import bus
+from antarium.client import RigError
 from antarium.config import resolve
-from antarium.rig import RigError
-from antarium.server import Server, wait_for
+from antarium.server import Server
 from antarium.trial_log import read_table
 
 

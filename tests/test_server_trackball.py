@@ -2,9 +2,10 @@
 and publishes an event; plugging it back resumes the closed loop."""
 
 import pytest
+from conftest import wait_for
 
 from antarium.config import resolve
-from antarium.server import Server, wait_for
+from antarium.server import Server
 from antarium.trial_log import read_table
 
 

@@ -9,9 +9,9 @@ import pytest
 
 from antarium.cli import main
 from antarium.commands.trackball import EMULATED_CPMM_FACTORS, EMULATED_SIGN_FLIP, emulated_backend, turn
-from antarium.trackball import calibration
-from antarium.trackball import config as tbconfig
-from antarium.trackball.driver import UsbTrackball
+from antarium.locomotion.trackball import calibration
+from antarium.locomotion.trackball import config as tbconfig
+from antarium.locomotion.trackball.driver import UsbTrackball
 
 OTHER = """
 [rig]

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from antarium.ball import pole_motion
-from antarium.trackball.kinematics import DEFAULT_SENSORS, BallSolver, SensorPlacement, design_matrix
+from antarium.core.ball import pole_motion
+from antarium.locomotion.trackball.kinematics import DEFAULT_SENSORS, BallSolver, SensorPlacement, design_matrix
 
 R = 0.05
 angles = st.floats(-math.pi, math.pi, allow_nan=False)

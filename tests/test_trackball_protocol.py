@@ -4,7 +4,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from antarium.trackball import protocol as P
+from antarium.locomotion.trackball import protocol as P
 
 GOLDEN = P.Report(seq=0x01020304, t_us=0x1122334455, counts=(1, -1, 300, -70000), squal=(0x80, 0x20),
                   overflow=(False, True))

@@ -6,13 +6,14 @@ import threading
 import time
 
 import pytest
+from conftest import wait_for
 
 from antarium import bus
 from antarium.cli import main
-from antarium.clock import SimulatedClock
+from antarium.core.clock import SimulatedClock
 from antarium.locomotion import BallSample, LocomotionSource, open_source, wire
-from antarium.trackball.emulator import EmulatedTrackball, constant
-from antarium.trackball.fictrac import FicTracFrame, format_line
+from antarium.locomotion.fictrac.protocol import FicTracFrame, format_line
+from antarium.locomotion.trackball.emulator import EmulatedTrackball, constant
 
 
 def _fictrac_line(i: int) -> str:
@@ -111,33 +112,28 @@ def test_cli_publishes_samples_and_unplug_events_on_the_bus(tmp_path):
 
 def test_frame_loop_holds_the_pose_while_the_usb_trackball_is_unplugged():
     """In-process: the server's frame loop reads the USB driver; unplugged, it holds the pose and logs an event."""
-    from antarium.clock import MonotonicClock
-    from antarium.frame_loop import FrameLoop
+    from antarium.core.clock import MonotonicClock
+    from antarium.server.frame_loop import FrameLoop
 
     events = []
     backend = EmulatedTrackball(motion=constant((0.0, -0.6, 0.0)), realtime=True)  # the ant walks 3 cm/s forward
     src = open_source("usb", backend=backend)
     loop = FrameLoop(clock=MonotonicClock(), source=src, on_event=lambda t, kind, data: events.append((t, kind)))
 
-    def wait_for(predicate, timeout_s=5.0):
-        deadline = time.monotonic() + timeout_s
-        while not predicate():
-            assert time.monotonic() < deadline
-            time.sleep(0.005)
 
     with src:
         loop.start_thread()
         try:
-            wait_for(lambda: loop.pose.x > 0.003)
+            assert wait_for(lambda: loop.pose.x > 0.003)
             t_unplug = time.monotonic()
             backend.unplug()
-            wait_for(lambda: not loop.locomotion_connected, 1.0)
+            assert wait_for(lambda: not loop.locomotion_connected, 1.0)
             seen_after = time.monotonic() - t_unplug
             held = loop.pose
             time.sleep(0.2)
             assert loop.pose == held  # no samples, no drift
             backend.replug()
-            wait_for(lambda: loop.locomotion_connected and loop.pose.x > held.x + 0.002)
+            assert wait_for(lambda: loop.locomotion_connected and loop.pose.x > held.x + 0.002)
         finally:
             loop.stop()
             loop.join(2.0)

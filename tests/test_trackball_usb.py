@@ -7,26 +7,22 @@ import numpy as np
 import pytest
 import usb.core
 import usb.util
+from conftest import wait_for
 
 from antarium.locomotion import BallSample, open_source
-from antarium.trackball import protocol as P
-from antarium.trackball.config import TrackballConfig
-from antarium.trackball.driver import UsbTrackball
-from antarium.trackball.emulator import EmulatedTrackball, constant, segments
+from antarium.locomotion.trackball import protocol as P
+from antarium.locomotion.trackball.config import TrackballConfig
+from antarium.locomotion.trackball.driver import UsbTrackball
+from antarium.locomotion.trackball.emulator import EmulatedTrackball, constant, segments
 
 R = 0.05
 
 
-def wait_for(predicate, timeout_s=5.0):
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        assert time.monotonic() < deadline, "condition not reached in time"
-        time.sleep(0.002)
 
 
 def collect(src, n, timeout_s=10.0):
     out = []
-    wait_for(lambda: len(out.extend(src.read()) or out) >= n, timeout_s)
+    assert wait_for(lambda: len(out.extend(src.read()) or out) >= n, timeout_s)
     return out
 
 
@@ -120,10 +116,10 @@ def test_unplug_is_reported_at_once_and_reading_resumes_after_replug():
     backend = EmulatedTrackball(realtime=True)
     src = open_source("usb", backend=backend, on_event=events.append)
     with src:
-        wait_for(lambda: src.status()["connected"] and src.status()["reports"] > 20)
+        assert wait_for(lambda: src.status()["connected"] and src.status()["reports"] > 20)
         backend.unplug()
         t0 = time.monotonic()
-        wait_for(lambda: not src.status()["connected"], 1.0)
+        assert wait_for(lambda: not src.status()["connected"], 1.0)
         detected = time.monotonic() - t0
         assert [e["event"] for e in events] == ["locomotion_connected", "locomotion_lost"]
         assert "No such device" in events[-1]["reason"]
@@ -131,7 +127,7 @@ def test_unplug_is_reported_at_once_and_reading_resumes_after_replug():
         time.sleep(0.05)
         assert src.read() == []  # nothing while unplugged
         backend.replug()
-        wait_for(lambda: src.status()["connected"], 2.0)
+        assert wait_for(lambda: src.status()["connected"], 2.0)
         samples = collect(src, 10)
         assert samples[0].seq == 0  # the replugged device restarted
     assert events[-1]["event"] == "locomotion_back"
@@ -142,7 +138,7 @@ def test_unplug_is_reported_at_once_and_reading_resumes_after_replug():
 def test_unplug_from_the_script_and_automatic_replug():
     backend = EmulatedTrackball(realtime=False, faults={50: "unplug"}, replug_after_s=0.05)
     with UsbTrackball(backend=backend, retry_s=0.01) as src:
-        wait_for(lambda: src.status()["connects"] == 2 and src.status()["reports"] > 100)
+        assert wait_for(lambda: src.status()["connects"] == 2 and src.status()["reports"] > 100)
         assert src.status()["unplugs"] == 1
 
 
@@ -157,11 +153,11 @@ def test_device_that_never_appears_is_not_connected_and_says_why():
 def test_stopped_device_is_restarted_by_the_silence_probe():
     backend = EmulatedTrackball(realtime=True)
     with UsbTrackball(backend=backend) as src:
-        wait_for(lambda: src.status()["reports"] > 10)
+        assert wait_for(lambda: src.status()["reports"] > 10)
         dev = usb.core.find(backend=backend)
         dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_STOP, 0, 0)  # e.g. a firmware watchdog reset
         n = src.status()["reports"]
-        wait_for(lambda: src.status()["reports"] > n + 50, 3.0)
+        assert wait_for(lambda: src.status()["reports"] > n + 50, 3.0)
         assert src.status()["connected"]
 
 

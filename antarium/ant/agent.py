@@ -19,7 +19,7 @@ from antarium.ant.eye import Eye, View
 from antarium.ant.locomotion import AntLocomotion, BusLegs, TrackballLegs
 from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M, RunSummary, arrived, stopping_distance
 from antarium.ant.routes import Route
-from antarium.pose import Pose
+from antarium.core.pose import Pose
 
 
 @dataclass
@@ -42,7 +42,7 @@ class Track:
 class VirtualAnt:
     """An eye, a model and legs in a frame loop.
 
-    loop:      `antarium.frame_loop.FrameLoop` whose `source` is `legs` (`legs.source` for `TrackballLegs`; the
+    loop:      `antarium.server.frame_loop.FrameLoop` whose `source` is `legs` (`legs.source` for `TrackballLegs`; the
                loop's "bus" source for `BusLegs`)
     read_leds: returns the (20350, 2) uint16 LEDs the dome shows now (`link.emulator.led_values`)
     frames_per_decision: frames the loop runs per decision; the command is spread evenly over them

@@ -19,10 +19,10 @@ from antarium.ant.agent import Track, follow_route, learning_walk
 from antarium.ant.eye import EyeParams
 from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M, median_mad, memory_pi_error
 from antarium.ant.models import make_model
-from antarium.ant.plots import plot_paths, plot_traces, scene_top_view
 from antarium.ant.routes import Route, RouteError, curved_route
 from antarium.ant.storage import mbon_bytes, save_model
 from antarium.ant.world import virtual_rig
+from antarium.plots.ant import plot_paths, plot_traces, scene_top_view
 
 #: metres between learned views: Antcar learns continuously (every frame of a 1 cm/frame walk), Ardin and
 #: perfect memory at intervals

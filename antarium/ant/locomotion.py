@@ -2,7 +2,7 @@
 
 `AntLocomotion` is the locomotion back-end "ant" (`open_source("ant", clock=..., tether=...)`). The ant calls
 `walk(forward, turn)`; the source turns that into the rotation of the Antarium's ball under an ant doing so
-(`antarium.ball.pole_motion` inverted) and hands it out on the next `read()`, stamped with the loop's clock:
+(`antarium.core.ball.pole_motion` inverted) and hands it out on the next `read()`, stamped with the loop's clock:
 
 - tether "free_yaw": the ant turns on its pin (its `yaw` in the dome frame changes, the ball does not turn);
   walking `forward` rolls the ball so that the pole moves by forward * (cos yaw, sin yaw): rx, ry; rz = 0.
@@ -20,8 +20,9 @@ import threading
 import time
 from typing import Any
 
-from antarium.ball import BALL_RADIUS_M
-from antarium.clock import Clock, MonotonicClock
+from antarium.core.ball import BALL_RADIUS_M
+from antarium.core.clock import Clock, MonotonicClock
+from antarium.core.rates import FRAME_PERIOD_S
 from antarium.locomotion import BallSample, LocomotionSource
 
 TETHERS = ("free_yaw", "fixed")
@@ -189,11 +190,11 @@ class TrackballLegs:
     """
 
     def __init__(self, tether: str = "free_yaw", yaw: float = 0.0, trackball: Any = None,
-                 clock: Clock | None = None, step_s: float = 1.0 / 190.0, on_sample=None, on_event=None,
+                 clock: Clock | None = None, step_s: float = FRAME_PERIOD_S, on_sample=None, on_event=None,
                  settle_timeout_s: float = 2.0) -> None:
-        from antarium.trackball import config as tbconfig
-        from antarium.trackball.driver import UsbTrackball
-        from antarium.trackball.emulator import EmulatedTrackball
+        from antarium.locomotion.trackball import config as tbconfig
+        from antarium.locomotion.trackball.driver import UsbTrackball
+        from antarium.locomotion.trackball.emulator import EmulatedTrackball
 
         config = tbconfig.load(trackball) if trackball is not None else tbconfig.TrackballConfig(sample_rate_hz=950)
         if not (isinstance(step_s, (int, float)) and 0.0 < step_s <= 10.0):

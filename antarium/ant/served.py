@@ -29,8 +29,8 @@ from typing import Any
 from antarium.ant.agent import VirtualAnt
 from antarium.ant.eye import Eye, EyeParams
 from antarium.ant.locomotion import TrackballLegs
-from antarium.clock import Clock, MonotonicClock
-from antarium.pose import Pose
+from antarium.core.clock import Clock, MonotonicClock
+from antarium.core.pose import Pose
 
 
 def served_config(config: str | Path | dict[str, Any]) -> dict[str, Any]:
@@ -171,10 +171,10 @@ def served_ant(model, config: str | Path | dict[str, Any], eye_params: EyeParams
     """A `VirtualAnt` with `model` on the rig that `antarium serve --config <config>` serves (see the module
     docstring; `served_config` says what the config needs). Waits up to `timeout_s` for the server."""
     from antarium import bus
+    from antarium.client import Rig
     from antarium.geometry import load_dome
     from antarium.locomotion import wire
-    from antarium.rig import Rig
-    from antarium.trackball.config import TrackballConfig
+    from antarium.locomotion.trackball.config import TrackballConfig
 
     cfg = served_config(config)
     eye = Eye.from_dome(load_dome(), eye_params)
@@ -215,9 +215,9 @@ def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out:
     from dataclasses import asdict
 
     from antarium.ant.agent import follow_route
-    from antarium.ant.plots import plot_paths, scene_top_view
     from antarium.ant.routes import Route
     from antarium.ant.storage import load_model
+    from antarium.plots.ant import plot_paths, scene_top_view
     from antarium.renderers import build_scene
 
     model, eye_params, stored = load_model(model_file)

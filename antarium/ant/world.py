@@ -21,14 +21,14 @@ from typing import Any
 from antarium.ant.agent import VirtualAnt
 from antarium.ant.eye import Eye, EyeParams
 from antarium.ant.locomotion import AntLocomotion, BusLegs, TrackballLegs
-from antarium.ball import BALL_RADIUS_M
-from antarium.clock import Clock, SimulatedClock
-from antarium.pose import Pose
+from antarium.core.ball import BALL_RADIUS_M
+from antarium.core.clock import Clock, SimulatedClock
+from antarium.core.pose import Pose
+from antarium.core.rates import DOME_RATE_HZ, FRAME_PERIOD_S
 
 #: eye height above the ground at ant scale (m)
 EYE_HEIGHT_M = 0.01
 #: the frame loop's rate (frames/s): the dome's
-LOOP_RATE_HZ = 190.0
 
 
 @contextlib.contextmanager
@@ -47,9 +47,9 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
     (`TrackballLegs`); its default reports at 950 Hz, five per frame.
     """
     from antarium.firmware_proto.link import open_link
-    from antarium.frame_loop import FrameLoop
     from antarium.geometry import load_dome
     from antarium.renderers import Renderer
+    from antarium.server.frame_loop import FrameLoop
     from antarium.trial_log import TrialLog
 
     clock = clock or SimulatedClock()
@@ -72,7 +72,7 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
                              "not both")
         if trackball is not None:
             legs = TrackballLegs(tether, trackball=None if trackball is True else trackball, clock=clock,
-                                 step_s=1.0 / LOOP_RATE_HZ)
+                                 step_s=FRAME_PERIOD_S)
             legs.start()
             stack.callback(legs.stop)
             source = legs.source
@@ -89,6 +89,6 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
             legs = BusLegs(session, rig, tether, clock=clock)
             stack.callback(legs.close)
         loop = FrameLoop(clock=clock, source=source, renderer=renderer, link=link, tether=tether, log=log,
-                         origin=Pose(0.0, 0.0, eye_height, 0.0), rate_hz=LOOP_RATE_HZ,
+                         origin=Pose(0.0, 0.0, eye_height, 0.0), rate_hz=DOME_RATE_HZ,
                          ball_radius=legs.driver.config.ball_radius if trackball is not None else BALL_RADIUS_M)
         yield VirtualAnt(eye, model, loop, legs, link.emulator.led_values, frames_per_decision)

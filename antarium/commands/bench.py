@@ -5,21 +5,9 @@ from __future__ import annotations
 import argparse
 from importlib import import_module
 
+from antarium.bench import TARGETS
+
 HELP = "run a benchmark and report it against the dome's 190 frames/s (5.3 ms frame period)"
-
-#: benchmark name -> "module:function"; the function takes the parsed args and returns an exit code.
-TARGETS: dict[str, str] = {
-    "loop": "antarium.loop_bench:run",
-    "ant": "antarium.ant.bench:run",
-    "trackball": "antarium.trackball.bench:run",
-    "protocol": "antarium.firmware_proto.bench:run",
-    "render": "antarium.renderers.bench:run",
-    "jitter": "antarium.jitter_bench:run",
-}
-
-DOME_RATE_HZ = 190.0
-FRAME_PERIOD_S = 1.0 / DOME_RATE_HZ
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("target", choices=sorted(TARGETS), help="what to measure")

@@ -21,8 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from antarium.ant.rig_demo import run_ant_demo
     from antarium.commands import layout
+    from antarium.demos.virtual_ant import run_ant_demo
 
     if not 0 <= args.rig_seconds <= 3600:
         raise ValueError(f"--rig-seconds must be in [0, 3600], got {args.rig_seconds}")
@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     for name, path in run_ant_demo(args.out).items():
         print(f"{name}: {path}")
     if args.rig_seconds:
-        from antarium.rig_demo import run_demo_rig
+        from antarium.demos.served_rig import run_demo_rig
 
         print(f"running the embedded default rig for {args.rig_seconds:g} s (emulator process, default habitat, "
               "scripted walker in closed loop; the scene turns 90 degrees half-way) ...", flush=True)

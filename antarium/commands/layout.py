@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
         print(f"per-LED table: {export_table(dome, args.export)}")
     if not args.no_pictures:
-        from antarium.layout_figures import dome_3d, mollweide_map
+        from antarium.plots.layout import dome_3d, mollweide_map
 
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

@@ -45,10 +45,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from antarium.core.pose import Pose
     from antarium.geometry import load_dome
-    from antarium.pose import Pose
+    from antarium.plots.dome_map import atlas_image, led_map, save_png
     from antarium.renderers.library import build_scene
-    from antarium.renderers.picture import atlas_image, led_map, save_png
     from antarium.renderers.renderer import Renderer
 
     pose = Pose.from_deg(*args.pos, heading_deg=args.heading)

@@ -58,7 +58,7 @@ def _open_source(args: argparse.Namespace, rig: dict[str, Any], on_sample=None, 
     from antarium.locomotion import open_source
 
     if args.source == "usb":
-        from antarium.trackball import config as tbconfig
+        from antarium.locomotion.trackball import config as tbconfig
 
         trackball = tbconfig.load(args.config)
         if not math.isclose(trackball.ball_radius, rig["loop"]["ball_radius"]):
@@ -66,7 +66,7 @@ def _open_source(args: argparse.Namespace, rig: dict[str, Any], on_sample=None, 
                   f"{rig['loop']['ball_radius']} m: the ant's motion will be scaled by their ratio", file=sys.stderr)
         backend = None
         if args.emulate:
-            from antarium.trackball.emulator import EmulatedTrackball, walk
+            from antarium.locomotion.trackball.emulator import EmulatedTrackball, walk
 
             backend = EmulatedTrackball(motion=walk(radius=trackball.ball_radius), truth=trackball,
                                         replug_after_s=args.replug_after)
@@ -146,9 +146,9 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    from antarium.trackball import calibration
-    from antarium.trackball import config as tbconfig
-    from antarium.trackball.driver import UsbTrackball
+    from antarium.locomotion.trackball import calibration
+    from antarium.locomotion.trackball import config as tbconfig
+    from antarium.locomotion.trackball.driver import UsbTrackball
 
     if args.config is None:
         raise ValueError("calibrate needs --config RIG.toml (the file its results are written to)")
@@ -187,7 +187,7 @@ def emulated_backend(config, realtime: bool = True):
     """An emulated trackball whose lens differs from `config` (see EMULATED_CPMM_FACTORS), turned on request."""
     from dataclasses import replace
 
-    from antarium.trackball.emulator import EmulatedTrackball, Turns
+    from antarium.locomotion.trackball.emulator import EmulatedTrackball, Turns
 
     sensors = []
     for i, s in enumerate(config.sensors):
@@ -216,7 +216,7 @@ def turn(driver, axis: str, turns: float, backend=None, seconds_per_turn: float 
               f"then press Enter.", flush=True)
         sys.stdin.readline()
     else:
-        from antarium.trackball import calibration
+        from antarium.locomotion.trackball import calibration
 
         period = 1.0 / driver.config.sample_rate_hz
         start = (math.floor(backend.device_time() / period) + 20) * period

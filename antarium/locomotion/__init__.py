@@ -1,7 +1,7 @@
 """Locomotion sources: one interface, a registry of back-ends imported lazily (python-can style).
 
 Every source yields `BallSample`s: timestamped ball-rotation increments with sequence numbers.
-Ball axes are the dome frame's (+x forward for a fixed-tether ant, +y left, +z up); see `antarium.ball`
+Ball axes are the dome frame's (+x forward for a fixed-tether ant, +y left, +z up); see `antarium.core.ball`
 for the motion of the ant standing on the top pole.
 
     with open_source("scripted", speed=0.02, turn_rate=0.1, clock=clock) as src:
@@ -92,9 +92,9 @@ BACKENDS: dict[str, str] = {
     "scripted": "antarium.locomotion.scripted:ScriptedSource",
     "replay": "antarium.locomotion.replay:ReplaySource",
     "bus": "antarium.locomotion.bus:BusSource",
-    "usb": "antarium.trackball.driver:UsbTrackball",
-    "fictrac": "antarium.trackball.fictrac_source:FicTracSource",
-    "fictrac-replay": "antarium.trackball.fictrac_source:FicTracReplay",
+    "usb": "antarium.locomotion.trackball.driver:UsbTrackball",
+    "fictrac": "antarium.locomotion.fictrac.source:FicTracSource",
+    "fictrac-replay": "antarium.locomotion.fictrac.source:FicTracReplay",
     "ant": "antarium.ant.locomotion:AntLocomotion",
 }
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from antarium.clock import Clock, MonotonicClock
+from antarium.core.clock import Clock, MonotonicClock
 from antarium.locomotion import BufferedSource, wire
 
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from antarium.clock import Clock, MonotonicClock
+from antarium.core.clock import Clock, MonotonicClock
 from antarium.locomotion import BallSample, LocomotionSource
 
 

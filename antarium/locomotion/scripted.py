@@ -2,7 +2,7 @@
 
 Samples are produced on a fixed grid of `rate_hz` on the injected clock, so a `SimulatedClock` gives the same
 samples as real time, only faster. The rotations are those of the Antarium's ball under an ant walking as
-scripted (`antarium.ball.pole_motion` inverted):
+scripted (`antarium.core.ball.pole_motion` inverted):
 
 - tether "free_yaw": the ant turns on its pin, the ball only rolls: rotation (ry, rx) encodes the walked
   displacement along the dome's x and y; rz = 0.
@@ -15,8 +15,8 @@ import math
 import random
 from typing import Any
 
-from antarium.ball import BALL_RADIUS_M
-from antarium.clock import Clock, MonotonicClock
+from antarium.core.ball import BALL_RADIUS_M
+from antarium.core.clock import Clock, MonotonicClock
 from antarium.locomotion import BallSample, LocomotionSource
 
 _TETHERS = ("free_yaw", "fixed")

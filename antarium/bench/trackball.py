@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from antarium.commands.bench import DOME_RATE_HZ, FRAME_PERIOD_S
+from antarium.core.rates import DOME_RATE_HZ, FRAME_PERIOD_S
 
 GOAL_REPORTS_HZ = 1000.0
 GOAL_P99_S = 0.5e-3
@@ -23,8 +23,8 @@ GOAL_FICTRAC_HZ = 10_000.0
 
 
 def _driver(seconds: float, realtime: bool, publish) -> dict:
-    from antarium.trackball.driver import UsbTrackball
-    from antarium.trackball.emulator import EmulatedTrackball, walk
+    from antarium.locomotion.trackball.driver import UsbTrackball
+    from antarium.locomotion.trackball.emulator import EmulatedTrackball, walk
 
     backend = EmulatedTrackball(motion=walk(), realtime=realtime)
     src = UsbTrackball(backend=backend, on_sample=publish, max_queue=1000)
@@ -47,8 +47,8 @@ def _driver(seconds: float, realtime: bool, publish) -> dict:
 
 
 def _unplug(repeats: int) -> dict:
-    from antarium.trackball.driver import UsbTrackball
-    from antarium.trackball.emulator import EmulatedTrackball
+    from antarium.locomotion.trackball.driver import UsbTrackball
+    from antarium.locomotion.trackball.emulator import EmulatedTrackball
 
     backend = EmulatedTrackball(realtime=True)
     delays = []
@@ -69,7 +69,7 @@ def _unplug(repeats: int) -> dict:
 
 
 def _fictrac(lines: int) -> dict:
-    from antarium.trackball.fictrac import FicTracFrame, format_line, parse_line, to_sample
+    from antarium.locomotion.fictrac.protocol import FicTracFrame, format_line, parse_line, to_sample
 
     rng = np.random.default_rng(0)
     text = []

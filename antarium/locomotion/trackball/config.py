@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from antarium.trackball.kinematics import BallSolver, SensorPlacement
-from antarium.trackball.protocol import N_SENSORS
+from antarium.locomotion.trackball.kinematics import BallSolver, SensorPlacement
+from antarium.locomotion.trackball.protocol import N_SENSORS
 
 DEFAULT_CPI = 1200
 

@@ -45,7 +45,7 @@ def _rate(step, n: int, seconds: float) -> float:
 
 
 def measure_encode(frames, seconds: float) -> float:
-    from .video import encode_frame
+    from antarium.firmware_proto.video import encode_frame
 
     out = np.empty((55, 1112), np.uint8)
     return _rate(lambda i: encode_frame(frames[i], i % 128, out=out), len(frames), seconds)
@@ -53,9 +53,9 @@ def measure_encode(frames, seconds: float) -> float:
 
 def measure_decode(frames, seconds: float, line: str) -> float:
     """Frames per second the emulator takes in: 55 VIDEO datagrams + LATCH each, fed as bytes."""
-    from .control import encode_latch
-    from .emulator import Emulator
-    from .video import encode_frame
+    from antarium.firmware_proto.control import encode_latch
+    from antarium.firmware_proto.emulator import Emulator
+    from antarium.firmware_proto.video import encode_frame
 
     streams = []  # one per sequence number, so that the stream can be cycled without going back in sequence
     for k in range(128):
@@ -81,9 +81,8 @@ def _free_port() -> int:
 
 def measure_loopback(frames, n_frames: int, rate_hz: float) -> dict:
     """Send `n_frames` at `rate_hz` to `antarium emulate` in a child process; count what it latched."""
-    from antarium.clock import MonotonicClock
-
-    from .link import open_link
+    from antarium.core.clock import MonotonicClock
+    from antarium.firmware_proto.link import open_link
 
     port = _free_port()
     proc = subprocess.Popen(
@@ -133,7 +132,7 @@ def measure_loopback(frames, n_frames: int, rate_hz: float) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from antarium.commands.bench import DOME_RATE_HZ, FRAME_PERIOD_S
+    from antarium.core.rates import DOME_RATE_HZ, FRAME_PERIOD_S
 
     seconds = args.seconds or 2.0
     n_loop = args.frames or 950

@@ -42,7 +42,7 @@ def measure(seconds: float = 2.0, n_frames: int = 20) -> dict:
     from antarium.ant.eye import Eye
     from antarium.ant.models import make_model
     from antarium.ant.storage import mbon_bytes
-    from antarium.commands.bench import DOME_RATE_HZ
+    from antarium.core.rates import DOME_RATE_HZ
     from antarium.geometry import load_dome
 
     pinned = False
@@ -83,7 +83,7 @@ def measure(seconds: float = 2.0, n_frames: int = 20) -> dict:
 def measure_on_one_core(seconds: float, n_frames: int) -> dict:
     """`measure` in a child process with one BLAS thread, pinned to one CPU."""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    code = f"import json; from antarium.ant.bench import measure; print(json.dumps(measure({seconds!r}, {n_frames!r})))"
+    code = f"import json; from antarium.bench.ant import measure; print(json.dumps(measure({seconds!r}, {n_frames!r})))"
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"ant benchmark failed: {done.stderr.strip()[-2000:]}")

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from antarium import bus
-from antarium.pose import Pose
+from antarium.core.pose import Pose
 
 
 class RigError(RuntimeError):

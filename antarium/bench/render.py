@@ -14,14 +14,15 @@ import time
 
 import numpy as np
 
-DOME_RATE_HZ = 190.0
+from antarium.core.rates import DOME_RATE_HZ
+
 GOALS_HZ = {"panorama": 1900.0, "habitat": 390.0}
 
 
 def stress_scene(n_triangles: int = 500_000, seed: int = 1):
     """Habitat far field plus a dense 24 m terrain of about `n_triangles` triangles with tall relief."""
-    from .habitat import habitat_scene
-    from .scene import MeshData, Scene, SceneObject
+    from antarium.renderers.habitat import habitat_scene
+    from antarium.renderers.scene import MeshData, Scene, SceneObject
 
     base = habitat_scene(seed)
     cells = int(math.sqrt(n_triangles / 2))
@@ -42,9 +43,9 @@ def stress_scene(n_triangles: int = 500_000, seed: int = 1):
 
 def workloads():
     """name -> (scene factory, Renderer keyword arguments)."""
-    from .habitat import habitat_scene
-    from .scene import Scene
-    from .stimuli import Grating
+    from antarium.renderers.habitat import habitat_scene
+    from antarium.renderers.scene import Scene
+    from antarium.renderers.stimuli import Grating
 
     hab = habitat_scene()
     return {
@@ -58,7 +59,7 @@ def workloads():
 
 
 def _poses(n: int):
-    from antarium.pose import Pose
+    from antarium.core.pose import Pose
 
     t = np.arange(n) / DOME_RATE_HZ
     return [Pose(0.05 * math.sin(0.3 * s) + 0.02 * s, 0.03 * s, 0.01, 0.8 * math.sin(0.7 * s)) for s in t]
@@ -106,9 +107,8 @@ def measure(renderer, scene, frames: int, warmup: int = 20) -> dict:
 
 def run(args) -> int:
     from antarium.geometry import load_dome
-
-    from .gl import describe
-    from .renderer import Renderer
+    from antarium.renderers.gl import describe
+    from antarium.renderers.renderer import Renderer
 
     frames = args.frames or 300
     if frames < 1:

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from antarium.clock import Clock, MonotonicClock
+from antarium.core.clock import Clock, MonotonicClock
 
 #: a gap longer than this (s) between two clock readings of the busy thread counts as a stall
 STALL_S = 100e-6
@@ -89,7 +89,7 @@ PROBE_THRESHOLD_S = 0.5e-3
 def _probe(cpu: int, priority: int, stop, conn) -> None:
     """Child process: wake every PROBE_PERIOD_S on `cpu` (SCHED_FIFO `priority` where allowed, else ordinary) until
     `stop` is set; send back (n, 2) float64 [slot time, lateness] (s, time.monotonic) of the late wake-ups."""
-    from antarium.cpu import set_realtime
+    from antarium.core.realtime import set_realtime
 
     os.sched_setaffinity(0, {cpu})
     realtime = False
@@ -189,8 +189,8 @@ def _steal_s() -> float | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from antarium import cpu
     from antarium.config import load_config
+    from antarium.core import realtime
 
     loop_cfg = load_config(os.environ.get("ANTARIUM_RIG_CONFIG") or None)["loop"]
     rate = loop_cfg["rate_hz"]
@@ -205,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
     out: dict[str, Any] = {}
 
     def skeleton() -> None:
-        if loop_cfg["cpu"] != "off" and cpu.supported() and len(os.sched_getaffinity(0)) > 1:
+        if loop_cfg["cpu"] != "off" and realtime.supported() and len(os.sched_getaffinity(0)) > 1:
             target = max(os.sched_getaffinity(0)) if loop_cfg["cpu"] == "auto" else loop_cfg["cpu"]
             try:
                 os.sched_setaffinity(0, {target})  # this thread only; it ends with the benchmark
@@ -214,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
                 setup["notes"].append(f"not on [loop] cpu {target} ({exc.strerror})")
         if loop_cfg["realtime_priority"]:
             try:
-                cpu.set_realtime(loop_cfg["realtime_priority"])
+                realtime.set_realtime(loop_cfg["realtime_priority"])
                 setup["realtime_priority"] = loop_cfg["realtime_priority"]
             except (AttributeError, OSError) as exc:
                 setup["notes"].append(f"not real-time ({type(exc).__name__}: {exc})")

@@ -12,7 +12,7 @@ carried over like a real sensor's. A motion may instead have a method `rotation(
 rotation vector (rad) over a device-time interval, which is then used exactly (e.g. a virtual ant's steps).
 
 Timing: `realtime=True` paces reports on a clock (a late host gets one report holding all the counts since
-the last, as the firmware does): the wall clock, or the injected `clock` (`antarium.clock`; with a
+the last, as the firmware does): the wall clock, or the injected `clock` (`antarium.core.clock`; with a
 `SimulatedClock` the device keeps step with a frame loop on that clock — call `wake()` after the clock moved);
 `realtime=False` returns a report on every read, each covering one sample period of device time (tests,
 benchmarks). `transfers` counts the transfers handed to the host, `due()` says whether a report is ready now.
@@ -37,9 +37,9 @@ import numpy as np
 import usb.backend
 import usb.core
 
-from antarium.clock import Clock
-from antarium.trackball import protocol as P
-from antarium.trackball.config import TrackballConfig
+from antarium.core.clock import Clock
+from antarium.locomotion.trackball import protocol as P
+from antarium.locomotion.trackball.config import TrackballConfig
 
 LIBUSB_ERROR_NO_DEVICE = -4
 LIBUSB_ERROR_TIMEOUT = -7

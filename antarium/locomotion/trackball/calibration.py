@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from antarium.trackball.config import TrackballConfig
+from antarium.locomotion.trackball.config import TrackballConfig
 
 AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 AXIS_NAMES = ("x0", "y0", "x1", "y1")

@@ -33,11 +33,11 @@ def run_ant_demo(out: str | Path, echo: Callable[[str], None] = print, scene: An
     from antarium.ant.agent import follow_route, learning_walk
     from antarium.ant.eye import EyeParams
     from antarium.ant.models import make_model
-    from antarium.ant.plots import plot_paths, plot_traces, scene_top_view
     from antarium.ant.routes import curved_route
     from antarium.ant.world import virtual_rig
     from antarium.geometry import load_dome
-    from antarium.renderers.picture import led_map, save_png
+    from antarium.plots.ant import plot_paths, plot_traces, scene_top_view
+    from antarium.plots.dome_map import led_map, save_png
     from antarium.trial_log import check_log_dir, log_path
 
     out = Path(out)

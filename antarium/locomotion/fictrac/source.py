@@ -16,9 +16,9 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from antarium.clock import Clock, MonotonicClock
+from antarium.core.clock import Clock, MonotonicClock
 from antarium.locomotion import BallSample, BufferedSource, LocomotionSource
-from antarium.trackball.fictrac import FicTracFrame, FicTracParseError, parse_line, to_sample
+from antarium.locomotion.fictrac.protocol import FicTracFrame, FicTracParseError, parse_line, to_sample
 
 TRANSPORTS = ("udp", "tcp")
 MAX_LINE = 4096  # bytes; a longer line without newline is garbage

@@ -90,7 +90,7 @@ def dome_picture(frame: np.ndarray, target: Path) -> Path:
     """What the dome shows for `frame`: sent through the emulator's datagram path, its latched LEDs mapped."""
     from antarium.firmware_proto.link import open_link
     from antarium.geometry import load_dome
-    from antarium.renderers.picture import led_map, save_png
+    from antarium.plots.dome_map import led_map, save_png
 
     link = open_link("virtual")
     try:

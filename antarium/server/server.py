@@ -2,7 +2,7 @@
 
 `Server(config).run()` runs the frame loop in the calling thread (the renderer's GL context lives in the
 thread that renders) until `stop()` (a signal handler, a bus command from another thread, or `until`).
-Commands arrive on zenoh threads as queries, are validated (`antarium.control`), and are executed in the
+Commands arrive on zenoh threads as queries, are validated (`antarium.server.commands`), and are executed in the
 loop's thread between frames; the reply carries the result or the error. See `docs/bus.md`.
 
 Everything the server drives can be injected (clock, source, renderer factory, link), so tests and the
@@ -18,18 +18,18 @@ import os
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from antarium import bus, cpu
-from antarium.clock import Clock, MonotonicClock
-from antarium.control import CommandError, parse_command
-from antarium.frame_loop import FrameLoop, FrameRecord
-from antarium.pose import Pose
+from antarium import bus
+from antarium.core import realtime
+from antarium.core.clock import Clock, MonotonicClock
+from antarium.core.pose import Pose
+from antarium.server.commands import CommandError, parse_command
+from antarium.server.frame_loop import FrameLoop, FrameRecord
 
 #: events that are also printed on stderr: an operator must notice them
 ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "frame_rejected")
@@ -70,7 +70,7 @@ class EmulatorProcess:
         self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self._output, stderr=subprocess.STDOUT)
         if self.realtime_priority:
             try:
-                cpu.set_realtime(self.realtime_priority, self.proc.pid)
+                realtime.set_realtime(self.realtime_priority, self.proc.pid)
             except (AttributeError, OSError):
                 pass
 
@@ -167,7 +167,7 @@ class Server:
         self.record = record
         self.trial_paths: list[Path] = []
         self.final_stats: dict[str, Any] = {}
-        self._isolation = None  # antarium.cpu.Isolation when [loop] cpu pins the frame loop
+        self._isolation = None  # antarium.core.realtime.Isolation when [loop] cpu pins the frame loop
         self._loop_tid = 0
         self._realtime_set = False
         self._switch_interval: float | None = None
@@ -613,12 +613,12 @@ class Server:
         """[loop] cpu: this (the frame loop's) thread alone on that CPU; warns if that cannot be done."""
         if which == "off":
             return
-        if not cpu.supported():
+        if not realtime.supported():
             if which != "auto":
                 self.echo("antarium serve: [loop] cpu needs Linux (sched_setaffinity, /proc); running unpinned")
             return
         try:
-            self._isolation = cpu.Isolation(which)
+            self._isolation = realtime.Isolation(which)
         except ValueError as exc:
             if which != "auto":  # "auto" on a one-CPU machine: nothing to say
                 self.echo(f"antarium serve: {exc}; running unpinned")
@@ -627,9 +627,9 @@ class Server:
 
     def _set_realtime(self, priority: int) -> None:
         """SCHED_FIFO for this (the frame loop's) thread; the threads and processes it starts begin ordinary
-        (`antarium.cpu.set_realtime`). Warns if not allowed."""
+        (`antarium.core.realtime.set_realtime`). Warns if not allowed."""
         try:
-            cpu.set_realtime(priority)
+            realtime.set_realtime(priority)
             self._realtime_set = True
         except (AttributeError, PermissionError, OSError) as exc:
             self.echo(f"antarium serve: realtime priority {priority} not granted ({exc}); running without it")
@@ -718,7 +718,7 @@ class Server:
         if self._realtime_set:
             self._realtime_set = False
             try:
-                cpu.set_ordinary()
+                realtime.set_ordinary()
             except OSError:
                 pass
 
@@ -750,13 +750,3 @@ def _json_default(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     return str(value)
-
-
-def wait_for(predicate: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
-    """Poll `predicate` until it holds or `timeout_s` passes (for scripts and tests on real time)."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(poll_s)
-    return predicate()

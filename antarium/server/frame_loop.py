@@ -5,7 +5,7 @@ locomotion samples, update the virtual pose (closed loop), render the LED frame,
 over the link, measure, log and publish. A frame whose sending ends after its slot (`t_target + period`)
 is counted late; slots that have passed meanwhile are skipped, never queued, so lag cannot accumulate.
 
-Everything is injected: `clock` (`antarium.clock`), `source` (`antarium.locomotion`), `renderer`
+Everything is injected: `clock` (`antarium.core.clock`), `source` (`antarium.locomotion`), `renderer`
 (`antarium.renderers.Renderer`, or None for pose-only runs), `link` (`antarium.firmware_proto` link, or
 None), `log` (`antarium.trial_log.TrialLog`, or None). With a `SimulatedClock` the same code runs faster
 than real time (tests, the virtual ant):
@@ -32,10 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from antarium.ball import BALL_RADIUS_M, pole_motion
-from antarium.clock import Clock
+from antarium.core.ball import BALL_RADIUS_M, pole_motion
+from antarium.core.clock import Clock
+from antarium.core.pose import Pose
+from antarium.core.rates import DOME_RATE_HZ
 from antarium.locomotion import LocomotionSource
-from antarium.pose import Pose
 
 TETHERS = ("free_yaw", "fixed")
 #: how many recent frames the statistics (percentiles, frame rate) cover
@@ -97,7 +98,7 @@ class FrameLoop:
     `call_soon` from others); they validate first and leave the state unchanged on a ValueError."""
 
     def __init__(self, *, clock: Clock, source: LocomotionSource | None, renderer=None, link=None,
-                 rate_hz: float = 190.0, closed_loop: bool = True, tether: str = "free_yaw",
+                 rate_hz: float = DOME_RATE_HZ, closed_loop: bool = True, tether: str = "free_yaw",
                  gain_translation: float = 1.0, gain_rotation: float = 1.0, origin: Pose | None = None,
                  ball_radius: float = BALL_RADIUS_M, log=None,
                  on_frame: Callable[[FrameRecord], None] | None = None,
@@ -199,14 +200,14 @@ class FrameLoop:
     def set_pose(self, pose: Pose) -> None:
         """Virtual displacement: put the eye at `pose` now (heading = world azimuth of the dome's +x)."""
         if not isinstance(pose, Pose):
-            raise ValueError(f"set_pose needs an antarium.pose.Pose, got {type(pose).__name__}")
+            raise ValueError(f"set_pose needs an antarium.core.pose.Pose, got {type(pose).__name__}")
         self.pose = pose
         self.event("pose_set", x=pose.x, y=pose.y, z=pose.z, heading=pose.heading)
 
     def reset_origin(self, origin: Pose | None = None) -> None:
         """Put the eye back at the virtual origin (or make `origin` the new origin and go there)."""
         if origin is not None and not isinstance(origin, Pose):
-            raise ValueError(f"reset_origin needs an antarium.pose.Pose or None, got {type(origin).__name__}")
+            raise ValueError(f"reset_origin needs an antarium.core.pose.Pose or None, got {type(origin).__name__}")
         self.origin = origin or self.origin
         self.pose = self.origin
         self.scene_rotation = 0.0

@@ -6,7 +6,7 @@ the goal is stated for 600) or `--frames`, then reads the recorded per-frame tab
 frame rate against target, late and skipped frames, closed-loop latency p50/p99/max and per-stage times,
 as ratios to the dome's needs (190 frames/s, 5.3 ms frame period). The first second (warm-up) is excluded.
 
-With `--machine-probe`, a stall probe runs on every CPU beside it (`antarium.jitter_bench.StallProbes`, real-time
+With `--machine-probe`, a stall probe runs on every CPU beside it (`antarium.bench.jitter.StallProbes`, real-time
 above the loop): the report then says how often the machine itself stopped a CPU, and how many late frames
 overlap such a stall (the machine's) and how many do not (the loop's own).
 """
@@ -64,7 +64,7 @@ def _machine_stalls(f: dict[str, np.ndarray], stalls: dict[int, tuple[bool, np.n
     """Per CPU, the probe's late wake-ups during the frames; and the late frames that overlap one. A frame spans
     from a probe period before its slot (the loop wakes 0.5 ms before it, and a stall may begin up to a probe
     period before the wake-up it delays) to its last datagram."""
-    from antarium.jitter_bench import LATENESS_EDGES_S, PROBE_PERIOD_S, overlapping
+    from antarium.bench.jitter import LATENESS_EDGES_S, PROBE_PERIOD_S, overlapping
 
     t0, t1 = f["t_target"] - PROBE_PERIOD_S, f["t_sent"]
     span = (t0[0], t1[-1]) if len(t0) else (0.0, 0.0)
@@ -118,10 +118,10 @@ def run(args: argparse.Namespace) -> int:
 def _start_probes(loop_priority: int):
     """A stall probe on every CPU this process may use, ten real-time priorities above the loop (ordinary when
     the loop is)."""
-    from antarium import cpu
-    from antarium.jitter_bench import StallProbes
+    from antarium.bench.jitter import StallProbes
+    from antarium.core import realtime
 
-    if not cpu.supported():
+    if not realtime.supported():
         raise SystemExit("antarium bench loop: --machine-probe needs Linux (CPU affinity and /proc)")
     return StallProbes(sorted(os.sched_getaffinity(0)), min(loop_priority + 10, 99) if loop_priority else 0)
 

@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from antarium.clock import Clock, MonotonicClock
+from antarium.core.clock import Clock, MonotonicClock
 from antarium.locomotion import BallSample, BufferedSource
-from antarium.trackball import config as tbconfig
-from antarium.trackball import protocol as P
+from antarium.locomotion.trackball import config as tbconfig
+from antarium.locomotion.trackball import protocol as P
 
 Event = dict[str, Any]
 LATENCY_WINDOW = 1 << 16  # reports kept for the arrival -> publication latency statistics
@@ -50,7 +50,7 @@ class UsbTrackball(BufferedSource):
     ) -> None:
         self.config = tbconfig.load(trackball)
         if emulate and backend is None:
-            from antarium.trackball.emulator import EmulatedTrackball
+            from antarium.locomotion.trackball.emulator import EmulatedTrackball
 
             backend = EmulatedTrackball(truth=self.config)
         self.backend = backend

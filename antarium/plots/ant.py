@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from antarium.ant.agent import Track
-from antarium.ant.routes import Route
+if TYPE_CHECKING:  # plots sit below the ant: they draw its records, never import it
+    from antarium.ant.agent import Track
+    from antarium.ant.routes import Route
 
 _TRACE_KEYS = ("lambda_left", "lambda_right", "lambda_diff", "lambda_max", "lambda_nest", "lambda_feeder",
                "motivation", "novelty", "image_difference")

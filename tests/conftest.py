@@ -1,0 +1,44 @@
+"""Shared helpers and fixtures: polling with a deadline, a free bus endpoint, a rig config, an isolated cache."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+
+def wait_for(predicate: Callable[[], bool], timeout_s: float = 5.0, poll_s: float = 0.002) -> bool:
+    """Poll `predicate` until it holds or `timeout_s` passes (tests on real time); the last answer."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(poll_s)
+    return predicate()
+
+
+def free_tcp_port(host: str = "127.0.0.1") -> int:
+    """A TCP port nothing listens on now (for a bus endpoint on loopback)."""
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def bus_endpoint() -> str:
+    """A zenoh endpoint on loopback that no other test uses."""
+    return f"tcp/127.0.0.1:{free_tcp_port()}"
+
+
+def pytest_configure(config) -> None:
+    """Caches (the renderer's footprint matrices) go to a folder of this test run, never to ~/.cache: set before
+    any fixture or child process exists, so every one of them uses it."""
+    cache = Path(tempfile.mkdtemp(prefix="antarium-test-cache-"))
+    os.environ["ANTARIUM_CACHE"] = str(cache)
+    config.add_cleanup(lambda: shutil.rmtree(cache, ignore_errors=True))
