@@ -22,29 +22,18 @@ from typing import Any
 
 KEY_ROOT = "antarium"
 
-#: command names answered by the server's queryables (`antarium/<rig>/cmd/<name>`)
-COMMANDS = (
-    "load_scene",
-    "set_pose",
-    "reset_origin",
-    "rotate_scene",
-    "closed_loop",
-    "tether",
-    "gains",
-    "scene_edit",
-    "trial_start",
-    "trial_stop",
-    "sky",
-    "polarisers",
-    "status",
-)
+
+
+def check_key_chunk(value: str, what: str) -> str:
+    """`value` if it is one key chunk (non-empty, without '/', wildcards or spaces), else ValueError naming `what`."""
+    if not isinstance(value, str) or not value or any(c in value for c in "/*?$# "):
+        raise ValueError(f"{what} must be a non-empty key chunk without '/', '*', '?', '$', '#', ' ', got {value!r}")
+    return value
 
 
 def check_rig_name(rig: str) -> str:
-    """A rig name is one key chunk: non-empty, without '/', wildcards or spaces."""
-    if not isinstance(rig, str) or not rig or any(c in rig for c in "/*?$# "):
-        raise ValueError(f"rig name must be a non-empty key chunk without '/', '*', '?', '$', '#', ' ', got {rig!r}")
-    return rig
+    """A rig name is one key chunk."""
+    return check_key_chunk(rig, "rig name")
 
 
 def rig_key(rig: str, *parts: str) -> str:
@@ -87,10 +76,9 @@ def events_key(rig: str) -> str:
 
 
 def command_key(rig: str, name: str) -> str:
-    """Queryable of one command (JSON request in the query payload, JSON reply or error reply)."""
-    if name not in COMMANDS:
-        raise ValueError(f"unknown command {name!r}; allowed: {', '.join(COMMANDS)}")
-    return rig_key(rig, "cmd", name)
+    """Queryable of one command (JSON request in the query payload, JSON reply or error reply); the commands
+    are those of `antarium.server.commands.COMMANDS`."""
+    return rig_key(rig, "cmd", check_key_chunk(name, "command name"))
 
 
 def alive_key(rig: str) -> str:

@@ -130,6 +130,10 @@ class Rig:
     # -- the one request path --------------------------------------------------------------------------
     def call(self, command: str, **params: Any) -> Any:
         """Send `command` with JSON `params`; return the server's result or raise `RigError` with its message."""
+        from antarium.server.commands import COMMANDS
+
+        if command not in COMMANDS:
+            raise RigError(f"unknown command {command!r}; allowed: {', '.join(COMMANDS)}")
         if self._session is None:
             raise RigError("the rig is not connected; use `with Rig(...) as rig:` or `rig.connect()`")
         key = bus.command_key(self.name, command)

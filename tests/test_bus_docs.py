@@ -4,16 +4,15 @@ from pathlib import Path
 
 from antarium import bus
 from antarium.locomotion import wire
-from antarium.server.commands import COMMANDS
-from antarium.server.server import SCENE_EDITS
+from antarium.server.commands import COMMANDS, SCENE_EDITS
 
 DOC = (Path(__file__).resolve().parent.parent / "docs" / "bus.md").read_text()
 
 
 def test_every_command_and_parameter_is_documented():
-    for command, params in COMMANDS.items():
+    for command, entry in COMMANDS.items():
         assert f"`{command}`" in DOC, command
-        for name in params:
+        for name in entry.params:
             assert f"`{name}`" in DOC, (command, name)
     for op, (_, args) in SCENE_EDITS.items():
         assert f"`{op}`" in DOC, op

@@ -14,8 +14,15 @@ def test_keys_share_the_rig_prefix():
     assert bus.locomotion_key("rig1") == "antarium/rig1/locomotion"
     assert bus.command_key("rig1", "set_pose") == "antarium/rig1/cmd/set_pose"
     assert bus.alive_key("r") == "antarium/r/alive/server"
-    with pytest.raises(ValueError, match="unknown command 'fly'"):
-        bus.command_key("rig1", "fly")
+    with pytest.raises(ValueError, match="key chunk"):
+        bus.command_key("rig1", "cmd/fly")
+
+
+def test_an_unknown_command_is_a_rig_error_before_anything_is_sent():
+    from antarium.client import Rig, RigError
+
+    with pytest.raises(RigError, match="unknown command 'fly'; allowed: load_scene, set_pose"):
+        Rig("rig1").call("fly")
     with pytest.raises(ValueError, match="rig name"):
         bus.rig_key("a/b")
 

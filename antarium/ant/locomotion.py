@@ -20,12 +20,10 @@ import threading
 import time
 from typing import Any
 
-from antarium.core.ball import BALL_RADIUS_M
+from antarium.core.ball import BALL_RADIUS_M, check_tether
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.core.rates import FRAME_PERIOD_S
 from antarium.locomotion import BallSample, LocomotionSource
-
-TETHERS = ("free_yaw", "fixed")
 
 
 class AntLocomotion(LocomotionSource):
@@ -37,8 +35,7 @@ class AntLocomotion(LocomotionSource):
 
     def __init__(self, tether: str = "free_yaw", yaw: float = 0.0, ball_radius: float = BALL_RADIUS_M,
                  clock: Clock | None = None) -> None:
-        if tether not in TETHERS:
-            raise ValueError(f"ant tether must be one of {TETHERS}, got {tether!r}")
+        check_tether(tether, "ant tether")
         if not isinstance(yaw, (int, float)) or not math.isfinite(yaw):
             raise ValueError(f"ant yaw must be a finite angle in radians, got {yaw!r}")
         if not isinstance(ball_radius, (int, float)) or not 1e-3 <= ball_radius <= 1.0:

@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, stop)
     bus = config["bus"]
     where = ", ".join(bus["listen"]) if bus["enabled"] else "bus disabled"
-    print(f"antarium serve: rig {server.rig!r} at {config['loop']['rate_hz']:g} frames/s; bus: {where}; "
+    print(f"antarium serve: rig {server.rig_name!r} at {config['loop']['rate_hz']:g} frames/s; bus: {where}; "
           f"trial logs in {server.log_dir}", flush=True)
     threading.Thread(target=_print_status, args=(server, args.status_every), daemon=True).start()
     frames = server.run(seconds=args.seconds)

@@ -31,7 +31,7 @@ class BusSource(BufferedSource):
                  max_pending: int = 100000, clock: Clock | None = None) -> None:
         from antarium.bus import check_rig_name
 
-        self.rig = check_rig_name(rig)
+        self.rig_name = check_rig_name(rig)
         self.bus_section = bus
         self.clock = clock or MonotonicClock()
         self.timeout_s = float(timeout_s)
@@ -61,8 +61,8 @@ class BusSource(BufferedSource):
             return
         if self._session is None:
             self._session = open_session(self.bus_section, role="client")
-        self._sub = self._session.declare_subscriber(locomotion_key(self.rig), self._on_sample)
-        self._events_sub = self._session.declare_subscriber(events_key(self.rig), self._on_event)
+        self._sub = self._session.declare_subscriber(locomotion_key(self.rig_name), self._on_sample)
+        self._events_sub = self._session.declare_subscriber(events_key(self.rig_name), self._on_event)
 
     def _on_sample(self, sample) -> None:  # zenoh thread: keep it short
         t = self.clock.now()

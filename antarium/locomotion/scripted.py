@@ -15,11 +15,9 @@ import math
 import random
 from typing import Any
 
-from antarium.core.ball import BALL_RADIUS_M
+from antarium.core.ball import BALL_RADIUS_M, check_tether
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.locomotion import BallSample, LocomotionSource
-
-_TETHERS = ("free_yaw", "fixed")
 
 
 class ScriptedSource(LocomotionSource):
@@ -40,8 +38,7 @@ class ScriptedSource(LocomotionSource):
         for name, (value, lo, hi) in checks.items():
             if not isinstance(value, (int, float)) or not lo <= value <= hi:
                 raise ValueError(f"scripted source {name} must be a number in [{lo}, {hi}], got {value!r}")
-        if tether not in _TETHERS:
-            raise ValueError(f"scripted source tether must be one of {_TETHERS}, got {tether!r}")
+        check_tether(tether, "scripted source tether")
         if path is not None:
             try:
                 path = [(float(x), float(y)) for x, y in path]

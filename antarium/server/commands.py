@@ -1,15 +1,25 @@
-"""Commands to the rig: declared parameters and their validation (pure Python, no bus).
+"""Commands to the rig: one table, each command's declared parameters beside the handler that runs it.
 
 A command is a name and a JSON object of parameters. `parse_command(name, params)` returns the checked
 parameters (defaults filled, degrees kept as given) or raises `CommandError` naming what was wrong and
-what is allowed; nothing is changed before a command is fully valid. `docs/bus.md` lists the same table.
+what is allowed; nothing is changed before a command is fully valid. The server then looks the command up in
+`COMMANDS` and runs its handler: in the frame loop's thread between two frames (`in_loop`), or in the caller's.
+`docs/bus.md` lists the same table (a test keeps them equal).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from antarium.core.ball import TETHERS
+from antarium.core.pose import Pose
+
+if TYPE_CHECKING:
+    from antarium.server.server import Server
 
 
 class CommandError(ValueError):
@@ -27,49 +37,157 @@ class Param:
     doc: str = ""
 
 
+@dataclass(frozen=True)
+class Command:
+    """params: name -> declaration; handler(server, checked params) -> result (None: the rig's state);
+    in_loop: run in the frame loop's thread between two frames (anything that changes what the dome shows)."""
+
+    params: dict[str, Param]
+    handler: Callable[[Server, dict[str, Any]], Any]
+    in_loop: bool = True
+
+
+# -- handlers: run with checked parameters; a handler that raises changes nothing --------------------------------
+def _set_pose(server: Server, p: dict[str, Any]) -> None:
+    cur = server.loop.pose
+    z = cur.z if p["z"] is None else p["z"]
+    heading = cur.heading if p["heading_deg"] is None else math.radians(p["heading_deg"])
+    server.loop.set_pose(Pose(p["x"], p["y"], z, math.remainder(heading, math.tau)))
+
+
+def _reset_origin(server: Server, p: dict[str, Any]) -> None:
+    origin = None
+    if p["x"] is not None:
+        o = server.loop.origin
+        origin = Pose(p["x"], p["y"], o.z if p["z"] is None else p["z"],
+                      o.heading if p["heading_deg"] is None else math.radians(p["heading_deg"]))
+    server.loop.reset_origin(origin)
+
+
+def _polarisers(server: Server, p: dict[str, Any]) -> None:
+    import numpy as np
+
+    if server.link is None:
+        raise RuntimeError("polarisers: this rig has no dome link")
+    server.loop.set_polarisers(None if p["angles_deg"] is None else np.radians(p["angles_deg"]))
+
+
+def _as_position(v: Any) -> list[float]:
+    return [float(c) for c in v]
+
+
+def _deg_to_rad(v: Any) -> float:
+    return math.radians(float(v))
+
+
+def _optional_float(v: Any) -> float | None:
+    return None if v is None else float(v)
+
+
+#: scene_edit operation -> (renderer method, {argument on the bus: (renderer argument, converter)})
+SCENE_EDITS: dict[str, tuple[str, dict[str, tuple[str, Callable[[Any], Any]]]]] = {
+    "move_object": ("move_object", {"name": ("name", str), "position": ("position", _as_position),
+                                    "yaw_deg": ("yaw", _deg_to_rad)}),
+    "remove_object": ("remove_object", {"name": ("name", str)}),
+    "scale_channel": ("scale_channel", {"channel": ("channel", str), "factor": ("factor", float)}),
+    "swap_green_blue": ("swap_green_blue", {"swap": ("swap", bool)}),
+    "set_lowpass": ("set_lowpass", {"cutoff_deg": ("cutoff_deg", _optional_float)}),
+    "set_contrast": ("set_contrast", {"contrast": ("contrast", float)}),
+    "set_brightness": ("set_brightness", {"brightness": ("brightness", float)}),
+}
+
+
+def _scene_edit(server: Server, p: dict[str, Any]) -> None:
+    """One edit of the current scene (a renderer method); a failing edit changes nothing."""
+    op, args = p["op"], p["args"]
+    renderer = server.require_renderer("scene_edit")
+    method, allowed = SCENE_EDITS[op]
+    unknown = sorted(set(args) - set(allowed))
+    if unknown:
+        raise CommandError(f"scene_edit {op}: unknown argument(s) {unknown}; allowed: {sorted(allowed)}")
+    kwargs = {}
+    for key, value in args.items():
+        target, convert = allowed[key]
+        try:
+            kwargs[target] = convert(value)
+        except (TypeError, ValueError):
+            raise CommandError(f"scene_edit {op}: argument {key!r} has a wrong type: {value!r}") from None
+    try:
+        getattr(renderer, method)(**kwargs)
+    except TypeError as exc:
+        raise CommandError(f"scene_edit {op}: {exc}") from None
+    server.loop.renderer_changed()
+    server.loop.event("scene_edit", op=op, args=args)
+
+
+def _sky(server: Server, p: dict[str, Any]) -> None:
+    """Move the sun / change the sky's polarisation of the current scene (rebuilds its far field)."""
+    renderer = server.require_renderer("sky")
+    scene = renderer.scene
+    sky = getattr(scene, "sky", None)
+    if sky is None:
+        raise RuntimeError(f"sky: the current scene {server.scene_name!r} has no sky")
+    changes = {k: math.radians(p[f"{k}_deg"]) for k in ("sun_azimuth", "sun_elevation") if p[f"{k}_deg"] is not None}
+    changes.update({k: p[k] for k in ("dop_max", "sun_radiance") if p[k] is not None})
+    if not changes:
+        raise CommandError("sky: give at least one of sun_azimuth_deg, sun_elevation_deg, dop_max, sun_radiance")
+    new_sky = dataclasses.replace(sky, **changes)
+    new_scene = dataclasses.replace(scene, far=[new_sky if layer is sky else layer for layer in scene.far])
+    try:
+        renderer.set_scene(new_scene)
+    except (OSError, ValueError, RuntimeError) as exc:
+        raise RuntimeError(f"sky: {exc}; the current sky stays") from None
+    server.loop.renderer_changed()
+    server.loop.event("sky", **{k: p[k] for k in p if p[k] is not None})
+
+
 _XY = 1e6  # metres: anything farther is a typo, not a world
-#: command name -> parameter name -> declaration
-COMMANDS: dict[str, dict[str, Param]] = {
-    "load_scene": {"scene": Param("scene", True, doc="scene name, file path, or {scene: name, ...parameters}")},
-    "set_pose": {
+#: command name -> its parameters and handler (the one table: the bus, the Rig client and docs/bus.md follow it)
+COMMANDS: dict[str, Command] = {
+    "load_scene": Command(
+        {"scene": Param("scene", True, doc="scene name, file path, or {scene: name, ...parameters}")},
+        lambda server, p: server.load_scene(p["scene"])),
+    "set_pose": Command({
         "x": Param("number", True, lo=-_XY, hi=_XY, doc="m"),
         "y": Param("number", True, lo=-_XY, hi=_XY, doc="m"),
         "z": Param("number", False, None, lo=-_XY, hi=_XY, doc="m (eye height; default: keep)"),
         "heading_deg": Param("number", False, None, lo=-3600, hi=3600, doc="world azimuth of the dome's +x"),
-    },
-    "reset_origin": {
+    }, _set_pose),
+    "reset_origin": Command({
         "x": Param("number", False, None, lo=-_XY, hi=_XY, doc="m; with y: a new origin"),
         "y": Param("number", False, None, lo=-_XY, hi=_XY, doc="m"),
         "z": Param("number", False, None, lo=-_XY, hi=_XY, doc="m"),
         "heading_deg": Param("number", False, None, lo=-3600, hi=3600),
-    },
-    "rotate_scene": {"deg": Param("number", True, lo=-3600, hi=3600, doc="counter-clockwise seen from above")},
-    "closed_loop": {"on": Param("bool", True)},
-    "tether": {"tether": Param("str", True, choices=("free_yaw", "fixed"))},
-    "gains": {
+    }, _reset_origin),
+    "rotate_scene": Command(
+        {"deg": Param("number", True, lo=-3600, hi=3600, doc="counter-clockwise seen from above")},
+        lambda server, p: server.loop.rotate_scene(math.radians(p["deg"]))),
+    "closed_loop": Command({"on": Param("bool", True)}, lambda server, p: server.loop.set_closed_loop(p["on"])),
+    "tether": Command({"tether": Param("str", True, choices=tuple(TETHERS))},
+                      lambda server, p: server.loop.set_tether(p["tether"])),
+    "gains": Command({
         "translation": Param("number", False, None, lo=-100, hi=100),
         "rotation": Param("number", False, None, lo=-100, hi=100),
-    },
-    "scene_edit": {
-        "op": Param("str", True, choices=("move_object", "remove_object", "scale_channel", "swap_green_blue",
-                                          "set_lowpass", "set_contrast", "set_brightness")),
+    }, lambda server, p: server.loop.set_gains(p["translation"], p["rotation"])),
+    "scene_edit": Command({
+        "op": Param("str", True, choices=tuple(SCENE_EDITS)),
         "args": Param("object", False, {}, doc="the operation's arguments (see docs/bus.md)"),
-    },
-    "trial_start": {
+    }, _scene_edit),
+    "trial_start": Command({
         "name": Param("str", True, doc="trial name (part of the log file name)"),
         "metadata": Param("object", False, {}, doc="JSON object stored with the trial"),
-    },
-    "trial_stop": {},
-    "sky": {
+    }, lambda server, p: server.trial_start(p["name"], p["metadata"]), in_loop=False),
+    "trial_stop": Command({}, lambda server, p: server.trial_stop(), in_loop=False),
+    "sky": Command({
         "sun_azimuth_deg": Param("number", False, None, lo=-360, hi=360),
         "sun_elevation_deg": Param("number", False, None, lo=-90, hi=90),
         "dop_max": Param("number", False, None, lo=0, hi=1, doc="maximum degree of polarisation"),
         "sun_radiance": Param("number", False, None, lo=0, hi=1000),
-    },
-    "polarisers": {
-        "angles_deg": Param("number_list", False, None, doc="55 x 9 e-vector angles, degrees; null: follow the sky"),
-    },
-    "status": {},
+    }, _sky),
+    "polarisers": Command(
+        {"angles_deg": Param("number_list", False, None, doc="55 x 9 e-vector angles, degrees; null: follow the sky")},
+        _polarisers),
+    "status": Command({}, lambda server, p: server.status(), in_loop=False),
 }
 
 
@@ -103,9 +221,10 @@ def _check(command: str, name: str, p: Param, value: Any) -> Any:
 
 def parse_command(command: str, params: Any) -> dict[str, Any]:
     """Checked parameters of `command` (defaults filled); `CommandError` if anything is wrong."""
-    decl = COMMANDS.get(command)
-    if decl is None:
+    entry = COMMANDS.get(command)
+    if entry is None:
         raise CommandError(f"unknown command {command!r}; allowed: {', '.join(COMMANDS)}")
+    decl = entry.params
     if params is None:
         params = {}
     if not isinstance(params, dict):

@@ -32,13 +32,12 @@ from typing import Any
 
 import numpy as np
 
-from antarium.core.ball import BALL_RADIUS_M, pole_motion
+from antarium.core.ball import BALL_RADIUS_M, check_tether, pole_motion
 from antarium.core.clock import Clock
 from antarium.core.pose import Pose
 from antarium.core.rates import DOME_RATE_HZ
 from antarium.locomotion import LocomotionSource
 
-TETHERS = ("free_yaw", "fixed")
 #: how many recent frames the statistics (percentiles, frame rate) cover
 STATS_WINDOW = 2048
 #: ask the locomotion source whether it is connected every this many frames
@@ -105,8 +104,7 @@ class FrameLoop:
                  on_event: Callable[[float, str, dict], None] | None = None) -> None:
         if not isinstance(rate_hz, (int, float)) or not 1.0 <= rate_hz <= 2000.0:
             raise ValueError(f"rate_hz must be in [1, 2000] frames/s, got {rate_hz!r}")
-        if tether not in TETHERS:
-            raise ValueError(f"tether must be one of {TETHERS}, got {tether!r}")
+        check_tether(tether)
         self.clock, self.source, self.renderer, self.link = clock, source, renderer, link
         self.period = 1.0 / float(rate_hz)
         self.rate_hz = float(rate_hz)
@@ -229,9 +227,7 @@ class FrameLoop:
         self.event("closed_loop", on=on)
 
     def set_tether(self, tether: str) -> None:
-        if tether not in TETHERS:
-            raise ValueError(f"tether must be one of {TETHERS}, got {tether!r}")
-        self.tether = tether
+        self.tether = check_tether(tether)
         self.event("tether", tether=tether)
 
     def set_gains(self, translation: float | None = None, rotation: float | None = None) -> None:

@@ -28,7 +28,7 @@ from antarium import bus
 from antarium.core import realtime
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.core.pose import Pose
-from antarium.server.commands import CommandError, parse_command
+from antarium.server.commands import COMMANDS, CommandError, parse_command
 from antarium.server.frame_loop import FrameLoop, FrameRecord
 
 #: events that are also printed on stderr: an operator must notice them
@@ -120,20 +120,6 @@ def default_renderer_factory(render_cfg: dict[str, Any], clock: Clock | None = N
                     far_layer_error_deg=render_cfg["far_layer_error_deg"])
 
 
-#: scene_edit operations -> (renderer method, {bus argument: (renderer argument, converter)})
-_DEG = math.radians
-SCENE_EDITS: dict[str, tuple[str, dict[str, tuple[str, Callable]]]] = {
-    "move_object": ("move_object", {"name": ("name", str), "position": ("position", lambda v: [float(c) for c in v]),
-                                    "yaw_deg": ("yaw", lambda v: _DEG(float(v)))}),
-    "remove_object": ("remove_object", {"name": ("name", str)}),
-    "scale_channel": ("scale_channel", {"channel": ("channel", str), "factor": ("factor", float)}),
-    "swap_green_blue": ("swap_green_blue", {"swap": ("swap", bool)}),
-    "set_lowpass": ("set_lowpass", {"cutoff_deg": ("cutoff_deg", lambda v: None if v is None else float(v))}),
-    "set_contrast": ("set_contrast", {"contrast": ("contrast", float)}),
-    "set_brightness": ("set_brightness", {"brightness": ("brightness", float)}),
-}
-
-
 class Server:
     """config: a resolved rig config (`antarium.config.load_config`). Injectable: clock, source,
     renderer_factory (called in the loop's thread; None for a pose-only rig), link (None: from `[link]`,
@@ -146,7 +132,7 @@ class Server:
         from antarium.trial_log import check_log_dir, prepare_writer
 
         self.config = config
-        self.rig = bus.check_rig_name(config["rig"]["name"])
+        self.rig_name = bus.check_rig_name(config["rig"]["name"])
         self.clock = clock or MonotonicClock()
         self.echo = echo or (lambda line: print(line, file=sys.stderr, flush=True))
         self.log_dir = check_log_dir(config["log"]["dir"])
@@ -190,7 +176,7 @@ class Server:
         loco = dict(self.config["locomotion"])
         name = loco.pop("source")
         if name == "bus":
-            loco.setdefault("rig", self.rig)
+            loco.setdefault("rig", self.rig_name)
             loco.setdefault("bus", self.config["bus"])
         loco.setdefault("clock", self.clock)
         if name == "scripted":
@@ -229,11 +215,11 @@ class Server:
                 return
             self.session = bus.open_session(self.config["bus"], role="server")
         s = self.session
-        self._pose_pub = s.declare_publisher(bus.pose_key(self.rig), express=True)
-        self._stats_pub = s.declare_publisher(bus.stats_key(self.rig), express=True)
+        self._pose_pub = s.declare_publisher(bus.pose_key(self.rig_name), express=True)
+        self._stats_pub = s.declare_publisher(bus.stats_key(self.rig_name), express=True)
         self._entities += [self._pose_pub, self._stats_pub,
-                           s.declare_queryable(bus.rig_key(self.rig, "cmd", "*"), self._on_query),
-                           s.liveliness().declare_token(bus.alive_key(self.rig))]
+                           s.declare_queryable(bus.rig_key(self.rig_name, "cmd", "*"), self._on_query),
+                           s.liveliness().declare_token(bus.alive_key(self.rig_name))]
 
     # -- bus traffic -----------------------------------------------------------------------------------
     def _on_query(self, query) -> None:
@@ -257,7 +243,7 @@ class Server:
             self.echo(f"antarium serve: {kind}: {json.dumps(data, default=_json_default)}")
         if self.session is not None:
             try:
-                self.session.put(bus.events_key(self.rig),
+                self.session.put(bus.events_key(self.rig_name),
                                  json.dumps({"t": t, "kind": kind, "data": data}, default=_json_default))
             except Exception as exc:  # zenoh errors must never stop the frame loop  # noqa: BLE001
                 self.echo(f"antarium serve: publishing event {kind} failed: {exc}")
@@ -300,12 +286,12 @@ class Server:
     def _publish_status(self) -> None:
         status = self.status()
         if self.session is not None:
-            self.session.put(bus.status_key(self.rig), json.dumps(status, default=_json_default))
+            self.session.put(bus.status_key(self.rig_name), json.dumps(status, default=_json_default))
 
     def status(self) -> dict[str, Any]:
         """Frame rate, late frames, latency percentiles, distributor telemetry, trial and log state."""
         loop = self.loop
-        out: dict[str, Any] = {"rig": self.rig, "t": self.clock.now(), "trial": self.trial_name,
+        out: dict[str, Any] = {"rig": self.rig_name, "t": self.clock.now(), "trial": self.trial_name,
                                "scene": self.scene_name, "alarms": []}
         if loop is not None:
             p = loop.pose
@@ -351,11 +337,9 @@ class Server:
         except CommandError as exc:
             self._log_command(name, params, {"error": str(exc)}, False)
             raise
-        if name == "status":
-            return self.status()
-        if name in ("trial_start", "trial_stop"):
-            result = self._trial_start(**checked) if name == "trial_start" else self._trial_stop()
-            return result
+        command = COMMANDS[name]
+        if not command.in_loop:
+            return command.handler(self, checked)
         if self.loop is None or not self._loop_running():
             raise RuntimeError(f"{name}: the server is not running")
         future = self.loop.call_soon(self._apply, name, checked, params)
@@ -368,10 +352,11 @@ class Server:
     def _apply(self, name: str, p: dict[str, Any], request: Any) -> Any:
         """Run a checked command in the loop's thread; log it with its outcome."""
         try:
-            result = self._dispatch(name, p)
+            result = COMMANDS[name].handler(self, p)
         except (CommandError, ValueError, RuntimeError, OSError) as exc:
             self._log_command(name, request, {"error": str(exc)}, False)
             raise
+        result = self.state() if result is None else result
         self._log_command(name, request, {"result": result}, True)
         return result
 
@@ -379,41 +364,8 @@ class Server:
         if self.trial_log is not None:
             self.trial_log.add_command(self.clock.now(), name, request, reply, ok)
 
-    def _dispatch(self, name: str, p: dict[str, Any]) -> Any:
-        loop = self.loop
-        if name == "set_pose":
-            cur = loop.pose
-            z = cur.z if p["z"] is None else p["z"]
-            heading = cur.heading if p["heading_deg"] is None else math.radians(p["heading_deg"])
-            loop.set_pose(Pose(p["x"], p["y"], z, math.remainder(heading, math.tau)))
-        elif name == "reset_origin":
-            origin = None
-            if p["x"] is not None:
-                o = loop.origin
-                origin = Pose(p["x"], p["y"], o.z if p["z"] is None else p["z"],
-                              o.heading if p["heading_deg"] is None else math.radians(p["heading_deg"]))
-            loop.reset_origin(origin)
-        elif name == "rotate_scene":
-            loop.rotate_scene(math.radians(p["deg"]))
-        elif name == "closed_loop":
-            loop.set_closed_loop(p["on"])
-        elif name == "tether":
-            loop.set_tether(p["tether"])
-        elif name == "gains":
-            loop.set_gains(p["translation"], p["rotation"])
-        elif name == "load_scene":
-            self._load_scene(p["scene"])
-        elif name == "scene_edit":
-            self._scene_edit(p["op"], p["args"])
-        elif name == "sky":
-            self._set_sky(p)
-        elif name == "polarisers":
-            if self.link is None:
-                raise RuntimeError("polarisers: this rig has no dome link")
-            loop.set_polarisers(None if p["angles_deg"] is None else np.radians(p["angles_deg"]))
-        return self._state()
-
-    def _state(self) -> dict[str, Any]:
+    def state(self) -> dict[str, Any]:
+        """What a command replies: pose, scene rotation, loop mode, gains, scene and trial."""
         loop = self.loop
         pose = loop.pose
         return {"pose": {"x": pose.x, "y": pose.y, "z": pose.z, "heading_deg": math.degrees(pose.heading)},
@@ -421,59 +373,15 @@ class Server:
                 "tether": loop.tether, "gains": {"translation": loop.gain_translation, "rotation": loop.gain_rotation},
                 "scene": self.scene_name, "trial": self.trial_name}
 
-    def _require_renderer(self, what: str):
+    def require_renderer(self, what: str):
+        """The renderer, or RuntimeError naming `what` needed it (a pose-only rig has none)."""
         if self.renderer is None:
             raise RuntimeError(f"{what}: this rig has no renderer (pose-only)")
         return self.renderer
 
-    def _scene_edit(self, op: str, args: dict[str, Any]) -> None:
-        """One edit of the current scene (renderer methods); a failing edit changes nothing."""
-        renderer = self._require_renderer("scene_edit")
-        method, allowed = SCENE_EDITS[op]
-        unknown = sorted(set(args) - set(allowed))
-        if unknown:
-            raise CommandError(f"scene_edit {op}: unknown argument(s) {unknown}; allowed: {sorted(allowed)}")
-        kwargs = {}
-        for key, value in args.items():
-            target, convert = allowed[key]
-            try:
-                kwargs[target] = convert(value)
-            except (TypeError, ValueError):
-                raise CommandError(f"scene_edit {op}: argument {key!r} has a wrong type: {value!r}") from None
-        try:
-            getattr(renderer, method)(**kwargs)
-        except TypeError as exc:
-            raise CommandError(f"scene_edit {op}: {exc}") from None
-        self.loop.renderer_changed()
-        self.loop.event("scene_edit", op=op, args=args)
-
-    def _set_sky(self, p: dict[str, Any]) -> None:
-        """Move the sun / change the sky's polarisation of the current scene (rebuilds its far field)."""
-        import dataclasses
-
-        renderer = self._require_renderer("sky")
-        scene = renderer.scene
-        sky = getattr(scene, "sky", None)
-        if sky is None:
-            raise RuntimeError(f"sky: the current scene {self.scene_name!r} has no sky")
-        changes = {k: v for k, v in (("sun_azimuth", p["sun_azimuth_deg"]), ("sun_elevation", p["sun_elevation_deg"]))
-                   if v is not None}
-        changes = {k: math.radians(v) for k, v in changes.items()}
-        changes.update({k: p[k] for k in ("dop_max", "sun_radiance") if p[k] is not None})
-        if not changes:
-            raise CommandError("sky: give at least one of sun_azimuth_deg, sun_elevation_deg, dop_max, sun_radiance")
-        new_sky = dataclasses.replace(sky, **changes)
-        new_scene = dataclasses.replace(scene, far=[new_sky if layer is sky else layer for layer in scene.far])
-        try:
-            renderer.set_scene(new_scene)
-        except (OSError, ValueError, RuntimeError) as exc:
-            raise RuntimeError(f"sky: {exc}; the current sky stays") from None
-        self.loop.renderer_changed()
-        self.loop.event("sky", **{k: p[k] for k in p if p[k] is not None})
-
-    def _load_scene(self, scene: str | dict) -> None:
+    def load_scene(self, scene: str | dict) -> None:
         """Load a scene (name, file path or spec) into the renderer; on failure the previous scene stays."""
-        renderer = self._require_renderer("load_scene")
+        renderer = self.require_renderer("load_scene")
         digest = _scene_sha256(scene)
         try:
             renderer.set_scene(scene)
@@ -487,7 +395,7 @@ class Server:
             self.trial_log.add_scene(self.clock.now(), self.scene_name, digest)
         self.loop.event("scene_loaded", scene=scene, sha256=digest)
 
-    def _trial_start(self, name: str, metadata: dict) -> dict[str, Any]:
+    def trial_start(self, name: str, metadata: dict) -> dict[str, Any]:
         from antarium.trial_log import LogError, TrialLog, log_path
 
         with self._trial_lock:
@@ -497,7 +405,7 @@ class Server:
                 json.dumps(metadata)
             except (TypeError, ValueError) as exc:
                 raise CommandError(f"trial_start: metadata must be JSON-serialisable: {exc}") from None
-            path = log_path(self.log_dir, self.rig, name)
+            path = log_path(self.log_dir, self.rig_name, name)
             try:
                 log = TrialLog(path, self.config, name, metadata, flush_s=self.config["log"]["flush_s"])
             except LogError as exc:
@@ -525,7 +433,7 @@ class Server:
         self.loop.log = log
         self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path))
 
-    def _trial_stop(self) -> dict[str, Any]:
+    def trial_stop(self) -> dict[str, Any]:
         with self._trial_lock:
             log = self.trial_log
             if log is None:
@@ -568,7 +476,7 @@ class Server:
                 origin=origin, ball_radius=loop_cfg["ball_radius"], log=self.trial_log,
                 on_frame=self._on_frame, on_event=self._publish_event)
             if self.renderer is not None:
-                self._load_scene(self.config["render"]["scene"])
+                self.load_scene(self.config["render"]["scene"])
                 if hasattr(self.renderer, "wait_far_layer") and not self.renderer.wait_far_layer(self.loop.pose):
                     self.echo("antarium serve: the far layer is not ready; the first frames are drawn in full")
             self._open_bus()
@@ -577,7 +485,7 @@ class Server:
                     self.source.use_session(self.session)  # a bus source shares the server's session
                 self.source.start()
             if (self.record or self.config["log"]["record"]) and self.trial_log is None:
-                self._trial_start(self.record or "recording", {})
+                self.trial_start(self.record or "recording", {})
         except BaseException as exc:
             self._start_error = exc
             self._ready.set()
@@ -598,7 +506,7 @@ class Server:
         self._isolate_loop(loop_cfg["cpu"])
         self._place_threads()
         self._ready.set()
-        self.loop.event("server_started", rig=self.rig)
+        self.loop.event("server_started", rig=self.rig_name)
         if self._stopping.is_set():  # stopped (a signal) while starting
             self.loop.stop()
         if seconds is not None:
@@ -642,9 +550,9 @@ class Server:
         """Run the server in a thread of its own; returns when it runs (or raises why it could not start).
         A server starts once: a second call raises ServerError (`with Server(...).start_thread():` is fine)."""
         if self._thread is not None:
-            raise ServerError(f"server {self.rig!r} was started already; a server starts once (start_thread() or "
+            raise ServerError(f"server {self.rig_name!r} was started already; a server starts once (start_thread() or "
                               "`with Server(...)`), stop() ends it")
-        self._thread = threading.Thread(target=self._run_quietly, name=f"antarium-server {self.rig}", daemon=True)
+        self._thread = threading.Thread(target=self._run_quietly, name=f"antarium-server {self.rig_name}", daemon=True)
         self._thread.start()
         if not self._ready.wait(timeout_s):
             raise ServerError(f"the server did not start within {timeout_s} s")
@@ -676,7 +584,7 @@ class Server:
                 self.final_frame = self.loop.last_frame.copy()
         if self.trial_log is not None:
             try:
-                self._trial_stop()
+                self.trial_stop()
             except RuntimeError as exc:
                 self.echo(f"antarium serve: closing the trial log: {exc}")
         for entity in reversed(self._entities):
@@ -743,7 +651,6 @@ def _scene_sha256(scene: str | dict) -> str:
 
 
 def _json_default(value: Any) -> Any:
-    import numpy as np
 
     if isinstance(value, np.ndarray):
         return value.tolist()
