@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from antarium.core.childproc import ChildProcess, connection_from_arg
+
 #: 2: the frames table has `full_render`
 FORMAT_VERSION = 2
 
@@ -113,7 +115,7 @@ class TrialLog:
             self._proc.kill()
             raise
         if kind != "ready":
-            self._proc.join(5)
+            self._proc.stop(5)
             raise LogError(f"cannot create trial log {str(self.path)!r}: {detail}")
         self.flush_s = float(flush_s)
         self._tables = ("frames", "locomotion", "events", "commands", "scenes")
@@ -226,9 +228,8 @@ class TrialLog:
                 self.error = self.error or f"trial log writer for {str(self.path)!r} died before closing: {exc}"
             self._conn.close()
             self._conn = None
-        self._proc.join(timeout_s)
-        if self._proc.exitcode is None:
-            self._proc.kill()
+        self._proc.wait(timeout_s)
+        self._proc.kill()  # only if it has not ended; releases its output file
 
     def __enter__(self) -> TrialLog:
         return self
@@ -237,79 +238,8 @@ class TrialLog:
         self.close()
 
 
-class _Duplex:
-    """Two one-way pipe connections used as one (send to the writer, receive from it)."""
-
-    def __init__(self, recv_fd: int, send_fd: int) -> None:
-        from multiprocessing.connection import Connection
-
-        self._in = Connection(recv_fd, writable=False)
-        self._out = Connection(send_fd, readable=False)
-
-    def send(self, message) -> None:
-        self._out.send(message)
-
-    def recv(self):
-        return self._in.recv()
-
-    def poll(self, timeout: float = 0.0) -> bool:
-        return self._in.poll(timeout)
-
-    def close(self) -> None:
-        self._in.close()
-        self._out.close()
-
-
-class _WriterProcess:
-    """`python -m antarium.trial_log FD FD`: a fresh interpreter (never a fork of a process holding zenoh or
-    GL threads, never a re-import of the user's main script) that imports numpy and h5py while it waits."""
-
-    def __init__(self) -> None:
-        import os
-        import subprocess
-        import sys
-        import tempfile
-
-        to_child_r, to_child_w = os.pipe()
-        from_child_r, from_child_w = os.pipe()
-        self._output = tempfile.TemporaryFile()
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "antarium.trial_log", str(to_child_r), str(from_child_w)],
-            pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL, stdout=self._output,
-            stderr=subprocess.STDOUT)
-        os.close(to_child_r)
-        os.close(from_child_w)
-        self.conn = _Duplex(from_child_r, to_child_w)
-
-    @property
-    def exitcode(self) -> int | None:
-        return self.proc.poll()
-
-    def output(self) -> str:
-        if self._output.closed:
-            return ""
-        self._output.seek(0)
-        return self._output.read()[-2000:].decode(errors="replace")
-
-    def join(self, timeout: float | None = None) -> None:
-        import subprocess
-
-        try:
-            self.proc.wait(timeout)
-            self._output.close()
-        except subprocess.TimeoutExpired:
-            pass
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
-        self.conn.close()
-        self._output.close()
-
-
 _spare_lock = threading.Lock()
-_spare: _WriterProcess | None = None
+_spare: ChildProcess | None = None
 
 
 def prepare_writer() -> None:
@@ -317,19 +247,24 @@ def prepare_writer() -> None:
     global _spare
     with _spare_lock:
         if _spare is None or _spare.exitcode is not None:
-            _spare = _WriterProcess()
+            _spare = _start_writer()
 
 
-def _take_writer() -> _WriterProcess:
+def _start_writer() -> ChildProcess:
+    """`python -m antarium.trial_log FD`: the writer, importing numpy and h5py while it waits for its trial."""
+    return ChildProcess("antarium.trial_log", connect=True)
+
+
+def _take_writer() -> ChildProcess:
     """The prepared writer (or a new one); a new spare is started for the trial after."""
     global _spare
     with _spare_lock:
-        writer = _spare if _spare is not None and _spare.exitcode is None else _WriterProcess()
-        _spare = _WriterProcess()
+        writer = _spare if _spare is not None and _spare.exitcode is None else _start_writer()
+        _spare = _start_writer()
     return writer
 
 
-def _writer_process_main(recv_fd: int, send_fd: int) -> None:
+def _writer_process_main(conn_arg: str) -> None:
     """Entry of the writer process: wait for ("open", path, attrs), then write (see `_writer_main`)."""
     import signal
 
@@ -337,7 +272,7 @@ def _writer_process_main(recv_fd: int, send_fd: int) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     import h5py  # noqa: F401 - imported while waiting, so that opening is quick
 
-    conn = _Duplex(recv_fd, send_fd)
+    conn = connection_from_arg(conn_arg)
     try:
         kind, path, attrs = conn.recv()
     except (EOFError, OSError):  # a spare that was never used: the server has ended
@@ -477,4 +412,4 @@ def read_table(path: str | Path, table: str) -> dict[str, np.ndarray]:
 if __name__ == "__main__":
     import sys
 
-    _writer_process_main(int(sys.argv[1]), int(sys.argv[2]))
+    _writer_process_main(sys.argv[1])

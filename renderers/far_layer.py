@@ -29,6 +29,8 @@ import time
 
 import numpy as np
 
+from antarium.core.childproc import ChildProcess, connection_from_arg
+
 from . import cubemap, shaders
 from .farfield import FarFieldTable, TableGrid
 from .meshbuffers import MeshBuffers
@@ -193,7 +195,7 @@ class FarLayer:
     @property
     def pid(self) -> int | None:
         """Process id of the async builder (None when sync)."""
-        return None if self.mode == "sync" else self._worker._proc.pid
+        return None if self.mode == "sync" else self._worker.pid
 
     def edit(self, edit: tuple) -> None:
         """Apply a scene edit (see `FarLayerBuilder.apply`); the layer is unusable until rebuilt."""
@@ -268,9 +270,7 @@ class _Worker:
 
     def __init__(self, far_field: FarFieldTable, args: tuple):
         import os
-        import subprocess
-        import sys
-        from multiprocessing import Pipe, shared_memory
+        from multiprocessing import shared_memory
 
         g = far_field.grid
         nbytes = int(np.prod(g.shape)) * 2 * 2 * 2  # two uint16 tables of two channels
@@ -279,11 +279,8 @@ class _Worker:
         for gb, uv in self.tables:
             gb[...] = 0
             uv[...] = 0
-        # a fresh interpreter (not multiprocessing's spawn, which re-runs the caller's main script)
-        self._conn, child = Pipe()
-        self._proc = subprocess.Popen([sys.executable, "-m", __name__, str(child.fileno())],
-                                      pass_fds=(child.fileno(),))
-        child.close()
+        self._child = ChildProcess(__name__, connect=True)
+        self._conn = self._child.conn
         # below a real-time frame loop, nice 10: it still has most of the idle time of the loop's other CPU, but
         # yields it at once to the server's ordinary threads, which may hold the loop's GIL; beside an ordinary
         # loop, nice 5: a quarter of a core against it, enough for a layer every ~0.3 s (nice 10 starved it)
@@ -293,6 +290,10 @@ class _Worker:
                          10 if realtime else 5))
         self.busy = False
         self.error: str | None = None
+
+    @property
+    def pid(self) -> int:
+        return self._child.pid
 
     def send(self, message: tuple) -> None:
         if self.error is not None:
@@ -325,27 +326,23 @@ class _Worker:
             self._conn.send(("stop",))
         except (OSError, EOFError):
             pass
-        try:
-            self._proc.wait(timeout=5)
-        except Exception:
-            self._proc.kill()
-            self._proc.wait()
-        self._conn.close()
+        if not self._child.wait(5):
+            self._child.kill()
+        self._child.close()
         self.tables = []
         for s in self._shm:
             s.close()
             s.unlink()
 
 
-def _serve(fd: int) -> None:  # pragma: no cover - runs in the child process
+def _serve(conn_arg: str) -> None:  # pragma: no cover - runs in the child process
     """Child process: build layers on request into the shared tables until told to stop."""
     import os
     from multiprocessing import resource_tracker, shared_memory
-    from multiprocessing.connection import Connection
 
     from .gl import create_context
 
-    conn = Connection(fd)
+    conn = connection_from_arg(conn_arg)
     shm_names, static_gb, static_uv, grid, (objects, radius, face_size, chunk_size, lod_angle), nice = conn.recv()
     try:  # the frame loop comes first: ordinary scheduling even if the loop's thread is real-time
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
@@ -385,4 +382,4 @@ def _serve(fd: int) -> None:  # pragma: no cover - runs in the child process
 if __name__ == "__main__":  # pragma: no cover - the async builder's process
     import sys
 
-    _serve(int(sys.argv[1]))
+    _serve(sys.argv[1])

@@ -3,7 +3,6 @@ the ant's dome (the emulated distributor and panels in the ant's process) and re
 where the driver of the ant's emulated USB trackball publishes it; short mode (a few seconds)."""
 
 import math
-import socket
 
 import numpy as np
 import pytest
@@ -17,20 +16,16 @@ from antarium.ant.served import run_served, served_ant, served_config
 from antarium.ant.storage import save_model
 from antarium.ant.world import virtual_rig
 from antarium.server import Server
+from antarium.server.emulator_process import free_udp_port
 from antarium.trial_log import read_table
 
 ROUTE = curved_route(4, length=0.4, start=(0.5, -0.3))
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 def _config(tmp_path, tether="free_yaw"):
     return {"rig": {"name": "antserved"}, "bus": {"listen": [bus.free_tcp_endpoint()]},
-            "link": {"interface": "udp", "port": _free_udp_port(), "spawn_emulator": False},
+            "link": {"interface": "udp", "port": free_udp_port("127.0.0.1"), "spawn_emulator": False},
             "locomotion": {"source": "bus"}, "loop": {"tether": tether},
             "render": {"scene": "habitat", "face_size": 64}, "log": {"dir": str(tmp_path / "trials")}}
 

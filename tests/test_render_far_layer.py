@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import math
+import os
+import signal
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import wait_for
 
 from antarium.core.pose import Pose
 from antarium.geometry import load_dome
@@ -146,8 +150,7 @@ def test_async_far_layer_takes_over_and_survives_its_process(dome, reference):
         r.render(Pose(5.0, 5.0, 0.01, 0.0), out=out, t=0.0)
         assert r.full_frames == full_before + 1
         # the builder process dies: reported, and every frame is drawn in full from then on
-        r._layer._worker._proc.kill()
-        r._layer._worker._proc.wait()
+        os.kill(r.far_layer_status()["pid"], signal.SIGKILL)
         deadline = time.monotonic() + 10
         while not r.far_layer_status()["error"] and time.monotonic() < deadline:
             r.render(Pose(5.0, 5.0, 0.01, 0.0), out=out, t=0.0)
@@ -161,17 +164,21 @@ def test_async_far_layer_takes_over_and_survives_its_process(dome, reference):
 
 
 def test_async_release_stops_the_process_and_frees_the_tables(dome):
-    from multiprocessing import shared_memory
-
     r = Renderer(dome, far_layer="async")
     r.set_scene(small_habitat())
-    worker = r._layer._worker
-    names = [s.name for s in worker._shm]
+    pid = r.far_layer_status()["pid"]
+    # the two table slots the builder writes into: the shared-memory files its address space maps
+    assert wait_for(lambda: len(_shared_memory_of(pid)) >= 2, 30.0)
+    tables = _shared_memory_of(pid)
     r.release()
-    assert worker._proc.poll() is not None
-    for name in names:
-        with pytest.raises(FileNotFoundError):
-            shared_memory.SharedMemory(name=name)
+    with pytest.raises(ProcessLookupError):  # ended and reaped
+        os.kill(pid, 0)
+    assert not any(t.exists() for t in tables)
+
+
+def _shared_memory_of(pid: int) -> set[Path]:
+    maps = Path(f"/proc/{pid}/maps").read_text().splitlines()
+    return {Path(line.split(maxsplit=5)[5]) for line in maps if "/dev/shm/" in line}
 
 
 @pytest.mark.parametrize("kwargs, message", [

@@ -127,7 +127,7 @@ def test_real_time_goes_to_the_loop_and_its_helper_the_emulator_below_the_rest_o
         assert all(pol[0] != os.SCHED_FIFO for t, pol in threads.items() if t not in (loop_tid, *helpers))
         # the emulator below the loop and its helper; the far-layer builder and the log writer ordinary, the
         # builder at nice 10 (it yields its CPU to the server's threads, which may hold the loop's GIL)
-        emulator = server.emulator.proc.pid
+        emulator = server.emulator.pid
         assert _policy(emulator) == (os.SCHED_FIFO, p - 2)
         builder = server.renderer.far_layer_status()["pid"]
         children = realtime._descendants(os.getpid())

@@ -27,7 +27,8 @@ import math
 import queue
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from operator import attrgetter
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,7 @@ from antarium.core.clock import Clock
 from antarium.core.pose import Pose
 from antarium.core.rates import DOME_RATE_HZ
 from antarium.locomotion import LocomotionSource
+from antarium.trial_log import FRAME_DTYPE
 
 #: how many recent frames the statistics (percentiles, frame rate) cover
 STATS_WINDOW = 2048
@@ -78,11 +80,13 @@ class FrameRecord:
     full_render: bool  # every mesh drawn this frame (the renderer's slow path: no far layer in use)
 
     def log_row(self) -> tuple:
-        p = self.pose
-        return (self.frame, self.t_target, self.t_start, self.t_sent, p.x, p.y, p.z, p.heading, self.scene_rotation,
-                int(self.closed_loop), int(self.fixed_tether), self.sample_seq, self.latency, self.render,
-                self.sample, self.convert, self.encode, self.send, self.pacing_error, int(self.late), self.skipped,
-                int(self.locomotion_connected), int(self.link_ok), int(self.full_render))
+        """The record in `antarium.trial_log.FRAME_DTYPE`'s field order (the pose's fields from `pose`)."""
+        return _LOG_ROW(self)
+
+
+POSE_FIELDS = {f.name for f in fields(Pose)}
+#: FRAME_DTYPE's fields read from a FrameRecord: the log's layout is the one table, the row follows it
+_LOG_ROW = attrgetter(*(f"pose.{name}" if name in POSE_FIELDS else name for name in FRAME_DTYPE.names))
 
 
 def _check_gain(name: str, value: Any) -> float:

@@ -15,7 +15,6 @@ import gc
 import json
 import math
 import os
-import subprocess
 import sys
 import threading
 from collections.abc import Callable
@@ -29,6 +28,7 @@ from antarium.core import realtime
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.core.pose import Pose
 from antarium.server.commands import COMMANDS, CommandError, parse_command
+from antarium.server.emulator_process import EmulatorProcess
 from antarium.server.frame_loop import FrameLoop, FrameRecord
 
 #: events that are also printed on stderr: an operator must notice them
@@ -40,74 +40,6 @@ GIL_SWITCH_INTERVAL_S = 2e-4
 
 class ServerError(RuntimeError):
     """The server cannot start as configured (the message says what to change)."""
-
-
-class EmulatorProcess:
-    """`antarium emulate` as a process of its own on loopback (the embedded default's dome).
-
-    realtime_priority: 1..99 to run it SCHED_FIFO at that priority (as hardware would answer), 0 for ordinary
-    scheduling; not granted, it runs ordinary.
-    """
-
-    def __init__(self, host: str = "127.0.0.1", port: int = 0, extra_args: list[str] | None = None,
-                 realtime_priority: int = 0) -> None:
-        self.host = host
-        self.realtime_priority = realtime_priority
-        self.port = port or _free_udp_port(host)
-        self.extra_args = list(extra_args or [])
-        self.proc: subprocess.Popen | None = None
-        self._output = None
-
-    def start(self) -> None:
-        """Start (or restart) the emulator process; its output goes to a temporary file (see `output`)."""
-        import tempfile
-
-        cmd = [sys.executable, "-m", "antarium", "emulate", "--host", self.host, "--port", str(self.port),
-               *self.extra_args]
-        if self._output is not None:
-            self._output.close()
-        self._output = tempfile.TemporaryFile(mode="w+b")  # a file, never a pipe that could fill and block it
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self._output, stderr=subprocess.STDOUT)
-        if self.realtime_priority:
-            try:
-                realtime.set_realtime(self.realtime_priority, self.proc.pid)
-            except (AttributeError, OSError):
-                pass
-
-    def output(self, max_bytes: int = 4000) -> str:
-        """The end of what the emulator printed (for error messages)."""
-        if self._output is None:
-            return ""
-        self._output.seek(0, 2)
-        size = self._output.tell()
-        self._output.seek(max(0, size - max_bytes))
-        return self._output.read().decode(errors="replace")
-
-    @property
-    def running(self) -> bool:
-        return self.proc is not None and self.proc.poll() is None
-
-    def stop(self, timeout_s: float = 5.0) -> None:
-        if self.proc is None:
-            return
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(timeout_s)
-        self.proc = None
-        self._output.close()
-        self._output = None
-
-
-def _free_udp_port(host: str) -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind((host, 0))
-        return s.getsockname()[1]
 
 
 def default_renderer_factory(render_cfg: dict[str, Any], clock: Clock | None = None):

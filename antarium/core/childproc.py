@@ -1,0 +1,98 @@
+"""Child processes of the rig: `python -m MODULE ARGS` in a fresh interpreter.
+
+A fresh interpreter is never a fork of a process that holds zenoh or GL threads, and never re-imports the user's
+main script (multiprocessing's spawn would). With `connect=True` the two processes share a duplex message
+connection: the child finds its end's file descriptor as its first argument (`connection_from_arg`). The child's
+output goes to a temporary file, never to a pipe that could fill and block it; `output()` reads its end.
+
+    child = ChildProcess("antarium.trial_log", connect=True)
+    child.conn.send(("open", path, attrs))
+    ...
+    child.stop()
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+from collections.abc import Sequence
+
+
+class ChildProcess:
+    """`python -m module *args` started at once. conn: the parent's end of the connection (None unless
+    `connect`); proc: the `subprocess.Popen`."""
+
+    def __init__(self, module: str, args: Sequence[str] = (), *, connect: bool = False) -> None:
+        from multiprocessing import Pipe
+
+        argv = [sys.executable, "-m", module]
+        self.conn = child_end = None
+        if connect:
+            self.conn, child_end = Pipe()
+            argv.append(str(child_end.fileno()))
+        self._output = tempfile.TemporaryFile()
+        try:
+            self.proc = subprocess.Popen([*argv, *args], stdin=subprocess.DEVNULL, stdout=self._output,
+                                         stderr=subprocess.STDOUT,
+                                         pass_fds=() if child_end is None else (child_end.fileno(),))
+        finally:
+            if child_end is not None:
+                child_end.close()
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    @property
+    def exitcode(self) -> int | None:
+        """None while it runs."""
+        return self.proc.poll()
+
+    @property
+    def running(self) -> bool:
+        return self.proc.poll() is None
+
+    def output(self, max_bytes: int = 4000) -> str:
+        """The end of what the child printed (for error messages); "" once closed."""
+        if self._output.closed:
+            return ""
+        self._output.seek(0, 2)
+        self._output.seek(max(0, self._output.tell() - max_bytes))
+        return self._output.read().decode(errors="replace")
+
+    def wait(self, timeout_s: float | None = None) -> bool:
+        """True once the child has ended (within `timeout_s`)."""
+        try:
+            self.proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            return False
+        return True
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Ask it to end (SIGTERM), kill it if it has not within `timeout_s`, release everything. Safe twice."""
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            if not self.wait(timeout_s):
+                self.kill()
+        self.close()
+
+    def kill(self) -> None:
+        """End it now (SIGKILL) and release everything."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.close()
+
+    def close(self) -> None:
+        """Release the connection and the output file (the child may go on running)."""
+        if self.conn is not None:
+            self.conn.close()
+        self._output.close()
+
+
+def connection_from_arg(arg: str):
+    """In the child: its end of the connection, from the argument `ChildProcess(connect=True)` gave it."""
+    from multiprocessing.connection import Connection
+
+    return Connection(int(arg))
