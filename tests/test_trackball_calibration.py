@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from antarium.cli import main
-from antarium.commands.trackball import EMULATED_CPMM_FACTORS, EMULATED_SIGN_FLIP, emulated_backend, turn
 from antarium.locomotion.trackball import calibration
 from antarium.locomotion.trackball import config as tbconfig
 from antarium.locomotion.trackball.driver import UsbTrackball
@@ -100,16 +99,16 @@ def test_calibration_refuses_incomplete_or_dead_data():
 
 def test_end_to_end_on_the_emulated_device_recovers_its_lens():
     config = tbconfig.TrackballConfig()
-    backend = emulated_backend(config, realtime=False)
+    backend = calibration.miscalibrated_emulator(config, realtime=False)
     with UsbTrackball(trackball=config, backend=backend) as driver:
-        from antarium.commands.trackball import wait_connected
-        wait_connected(driver, 5.0)
-        steps = [calibration.Step(a, 1.0, tuple(turn(driver, a, 1.0, backend))) for a in ("z", "x", "y")]
+        driver.wait_connected(5.0)
+        steps = [calibration.Step(a, 1.0, tuple(calibration.turn_emulated(driver, backend, a, 1.0)))
+                 for a in ("z", "x", "y")]
     result = calibration.calibrate(config, steps)
-    expected = [47.244094 * f for f in EMULATED_CPMM_FACTORS]
+    expected = [47.244094 * f for f in calibration.EMULATED_CPMM_FACTORS]
     got = [v for s in result.config.sensors for v in s.counts_per_mm]
     np.testing.assert_allclose(got, expected, rtol=1e-3)
-    assert [g for s in result.config.sensors for g in s.signs] == list(EMULATED_SIGN_FLIP)
+    assert [g for s in result.config.sensors for g in s.signs] == list(calibration.EMULATED_SIGN_FLIP)
     assert max(result.spread().values()) < 1e-3
 
 
@@ -120,7 +119,7 @@ def test_cli_calibrate_writes_the_rig_config(tmp_path, capsys):
     doc = tomllib.loads(rig.read_text())
     assert doc["rig"] == {"name": "lab2"} and doc["ant"]["weights"] == [1, 2, 3]
     cpmm = [v for s in doc["trackball"]["sensors"] for v in s["counts_per_mm"]]
-    np.testing.assert_allclose(cpmm, [47.244094 * f for f in EMULATED_CPMM_FACTORS], rtol=5e-3)
+    np.testing.assert_allclose(cpmm, [47.244094 * f for f in calibration.EMULATED_CPMM_FACTORS], rtol=5e-3)
     assert "wrote [trackball]" in capsys.readouterr().out
     assert main(["trackball", "calibrate", "--emulate", "--config", str(rig), "--axes", "q"]) == 2
     assert math.isclose(tbconfig.load(rig).sensors[0].counts_per_mm[0], cpmm[0])  # the failed run changed nothing

@@ -21,12 +21,6 @@ from typing import Any
 
 HELP = "run the USB trackball or FicTrac input and publish it on the bus; `calibrate` the ball's sensors"
 
-#: how the emulated "lens" of `calibrate --emulate` differs from the config: factors on counts per mm
-#: (x0, y0, x1, y1) and a flipped y1 sign, so that the demo has something to find
-EMULATED_CPMM_FACTORS = (1.06, 0.94, 1.03, 0.91)
-EMULATED_SIGN_FLIP = (1, 1, 1, -1)
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("action", nargs="?", default="run", choices=("run", "calibrate"),
                         help="run (default): publish samples; calibrate: guided calibration")
@@ -161,12 +155,13 @@ def _calibrate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     config = tbconfig.load(args.config) if Path(args.config).exists() else tbconfig.TrackballConfig()
-    backend = emulated_backend(config) if args.emulate else None
+    backend = calibration.miscalibrated_emulator(config) if args.emulate else None
     driver = UsbTrackball(trackball=config, backend=backend)
     with driver:
-        wait_connected(driver, 5.0)
-        steps = [calibration.Step(axis, args.turns, tuple(turn(driver, axis, args.turns, backend)))
-                 for axis in axes]
+        driver.wait_connected(5.0)
+        steps = [calibration.Step(axis, args.turns, tuple(
+            _turn_by_hand(driver, axis, args.turns) if backend is None
+            else calibration.turn_emulated(driver, backend, axis, args.turns))) for axis in axes]
     result = calibration.calibrate(config, steps)
     print(f"{'axis':6}{'old counts/mm':>15}{'new counts/mm':>15}{'sign':>6}{'spread':>9}")
     spread = result.spread()
@@ -183,50 +178,13 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
-def emulated_backend(config, realtime: bool = True):
-    """An emulated trackball whose lens differs from `config` (see EMULATED_CPMM_FACTORS), turned on request."""
-    from dataclasses import replace
-
-    from antarium.locomotion.trackball.emulator import EmulatedTrackball, Turns
-
-    sensors = []
-    for i, s in enumerate(config.sensors):
-        f = EMULATED_CPMM_FACTORS[2 * i: 2 * i + 2]
-        g = EMULATED_SIGN_FLIP[2 * i: 2 * i + 2]
-        sensors.append(replace(s, counts_per_mm=(s.counts_per_mm[0] * f[0], s.counts_per_mm[1] * f[1]),
-                               signs=(s.signs[0] * g[0], s.signs[1] * g[1])))
-    return EmulatedTrackball(motion=Turns(), truth=replace(config, sensors=tuple(sensors)), realtime=realtime)
-
-
-def wait_connected(driver, timeout_s: float) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not driver.status()["connected"]:
-        if time.monotonic() > deadline:
-            raise RuntimeError(f"trackball {driver.status()['device']} not found within {timeout_s} s "
-                               f"({driver.last_error or 'no such device'})")
-        time.sleep(0.01)
-
-
-def turn(driver, axis: str, turns: float, backend=None, seconds_per_turn: float = 1.0) -> list[int]:
-    """One calibration step: the operator (or the emulated ball) turns `turns` times about `axis`; raw counts."""
+def _turn_by_hand(driver, axis: str, turns: float) -> list[int]:
+    """One calibration step: the operator turns the ball `turns` times about `axis`; the raw counts."""
     driver.reset_raw_counts()
-    if backend is None:
-        print(f"Mark the ball. Turn it {turns:g} whole turns about the dome's {axis} axis "
-              f"(right-hand rule, {'+z up' if axis == 'z' else '+x forward, +y left'}), "
-              f"then press Enter.", flush=True)
-        sys.stdin.readline()
-    else:
-        from antarium.locomotion.trackball import calibration
-
-        period = 1.0 / driver.config.sample_rate_hz
-        start = (math.floor(backend.device_time() / period) + 20) * period
-        duration = round(turns * seconds_per_turn / period) * period
-        end = backend.motion.schedule(start, calibration.AXES[axis], turns, duration)
-        deadline = time.monotonic() + 10 * duration + 5.0
-        while backend.device_time() < end + 20 * period:
-            if time.monotonic() > deadline:
-                raise RuntimeError("the emulated trackball stopped sending reports during calibration")
-            time.sleep(0.005)
+    print(f"Mark the ball. Turn it {turns:g} whole turns about the dome's {axis} axis "
+          f"(right-hand rule, {'+z up' if axis == 'z' else '+x forward, +y left'}), "
+          f"then press Enter.", flush=True)
+    sys.stdin.readline()
     return driver.raw_counts()
 
 

@@ -87,6 +87,47 @@ class BufferedSource(LocomotionSource):
         return out
 
 
+class ReaderSource(BufferedSource):
+    """A buffered source fed by a reader thread of its own (a USB device, a socket).
+
+    Subclasses implement `_run()`, the thread's body, which returns once `_stop` is set; `_open()` runs in
+    `start`'s caller before the thread (it may raise: nothing is started then), `_close()` in `stop`'s after the
+    thread ended. `thread_name` names the thread.
+    """
+
+    thread_name = "locomotion-reader"
+
+    def __init__(self, max_pending: int = 100_000) -> None:
+        super().__init__(max_pending)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        if self._thread is not None:
+            return
+        self._open()
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=self.thread_name, daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        self._close()
+
+    def _open(self) -> None:  # noqa: B027 - a source without set-up need not override
+        """Take what the thread reads from; runs before the thread starts."""
+
+    def _close(self) -> None:  # noqa: B027
+        """Release what `_open` took; runs after the thread ended. Safe to call twice."""
+
+    @abstractmethod
+    def _run(self) -> None:
+        """The reader thread: push samples until `_stop` is set."""
+
+
 #: back-end name -> "module:Class", imported only when opened.
 BACKENDS: dict[str, str] = {
     "scripted": "antarium.locomotion.scripted:ScriptedSource",

@@ -12,12 +12,11 @@ connected while frames arrive at least every `timeout_s`.
 from __future__ import annotations
 
 import socket
-import threading
 from pathlib import Path
 from typing import Any
 
 from antarium.core.clock import Clock, MonotonicClock
-from antarium.locomotion import BallSample, BufferedSource, LocomotionSource
+from antarium.locomotion import BallSample, LocomotionSource, ReaderSource
 from antarium.locomotion.fictrac.protocol import FicTracFrame, FicTracParseError, parse_line, to_sample
 
 TRANSPORTS = ("udp", "tcp")
@@ -52,7 +51,7 @@ class _Counters:
         return frame
 
 
-class FicTracSource(BufferedSource):
+class FicTracSource(ReaderSource):
     """FicTrac's live stream on loopback or the lab network."""
 
     def __init__(
@@ -76,8 +75,6 @@ class FicTracSource(BufferedSource):
         self.timeout_s, self.retry_s = timeout_s, retry_s
         self._stats = _Counters()
         super().__init__(max_queue)
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._sock: socket.socket | None = None
         self._last_frame: float | None = None
         self._tcp_connected = False
@@ -89,9 +86,11 @@ class FicTracSource(BufferedSource):
             return self._sock.getsockname()[:2]
         return (self.host, self.port)
 
-    def start(self) -> None:
-        if self._thread is not None:
-            return
+    @property
+    def thread_name(self) -> str:
+        return f"fictrac-{self.transport}"
+
+    def _open(self) -> None:
         if self.transport == "udp":
             sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             try:
@@ -101,15 +100,8 @@ class FicTracSource(BufferedSource):
                 raise RuntimeError(f"cannot listen for FicTrac on udp {self.host}:{self.port}: {exc}") from None
             sock.settimeout(0.05)
             self._sock = sock
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name=f"fictrac-{self.transport}", daemon=True)
-        self._thread.start()
 
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+    def _close(self) -> None:
         if self._sock is not None:
             self._sock.close()
             self._sock = None

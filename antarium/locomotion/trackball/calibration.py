@@ -89,3 +89,39 @@ def calibrate(config: TrackballConfig, steps: list[Step], min_share: float = 0.5
         sgn = tuple(signs[f"{a}{i}"][0] for a in "xy")
         sensors.append(replace(sensor, counts_per_mm=cpmm, signs=sgn))
     return Result(replace(config, sensors=tuple(sensors)), {k: v for k, v in estimates.items()})
+
+
+#: how the emulated "lens" of `calibrate --emulate` differs from the config: factors on counts per mm
+#: (x0, y0, x1, y1) and a flipped y1 sign, so that a demo or test has something to find
+EMULATED_CPMM_FACTORS = (1.06, 0.94, 1.03, 0.91)
+EMULATED_SIGN_FLIP = (1, 1, 1, -1)
+
+
+def miscalibrated_emulator(config: TrackballConfig, realtime: bool = True):
+    """An emulated trackball whose lens differs from `config` as above, turned on request (`turn_emulated`)."""
+    from antarium.locomotion.trackball.emulator import EmulatedTrackball, Turns
+
+    sensors = []
+    for i, s in enumerate(config.sensors):
+        f = EMULATED_CPMM_FACTORS[2 * i: 2 * i + 2]
+        g = EMULATED_SIGN_FLIP[2 * i: 2 * i + 2]
+        sensors.append(replace(s, counts_per_mm=(s.counts_per_mm[0] * f[0], s.counts_per_mm[1] * f[1]),
+                               signs=(s.signs[0] * g[0], s.signs[1] * g[1])))
+    return EmulatedTrackball(motion=Turns(), truth=replace(config, sensors=tuple(sensors)), realtime=realtime)
+
+
+def turn_emulated(driver, backend, axis: str, turns: float, seconds_per_turn: float = 1.0) -> list[int]:
+    """One calibration step on the emulated ball: `turns` whole turns about `axis`; the driver's raw counts."""
+    import time
+
+    driver.reset_raw_counts()
+    period = 1.0 / driver.config.sample_rate_hz
+    start = (math.floor(backend.device_time() / period) + 20) * period
+    duration = round(turns * seconds_per_turn / period) * period
+    end = backend.motion.schedule(start, AXES[axis], turns, duration)
+    deadline = time.monotonic() + 10 * duration + 5.0
+    while backend.device_time() < end + 20 * period:
+        if time.monotonic() > deadline:
+            raise RuntimeError("the emulated trackball stopped sending reports during calibration")
+        time.sleep(0.005)
+    return driver.raw_counts()

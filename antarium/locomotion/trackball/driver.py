@@ -17,7 +17,6 @@ for the device every `retry_s` and resumes on its own ("locomotion_back").
 from __future__ import annotations
 
 import array
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -26,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from antarium.core.clock import Clock, MonotonicClock
-from antarium.locomotion import BallSample, BufferedSource
+from antarium.locomotion import BallSample, ReaderSource
 from antarium.locomotion.trackball import config as tbconfig
 from antarium.locomotion.trackball import protocol as P
 
@@ -35,7 +34,7 @@ LATENCY_WINDOW = 1 << 16  # reports kept for the arrival -> publication latency 
 QUALITY_SMOOTHING = 0.01  # weight of each report in `quality_avg` (about the last 100 reports)
 
 
-class UsbTrackball(BufferedSource):
+class UsbTrackball(ReaderSource):
     def __init__(
         self,
         trackball: str | Path | dict[str, Any] | tbconfig.TrackballConfig | None = None,
@@ -62,8 +61,6 @@ class UsbTrackball(BufferedSource):
         self._solver = self.config.solver()
         self._metres_per_count = self.config.metres_per_count()
         super().__init__(max_queue)
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._connected = False
         self._latency = np.zeros(LATENCY_WINDOW)
         self._raw = [0] * (2 * P.N_SENSORS)
@@ -76,9 +73,9 @@ class UsbTrackball(BufferedSource):
         self.last_error = ""
 
     # --- LocomotionSource ---------------------------------------------------------------------
-    def start(self) -> None:
-        if self._thread is not None:
-            return
+    thread_name = "usb-trackball"
+
+    def _open(self) -> None:
         if self.backend is None:
             import usb.backend.libusb1
 
@@ -86,15 +83,15 @@ class UsbTrackball(BufferedSource):
             if self.backend is None:
                 raise RuntimeError("no libusb-1.0 found for the USB trackball; install it "
                                    "(apt-get install libusb-1.0-0) or use the emulated device (--emulate)")
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="usb-trackball", daemon=True)
-        self._thread.start()
 
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+    def wait_connected(self, timeout_s: float) -> None:
+        """Block until the device is connected; RuntimeError naming it if not within `timeout_s`."""
+        deadline = time.monotonic() + timeout_s
+        while not self.status()["connected"]:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"trackball {self.status()['device']} not found within {timeout_s} s "
+                                   f"({self.last_error or 'no such device'})")
+            time.sleep(0.01)
 
     def status(self) -> dict[str, Any]:
         age = time.monotonic() - self._last_report if self._last_report else None
