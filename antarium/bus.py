@@ -18,7 +18,10 @@ import json
 import socket
 import struct
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from antarium.config import BusSection
 
 KEY_ROOT = "antarium"
 
@@ -86,14 +89,18 @@ def alive_key(rig: str) -> str:
     return rig_key(rig, "alive", "server")
 
 
-def session_config(bus: dict[str, Any], role: str = "server"):
-    """A `zenoh.Config` from a resolved `[bus]` section for `role` "server" (listens) or "client" (connects)."""
+def session_config(bus: BusSection | dict[str, Any] | None, role: str = "server"):
+    """A `zenoh.Config` from a `[bus]` section (typed, or a table with defaults filled in) for `role` "server"
+    (listens) or "client" (connects)."""
     import zenoh
 
     if role not in ("server", "client"):
         raise ValueError(f"bus role must be 'server' or 'client', got {role!r}")
-    if bus.get("access_control") and role == "server":  # the server enforces who may command the rig
-        path = Path(bus["access_control"])
+    from antarium.config import BusSection
+
+    bus = BusSection.read(bus or {})
+    if bus.access_control and role == "server":  # the server enforces who may command the rig
+        path = Path(bus.access_control)
         try:
             text = path.read_text()
         except OSError as exc:
@@ -104,11 +111,9 @@ def session_config(bus: dict[str, Any], role: str = "server"):
             raise ValueError(f"[bus] access_control file {str(path)!r} is not a valid zenoh ACL: {exc}") from None
     else:
         conf = zenoh.Config()
-    mode = bus.get("mode", "peer")
-    conf.insert_json5("mode", json.dumps(mode))
-    conf.insert_json5("scouting/multicast/enabled", json.dumps(bool(bus.get("multicast_scouting", False))))
-    listen = list(bus.get("listen", ["tcp/127.0.0.1:7447"]))
-    connect = list(bus.get("connect", []))
+    conf.insert_json5("mode", json.dumps(bus.mode))
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(bus.multicast_scouting))
+    listen, connect = bus.listen, bus.connect
     if role == "server":
         conf.insert_json5("listen/endpoints", json.dumps(listen))
         conf.insert_json5("connect/endpoints", json.dumps(connect))
@@ -118,18 +123,15 @@ def session_config(bus: dict[str, Any], role: str = "server"):
     return conf
 
 
-def open_session(bus: dict[str, Any] | None = None, role: str = "server"):
+def open_session(bus: BusSection | dict[str, Any] | None = None, role: str = "server"):
     """Open a zenoh session from a `[bus]` section (defaults when None). See `session_config`."""
     import zenoh
 
-    from antarium.config import DEFAULTS
-
-    section = dict(DEFAULTS["bus"])
-    section.update(bus or {})
+    conf = session_config(bus, role)
     try:
-        return zenoh.open(session_config(section, role))
+        return zenoh.open(conf)
     except zenoh.ZError as exc:
-        raise RuntimeError(f"cannot open the zenoh session (role {role}, [bus] {section}): {exc}") from None
+        raise RuntimeError(f"cannot open the zenoh session (role {role}, [bus] {bus}): {exc}") from None
 
 
 def free_tcp_endpoint(host: str = "127.0.0.1") -> str:

@@ -63,16 +63,14 @@ class Rig:
 
     def __init__(self, name: str = "rig1", *, config: str | Path | dict | None = None,
                  connect: list[str] | None = None, timeout_s: float = 10.0, session=None) -> None:
-        from antarium.config import load_config, resolve
+        from antarium.config import RigConfig, load_config, resolve
 
         self.name = bus.check_rig_name(name)
-        if isinstance(config, dict):
-            cfg = resolve(config) if "bus" not in config or "rig" not in config else config
+        if isinstance(config, RigConfig):
+            cfg = config
         else:
-            cfg = load_config(config)
-        self.bus_section = dict(cfg["bus"])
-        if connect is not None:
-            self.bus_section["connect"] = list(connect)
+            cfg = resolve(config) if isinstance(config, dict) else load_config(config)
+        self.bus_section = cfg.bus.model_copy(update=None if connect is None else {"connect": list(connect)})
         self.timeout_s = float(timeout_s)
         self._session = session
         self._own_session = session is None
@@ -90,7 +88,7 @@ class Rig:
         self._subs.append(self._session.liveliness().declare_subscriber(
             bus.alive_key(self.name), self._on_alive, history=True))
         if not self._alive.wait(self.timeout_s):
-            where = self.bus_section.get("connect") or self.bus_section.get("listen")
+            where = self.bus_section.connect or self.bus_section.listen
             self.close()
             raise RigError(f"no antarium server for rig {self.name!r} answered within {self.timeout_s} s "
                            f"(tried {where}); is `antarium serve` running?")
@@ -298,7 +296,7 @@ def script_rig(args) -> Iterator[Rig]:
     if args.start_server:
         from antarium.server import Server
 
-        config["rig"]["name"] = args.rig
+        config.rig.name = args.rig
         server = Server(config).start_thread(timeout_s=args.timeout)
     try:
         with Rig(args.rig, config=config, timeout_s=args.timeout) as rig:

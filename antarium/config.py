@@ -1,191 +1,240 @@
-"""The rig configuration: TOML, one section per part, unknown sections kept verbatim.
+"""The rig configuration: TOML, one typed section per part, checked completely when it is loaded.
 
-The server owns `[rig]`, `[loop]`, `[locomotion]`, `[link]`, `[render]`, `[bus]` and `[log]`; their keys are
-checked here (unknown key, wrong type or out-of-range value -> `ConfigError` naming what is allowed).
-Every other section (`[trackball]`, `[ant]`, ...) is kept as it was written, for its owner to parse.
-With no file the embedded default rig is used: emulator on loopback, default habitat, scripted walker
-in closed loop. See `docs/rig.example.toml`.
+Each section is a pydantic model (`LoopSection`, `LinkSection`, ...) whose field names carry their units
+(`eye_height_m`, `face_size_px`); `load_config(path)` / `resolve(raw)` return a `RigConfig` whose sections are
+read as attributes (`config.loop.rate_hz`). Anything wrong (an unknown section or key, a wrong type, a value out
+of range) raises `ConfigError` with one line naming the key and what is allowed, before anything starts. Keys
+renamed since (`[loop] eye_height` is now `eye_height_m`) are still read, with a `ConfigDeprecationWarning`.
+Sections owned by another part (`[trackball]`, `[ant]`) are kept as tables for that part to parse. With no file
+the embedded default rig is used: emulator on loopback, default habitat, scripted walker in closed loop.
+See `docs/rig.example.toml`.
 """
 
 from __future__ import annotations
 
-import copy
 import math
 import tomllib
+import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Literal
 
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from antarium.core.ball import BALL_RADIUS_M, TETHERS
 from antarium.core.rates import DOME_RATE_HZ
-
-#: section -> key -> default value. The type of the default is the type a value must have
-#: (int is accepted where a float is expected).
-DEFAULTS: dict[str, dict[str, Any]] = {
-    "rig": {"name": "rig1"},
-    "loop": {
-        "rate_hz": DOME_RATE_HZ,  # frames per second
-        "closed_loop": True,
-        "tether": "free_yaw",  # "free_yaw": ball gives translation only; "fixed": ball gives yaw too
-        "gain_translation": 1.0,
-        "gain_rotation": 1.0,
-        "start_x": 0.0,  # virtual origin, metres
-        "start_y": 0.0,
-        "eye_height": 0.01,  # metres above the ground
-        "start_heading_deg": 0.0,
-        "ball_radius": 0.05,  # metres
-        "stats_every": 19,  # publish frame statistics every N frames
-        "pose_every": 1,  # publish the pose every N frames
-        "realtime_priority": 10,  # 1..99: the frame loop SCHED_FIFO (a spawned emulator two below); 0: off
-        "cpu": "auto",  # a CPU for the frame loop's thread alone, the rest of the rig on the others: a CPU number,
-        # "auto" (the last one, when there are two or more) or "off"
-    },
-    "locomotion": {"source": "scripted"},  # other keys are passed to the source as keyword arguments
-    "link": {
-        "interface": "udp",  # "udp" (distributor or `antarium emulate`) or "virtual" (in-process)
-        "host": "127.0.0.1",
-        "port": 0,  # 0 with spawn_emulator: an OS-chosen free port
-        "spawn_emulator": True,  # start `antarium emulate` as its own process on loopback
-    },
-    "render": {
-        "scene": "habitat",  # a scene name, a file path, or a table {scene = name, ...parameters} (renderers)
-        "face_size": 0,  # cube face side in texels; 0: the renderer's default (96 with a far layer, else 192)
-        "far_layer": "async",  # "off", "sync" or "async": meshes beyond near_radius_m from a recent eye position
-        "near_radius_m": 2.0,  # meshes within this distance are drawn every frame
-        "far_layer_error_deg": 0.5,  # largest parallax error of the far layer before a frame is drawn in full
-    },
-    "bus": {
-        "enabled": True,
-        "mode": "peer",
-        "listen": ["tcp/127.0.0.1:7447"],
-        "connect": [],
-        "multicast_scouting": False,
-        "access_control": "",  # path of a JSON5 file holding a zenoh `access_control` object ("" = none)
-    },
-    "log": {
-        "dir": "trials",
-        "flush_s": 0.25,  # seconds between flushes to disk (smaller batches: shorter GIL holds by the log sender)
-        "record": False,  # record from the start (otherwise only inside trials)
-    },
-}
-
-#: the embedded default's walker, used when the config has no [locomotion] section: an ant-like scripted walk
-#: (about 3 cm/s, in spurts, meandering), seeded so that every run is the same
-DEFAULT_WALKER: dict[str, Any] = {"source": "scripted", "speed": 0.03, "meander": 0.6, "spurt_s": 0.8,
-                                  "pause_fraction": 0.2, "seed": 1}
-
-#: keys whose values are constrained beyond their type: key -> (allowed values or (lo, hi) range)
-_CHOICES = {
-    ("loop", "tether"): ("free_yaw", "fixed"),
-    ("link", "interface"): ("udp", "virtual"),
-    ("bus", "mode"): ("peer", "client", "router"),
-    ("render", "far_layer"): ("off", "sync", "async"),
-}
-_RANGES = {
-    ("loop", "rate_hz"): (1.0, 2000.0),
-    ("loop", "gain_translation"): (-100.0, 100.0),
-    ("loop", "gain_rotation"): (-100.0, 100.0),
-    ("loop", "ball_radius"): (1e-3, 1.0),
-    ("loop", "eye_height"): (0.0, 1000.0),
-    ("loop", "stats_every"): (1, 100000),
-    ("loop", "pose_every"): (1, 100000),
-    ("loop", "realtime_priority"): (0, 99),
-    ("link", "port"): (0, 65535),
-    ("render", "face_size"): (0, 2048),
-    ("render", "near_radius_m"): (0.01, 1000.0),
-    ("render", "far_layer_error_deg"): (0.01, 5.0),
-    ("log", "flush_s"): (0.01, 1.0),
-}
-#: sections whose extra keys are allowed (passed on to a back-end)
-_OPEN_SECTIONS = {"locomotion"}
 
 
 class ConfigError(ValueError):
     """A rig configuration that cannot be used; the message names the key and what is allowed."""
 
 
-def check_value(section: str, key: str, value: Any) -> Any:
-    """Validate one value of an owned section; returns it (ints widened to float where a float is expected)."""
-    default = DEFAULTS[section][key]
-    where = f"[{section}] {key}"
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where} must be true or false, got {value!r}")
-    elif isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ConfigError(f"{where} must be a finite number, got {value!r}")
-        value = float(value)
-    elif isinstance(default, int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where} must be an integer, got {value!r}")
-    elif (section, key) == ("render", "scene"):
-        if not isinstance(value, (str, dict)) or (isinstance(value, dict) and "scene" not in value):
-            raise ConfigError(f"{where} must be a scene name, a file path or a table with 'scene', got {value!r}")
-    elif (section, key) == ("loop", "cpu"):
-        if not (value in ("auto", "off") or (isinstance(value, int) and not isinstance(value, bool) and value >= 0)):
-            raise ConfigError(f"{where} must be a CPU number (>= 0), \"auto\" or \"off\", got {value!r}")
-    elif isinstance(default, str):
-        if not isinstance(value, str):
-            raise ConfigError(f"{where} must be a string, got {value!r}")
-    elif isinstance(default, list):
-        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise ConfigError(f"{where} must be a list of strings, got {value!r}")
-    choices = _CHOICES.get((section, key))
-    if choices is not None and value not in choices:
-        raise ConfigError(f"{where} must be one of {', '.join(map(repr, choices))}, got {value!r}")
-    bounds = _RANGES.get((section, key))
-    if bounds is not None and not bounds[0] <= value <= bounds[1]:
-        raise ConfigError(f"{where} must be in [{bounds[0]}, {bounds[1]}], got {value!r}")
-    return value
+class ConfigDeprecationWarning(FutureWarning):
+    """A config key read under its old name (shown by default: a lab should rename it)."""
 
 
-def resolve(raw: dict[str, Any]) -> dict[str, Any]:
-    """Defaults merged with `raw` (a parsed TOML document), owned sections checked, others kept verbatim."""
+class Section(BaseModel):
+    """One `[section]`: unknown keys refused, no silent conversion (1 is not true, "5" is not 5)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, validate_assignment=True)
+    #: the section's name in the file
+    NAME: ClassVar[str] = ""
+    #: old key -> its name now (read with a deprecation warning)
+    RENAMED: ClassVar[dict[str, str]] = {}
+    #: key -> what it allows, where its type alone does not say (error messages and validators)
+    ALLOWED: ClassVar[dict[str, str]] = {}
+
+    @classmethod
+    def read(cls, table: Any) -> Section:
+        """This section from a parsed TOML table (or a section already read); ConfigError if anything is wrong."""
+        if isinstance(table, cls):
+            return table
+        if not isinstance(table, dict):
+            raise ConfigError(f"[{cls.NAME}] must be a table, got {table!r}")
+        table = _renamed(cls, table)
+        try:
+            return cls.model_validate(table)
+        except ValidationError as exc:
+            raise ConfigError(_message(cls, exc, table)) from None
+
+
+def _finite(lo: float, hi: float, default: float, doc: str = "") -> Any:
+    return Field(default, ge=lo, le=hi, allow_inf_nan=False, description=doc)
+
+
+class RigSection(Section):
+    NAME: ClassVar[str] = "rig"
+    name: str = Field("rig1", description="the bus key prefix is antarium/<name>/...")
+
+    @field_validator("name")
+    @classmethod
+    def _one_key_chunk(cls, v: str) -> str:
+        if not v or any(c in v for c in "/*?$# "):
+            raise ValueError("must be a non-empty key chunk without '/', wildcards or spaces")
+        return v
+
+
+class LoopSection(Section):
+    NAME: ClassVar[str] = "loop"
+    RENAMED: ClassVar[dict[str, str]] = {
+        "start_x": "start_x_m", "start_y": "start_y_m", "eye_height": "eye_height_m", "ball_radius": "ball_radius_m",
+        "stats_every": "stats_every_frames", "pose_every": "pose_every_frames"}
+    rate_hz: float = _finite(1.0, 2000.0, DOME_RATE_HZ, "frames per second")
+    closed_loop: bool = True
+    tether: Literal[tuple(TETHERS)] = "free_yaw"  # type: ignore[valid-type]
+    gain_translation: float = _finite(-100.0, 100.0, 1.0)
+    gain_rotation: float = _finite(-100.0, 100.0, 1.0)
+    start_x_m: float = _finite(-1e6, 1e6, 0.0, "virtual origin")
+    start_y_m: float = _finite(-1e6, 1e6, 0.0)
+    eye_height_m: float = _finite(0.0, 1000.0, 0.01, "above the ground")
+    start_heading_deg: float = _finite(-3600.0, 3600.0, 0.0)
+    ball_radius_m: float = _finite(1e-3, 1.0, BALL_RADIUS_M)
+    stats_every_frames: int = Field(19, ge=1, le=100_000, description="publish frame statistics every N frames")
+    pose_every_frames: int = Field(1, ge=1, le=100_000, description="publish the pose every N frames")
+    realtime_priority: int = Field(10, ge=0, le=99, description="SCHED_FIFO for the frame loop (0: off)")
+    cpu: int | str = Field("auto", description='a CPU for the frame loop alone: a number, "auto" or "off"')
+    ALLOWED: ClassVar[dict[str, str]] = {"cpu": 'a CPU number (>= 0), "auto" or "off"'}
+
+    @field_validator("cpu")
+    @classmethod
+    def _cpu(cls, v: int | str) -> int | str:
+        if v in ("auto", "off") or (isinstance(v, int) and v >= 0):
+            return v
+        raise ValueError(f"must be {cls.ALLOWED['cpu']}")
+
+
+class LocomotionSection(Section):
+    """`source` names the back-end; every other key is passed to it as a keyword argument."""
+
+    model_config = ConfigDict(extra="allow", strict=True, validate_assignment=True)
+    NAME: ClassVar[str] = "locomotion"
+    source: str = "scripted"
+
+    @property
+    def options(self) -> dict[str, Any]:
+        """The keys passed on to the source."""
+        return dict(self.model_extra or {})
+
+
+class LinkSection(Section):
+    NAME: ClassVar[str] = "link"
+    interface: Literal["udp", "virtual"] = "udp"
+    host: str = "127.0.0.1"
+    port: int = Field(0, ge=0, le=65535, description="0 with spawn_emulator: a free port")
+    spawn_emulator: bool = True
+
+
+class RenderSection(Section):
+    NAME: ClassVar[str] = "render"
+    RENAMED: ClassVar[dict[str, str]] = {"face_size": "face_size_px"}
+    scene: str | dict[str, Any] = "habitat"
+    face_size_px: int = Field(0, ge=0, le=2048, description="cube face side; 0: the renderer's default")
+    far_layer: Literal["off", "sync", "async"] = "async"
+    near_radius_m: float = _finite(0.01, 1000.0, 2.0)
+    far_layer_error_deg: float = _finite(0.01, 5.0, 0.5)
+    ALLOWED: ClassVar[dict[str, str]] = {"scene": "a scene name, a file path or a table with 'scene'"}
+
+    @field_validator("scene")
+    @classmethod
+    def _scene(cls, v: str | dict) -> str | dict:
+        if isinstance(v, dict) and "scene" not in v:
+            raise ValueError(f"must be {cls.ALLOWED['scene']}")
+        return v
+
+
+class BusSection(Section):
+    NAME: ClassVar[str] = "bus"
+    enabled: bool = True
+    mode: Literal["peer", "client", "router"] = "peer"
+    listen: list[str] = Field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
+    connect: list[str] = Field(default_factory=list)
+    multicast_scouting: bool = False
+    access_control: str = Field("", description="path of a JSON5 file holding a zenoh access_control object")
+
+
+class LogSection(Section):
+    NAME: ClassVar[str] = "log"
+    dir: str = "trials"
+    flush_s: float = _finite(0.01, 1.0, 0.25, "seconds between flushes to disk")
+    record: bool = False
+
+
+#: the sections this module checks, by name
+SECTIONS: dict[str, type[Section]] = {s.NAME: s for s in (
+    RigSection, LoopSection, LocomotionSection, LinkSection, RenderSection, BusSection, LogSection)}
+#: sections owned by another part, kept as tables for it to parse with its own code
+FOREIGN_SECTIONS = ("trackball", "ant")
+
+#: the embedded default's walker, used when the config has no [locomotion] section: an ant-like scripted walk
+#: (about 3 cm/s, in spurts, meandering), seeded so that every run is the same
+DEFAULT_WALKER: dict[str, Any] = {"source": "scripted", "speed": 0.03, "meander": 0.6, "spurt_s": 0.8,
+                                  "pause_fraction": 0.2, "seed": 1}
+
+
+class RigConfig(BaseModel):
+    """A whole rig config: one attribute per section; `foreign` holds the sections other parts parse."""
+
+    model_config = ConfigDict(validate_assignment=True)
+    rig: RigSection = Field(default_factory=RigSection)
+    loop: LoopSection = Field(default_factory=LoopSection)
+    locomotion: LocomotionSection = Field(default_factory=lambda: LocomotionSection.model_validate(DEFAULT_WALKER))
+    link: LinkSection = Field(default_factory=LinkSection)
+    render: RenderSection = Field(default_factory=RenderSection)
+    bus: BusSection = Field(default_factory=BusSection)
+    log: LogSection = Field(default_factory=LogSection)
+    foreign: dict[str, dict[str, Any]] = Field(default_factory=dict)
+
+    def section(self, name: str) -> dict[str, Any] | None:
+        """A foreign section's table (`[trackball]`, `[ant]`), or None when the file has none."""
+        return self.foreign.get(name)
+
+    def to_toml_dict(self) -> dict[str, Any]:
+        """The config as TOML tables (what `--print-config` prints and every trial log stores)."""
+        out: dict[str, Any] = {name: getattr(self, name).model_dump() for name in SECTIONS}
+        out.update(self.foreign)
+        return out
+
+
+def resolve(raw: dict[str, Any]) -> RigConfig:
+    """The config from a parsed TOML document: defaults filled in, every section checked."""
     if not isinstance(raw, dict):
         raise ConfigError(f"a rig config must be a table of sections, got {type(raw).__name__}")
-    resolved = copy.deepcopy(DEFAULTS)
-    if "locomotion" not in raw:
-        resolved["locomotion"] = dict(DEFAULT_WALKER)
-    for section, table in raw.items():
-        if section not in DEFAULTS:
-            resolved[section] = copy.deepcopy(table)
-            continue
-        if not isinstance(table, dict):
-            raise ConfigError(f"[{section}] must be a table, got {table!r}")
-        for key, value in table.items():
-            if key in DEFAULTS[section]:
-                resolved[section][key] = check_value(section, key, value)
-            elif section in _OPEN_SECTIONS:
-                resolved[section][key] = copy.deepcopy(value)
-            else:
-                raise ConfigError(
-                    f"unknown key {key!r} in [{section}]; allowed: {', '.join(sorted(DEFAULTS[section]))}"
-                )
-    _one_ball_radius(raw, resolved)
-    name = resolved["rig"]["name"]
-    if not name or any(c in name for c in "/*?$# "):
-        raise ConfigError(f"[rig] name must be a non-empty key chunk without '/', wildcards or spaces, got {name!r}")
-    return resolved
+    unknown = sorted(set(raw) - set(SECTIONS) - set(FOREIGN_SECTIONS))
+    if unknown:
+        raise ConfigError(f"unknown section [{unknown[0]}]; allowed: "
+                          + ", ".join(f"[{s}]" for s in (*SECTIONS, *FOREIGN_SECTIONS)))
+    sections = {name: cls.read(raw[name]) for name, cls in SECTIONS.items() if name in raw}
+    foreign = {}
+    for name in FOREIGN_SECTIONS:
+        if name in raw:
+            if not isinstance(raw[name], dict):
+                raise ConfigError(f"[{name}] must be a table, got {raw[name]!r}")
+            foreign[name] = raw[name]
+    config = RigConfig(**sections, foreign=foreign)
+    _one_ball_radius(raw, config)
+    return config
 
 
-def _one_ball_radius(raw: dict[str, Any], resolved: dict[str, Any]) -> None:
+def _one_ball_radius(raw: dict[str, Any], config: RigConfig) -> None:
     """The ball has one radius: `[trackball] ball_radius` (the hardware's) is the loop's unless `[loop]` sets it;
     two different values are refused, since the ant's motion would be scaled by their ratio."""
     trackball = raw.get("trackball")
     if not isinstance(trackball, dict) or "ball_radius" not in trackball:
         return
     try:
-        r = check_value("loop", "ball_radius", trackball["ball_radius"])
+        r = LoopSection.read({"ball_radius_m": trackball["ball_radius"]}).ball_radius_m
     except ConfigError as exc:
-        raise ConfigError(str(exc).replace("[loop]", "[trackball]")) from None
-    if "ball_radius" in raw.get("loop", {}) and not math.isclose(resolved["loop"]["ball_radius"], r):
+        raise ConfigError(str(exc).replace("[loop] ball_radius_m", "[trackball] ball_radius")) from None
+    loop = raw.get("loop", {})
+    if ("ball_radius_m" in loop or "ball_radius" in loop) and not math.isclose(config.loop.ball_radius_m, r):
         raise ConfigError(
-            f"[loop] ball_radius {resolved['loop']['ball_radius']} m differs from [trackball] ball_radius {r} m; "
+            f"[loop] ball_radius_m {config.loop.ball_radius_m} m differs from [trackball] ball_radius {r} m; "
             "allowed: one value (set it in [trackball] only)"
         )
-    resolved["loop"]["ball_radius"] = r
+    config.loop.ball_radius_m = r
 
 
-def load_config(path: str | Path | None = None) -> dict[str, Any]:
-    """The resolved rig config from a TOML file, or the embedded default when `path` is None."""
+def load_config(path: str | Path | None = None) -> RigConfig:
+    """The rig config from a TOML file, or the embedded default when `path` is None."""
     if path is None:
         return resolve({})
     path = Path(path)
@@ -197,3 +246,47 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"rig config {str(path)!r} is not valid TOML: {exc}") from None
     return resolve(raw)
+
+
+def _renamed(cls: type[Section], table: dict[str, Any]) -> dict[str, Any]:
+    """`table` with old key names replaced by today's (warning once per key); both given is an error."""
+    if not cls.RENAMED or not set(table) & set(cls.RENAMED):
+        return table
+    out = dict(table)
+    for old, new in cls.RENAMED.items():
+        if old in out:
+            if new in out:
+                raise ConfigError(f"[{cls.NAME}] has both {old!r} and {new!r}; allowed: {new!r} only")
+            warnings.warn(f"[{cls.NAME}] {old} is deprecated: call it {new}", ConfigDeprecationWarning, stacklevel=4)
+            out[new] = out.pop(old)
+    return out
+
+
+def _message(cls: type[Section], exc: ValidationError, table: dict[str, Any]) -> str:
+    """One line for the first error: the key, what is allowed, what was given."""
+    err = exc.errors()[0]
+    key = str(err["loc"][0]) if err["loc"] else ""
+    where = f"[{cls.NAME}] {key}"
+    got = table.get(key, err.get("input"))
+    kind = err["type"]
+    field = cls.model_fields.get(key)
+    if kind == "extra_forbidden":
+        return f"unknown key {key!r} in [{cls.NAME}]; allowed: {', '.join(sorted(cls.model_fields))}"
+    if kind in ("greater_than_equal", "less_than_equal") and field is not None:
+        lo = next((m.ge for m in field.metadata if getattr(m, "ge", None) is not None), None)
+        hi = next((m.le for m in field.metadata if getattr(m, "le", None) is not None), None)
+        return f"{where} must be in [{lo}, {hi}], got {got!r}"
+    if kind == "literal_error":
+        return f"{where} must be one of {err['ctx']['expected'].replace(' or ', ', ')}, got {got!r}"
+    if kind == "value_error":
+        return f"{where} {err['ctx']['error']}, got {got!r}"
+    if key in cls.ALLOWED:
+        return f"{where} must be {cls.ALLOWED[key]}, got {got!r}"
+    plain = {"bool_type": "true or false", "float_type": "a finite number", "finite_number": "a finite number",
+             "int_type": "an integer", "string_type": "a string", "list_type": "a list of strings",
+             "dict_type": "a table"}
+    if kind in plain:
+        if len(err["loc"]) > 1 and field is not None and "list" in str(field.annotation):
+            return f"{where} must be a list of strings, got {got!r}"
+        return f"{where} must be {plain[kind]}, got {got!r}"
+    return f"{where}: {err['msg']}, got {got!r}"

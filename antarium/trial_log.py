@@ -75,7 +75,8 @@ class TrialLog:
     """One recording. Append rows from any thread (cheap); a separate writer process owns the HDF5 file.
 
     path:     the .h5 file to create (its folder must exist and be writable; an existing file is refused)
-    config:   the resolved rig config (stored as JSON in the `config` attribute)
+    config:   the resolved rig config as TOML tables (`RigConfig.to_toml_dict()`; stored as JSON in the
+              `config` attribute)
     name:     trial name; metadata: JSON-serialisable dict stored in the `metadata` attribute
     flush_s:  seconds between hand-overs to the writer, which appends and flushes to disk (at most 1 s)
 

@@ -27,7 +27,7 @@ def _config(tmp_path, tether="free_yaw"):
     return {"rig": {"name": "antserved"}, "bus": {"listen": [bus.free_tcp_endpoint()]},
             "link": {"interface": "udp", "port": free_udp_port("127.0.0.1"), "spawn_emulator": False},
             "locomotion": {"source": "bus"}, "loop": {"tether": tether},
-            "render": {"scene": "habitat", "face_size": 64}, "log": {"dir": str(tmp_path / "trials")}}
+            "render": {"scene": "habitat", "face_size_px": 64}, "log": {"dir": str(tmp_path / "trials")}}
 
 
 @pytest.fixture(scope="module")

@@ -73,7 +73,7 @@ def test_a_peer_on_a_lab_interface_watches_and_sends_locomotion_but_cannot_comma
     acl = acl.replace(LAB, LAB.replace('"eth0"', '"eth0", "lo"'))
     config, server = serve(tmp_path, acl, locomotion={"source": "bus", "timeout_s": 5.0})
     try:
-        with bus.open_session(config["bus"], role="client") as session:
+        with bus.open_session(config.bus, role="client") as session:
             got_pose = threading.Event()
             poses = []
 
@@ -116,7 +116,7 @@ def test_a_peer_on_an_unlisted_interface_is_refused(tmp_path):
     assert '"lo"' not in acl
     config, server = serve(tmp_path, acl)
     try:
-        with bus.open_session(config["bus"], role="client") as session:
+        with bus.open_session(config.bus, role="client") as session:
             with pytest.raises(RigError, match="no antarium server"):  # it cannot even see the server
                 antarium.Rig("rig1", config=config, session=session, timeout_s=1.0).connect()
             refused_command(server, session)

@@ -10,7 +10,7 @@ from conftest import wait_for
 import antarium
 from antarium import bus
 from antarium.client import RigError
-from antarium.config import resolve
+from antarium.config import LocomotionSection, resolve
 from antarium.server import Server
 from antarium.trial_log import read_table
 
@@ -147,7 +147,7 @@ def test_access_control_refuses_an_unlisted_peer(tmp_path):
     server = Server(config, renderer_factory=None, link=False).start_thread()
     try:
         def client(zid):
-            conf = bus.session_config(config["bus"], "client")
+            conf = bus.session_config(config.bus, "client")
             conf.insert_json5("id", json.dumps(zid))
             return zenoh.open(conf)
 
@@ -168,10 +168,10 @@ def test_locomotion_from_the_bus_drives_the_closed_loop(tmp_path):
     from antarium.locomotion import BallSample, wire
 
     config = _config(tmp_path, rig="tloco")
-    config["locomotion"] = {"source": "bus", "timeout_s": 5.0}
+    config.locomotion = LocomotionSection.read({"source": "bus", "timeout_s": 5.0})
     server = Server(config, renderer_factory=None, link=False).start_thread()
     try:
-        with bus.open_session(config["bus"], "client") as trackball:
+        with bus.open_session(config.bus, "client") as trackball:
             pub = trackball.declare_publisher(bus.locomotion_key("tloco"), express=True)
             assert wait_for(lambda: server.source.received == 0 and server.loop.frame > 5, 5.0)
             for seq in range(200):  # the ball rolls about -y: the ant walks along the dome's +x

@@ -1,10 +1,22 @@
-"""The rig config: defaults, checks naming what is allowed, unknown sections kept verbatim, the example."""
+"""The rig config: typed sections with units in their names, checks naming what is allowed, renamed keys still
+read with a warning, foreign sections kept for their owners, the documented example."""
 
+import tomllib
+import warnings
 from pathlib import Path
 
 import pytest
 
-from antarium.config import DEFAULT_WALKER, ConfigError, load_config, resolve
+from antarium.config import (
+    DEFAULT_WALKER,
+    SECTIONS,
+    ConfigDeprecationWarning,
+    ConfigError,
+    LoopSection,
+    RigConfig,
+    load_config,
+    resolve,
+)
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "docs" / "rig.example.toml"
 
@@ -12,35 +24,68 @@ EXAMPLE = Path(__file__).resolve().parent.parent / "docs" / "rig.example.toml"
 def test_the_documented_example_is_the_default():
     example = load_config(EXAMPLE)
     default = load_config(None)
-    default["locomotion"] = {"source": "scripted"}  # the example names the source without the walker's options
+    default.locomotion = example.locomotion  # the example names the source without the walker's options
     assert example == default
 
 
+def test_the_example_documents_every_key_of_every_section():
+    doc = tomllib.loads(EXAMPLE.read_text())
+    for name, section in SECTIONS.items():
+        if name != "locomotion":
+            assert set(doc[name]) == set(section.model_fields), name
+
+
+def test_sections_are_typed_and_read_as_attributes():
+    config = load_config(None)
+    assert isinstance(config, RigConfig)
+    assert config.loop.rate_hz == 190.0 and config.loop.eye_height_m == 0.01 and config.render.face_size_px == 0
+    assert config.to_toml_dict()["loop"]["ball_radius_m"] == 0.05
+
+
 def test_embedded_default_walks_a_seeded_scripted_walker():
-    assert load_config(None)["locomotion"] == DEFAULT_WALKER
-    assert resolve({"locomotion": {"source": "bus"}})["locomotion"] == {"source": "bus"}
+    loco = load_config(None).locomotion
+    assert {"source": loco.source, **loco.options} == DEFAULT_WALKER
+    bus_only = resolve({"locomotion": {"source": "bus"}}).locomotion
+    assert bus_only.source == "bus" and bus_only.options == {}
 
 
-def test_unknown_sections_are_kept_verbatim_for_their_owners():
+def test_foreign_sections_are_kept_verbatim_for_their_owners():
     raw = {"trackball": {"cpi": 1200, "sensors": [{"azimuth_deg": 0}]}, "ant": {"model": "mb"}}
     resolved = resolve(raw)
-    assert resolved["trackball"] == raw["trackball"] and resolved["ant"] == {"model": "mb"}
+    assert resolved.section("trackball") == raw["trackball"] and resolved.section("ant") == {"model": "mb"}
+    assert resolved.to_toml_dict()["ant"] == {"model": "mb"}
 
 
 @pytest.mark.parametrize("raw, message", [
     ({"loop": {"rate": 190}}, "unknown key 'rate' in \\[loop\\]; allowed: "),
     ({"loop": {"rate_hz": "fast"}}, "\\[loop\\] rate_hz must be a finite number"),
-    ({"loop": {"rate_hz": 0}}, "\\[loop\\] rate_hz must be in"),
+    ({"loop": {"rate_hz": 0}}, "\\[loop\\] rate_hz must be in \\[1.0, 2000.0\\], got 0"),
+    ({"loop": {"rate_hz": float("nan")}}, "\\[loop\\] rate_hz must be a finite number"),
     ({"loop": {"tether": "loose"}}, "must be one of 'free_yaw', 'fixed'"),
     ({"loop": {"closed_loop": 1}}, "true or false"),
+    ({"loop": {"pose_every_frames": 1.5}}, "\\[loop\\] pose_every_frames must be an integer"),
     ({"bus": {"listen": "tcp/127.0.0.1:7447"}}, "list of strings"),
     ({"render": {"scene": {"period_deg": 3}}}, "table with 'scene'"),
+    ({"render": {"scene": 5}}, "\\[render\\] scene must be a scene name, a file path or a table"),
     ({"rig": {"name": "a/b"}}, "\\[rig\\] name"),
     ({"loop": 3}, "\\[loop\\] must be a table"),
+    ({"rgi": {"name": "x"}}, "unknown section \\[rgi\\]; allowed: \\[rig\\], \\[loop\\]"),
+    ({"loop": {"eye_height": 0.02, "eye_height_m": 0.02}}, "both 'eye_height' and 'eye_height_m'"),
 ])
 def test_bad_values_name_the_key_and_what_is_allowed(raw, message):
     with pytest.raises(ConfigError, match=message):
         resolve(raw)
+
+
+@pytest.mark.parametrize("old, new, value", [(old, new, None) for old, new in LoopSection.RENAMED.items()])
+def test_old_key_names_are_read_with_a_deprecation_warning(old, new, value):
+    value = 3 if new.endswith("_frames") else 0.02
+    with pytest.warns(ConfigDeprecationWarning, match=f"\\[loop\\] {old} is deprecated: call it {new}"):
+        config = resolve({"loop": {old: value}})
+    assert getattr(config.loop, new) == value
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert getattr(resolve({"loop": {new: value}}).loop, new) == value  # today's name: no warning
 
 
 def test_bad_files_are_reported(tmp_path):
@@ -53,9 +98,9 @@ def test_bad_files_are_reported(tmp_path):
 
 
 def test_the_ball_has_one_radius():
-    assert resolve({"trackball": {"ball_radius": 0.04}})["loop"]["ball_radius"] == 0.04
-    assert resolve({"loop": {"ball_radius": 0.04}, "trackball": {"ball_radius": 0.04}})["loop"]["ball_radius"] == 0.04
-    with pytest.raises(ConfigError, match=r"\[loop\] ball_radius 0.05 m differs from \[trackball\] ball_radius 0.04"):
-        resolve({"loop": {"ball_radius": 0.05}, "trackball": {"ball_radius": 0.04}})
+    assert resolve({"trackball": {"ball_radius": 0.04}}).loop.ball_radius_m == 0.04
+    assert resolve({"loop": {"ball_radius_m": 0.04}, "trackball": {"ball_radius": 0.04}}).loop.ball_radius_m == 0.04
+    with pytest.raises(ConfigError, match=r"\[loop\] ball_radius_m 0.05 m differs from \[trackball\] ball_radius 0.04"):
+        resolve({"loop": {"ball_radius_m": 0.05}, "trackball": {"ball_radius": 0.04}})
     with pytest.raises(ConfigError, match=r"\[trackball\] ball_radius must be in"):
         resolve({"trackball": {"ball_radius": 5.0}})

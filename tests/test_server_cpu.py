@@ -52,7 +52,7 @@ def test_a_cpu_the_process_may_not_use_is_refused():
 
 @pytest.mark.parametrize("value", ["auto", "off", 0, 3])
 def test_cpu_setting_accepts_auto_off_and_numbers(value):
-    assert resolve({"loop": {"cpu": value}})["loop"]["cpu"] == value
+    assert resolve({"loop": {"cpu": value}}).loop.cpu == value
 
 
 @pytest.mark.parametrize("value", [-1, "fast", 1.5, True])

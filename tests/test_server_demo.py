@@ -42,7 +42,7 @@ def test_demo_refuses_bad_rig_seconds(tmp_path, capsys):
 
 def test_demo_rig_outputs(tmp_path):
     lines = []
-    paths = run_demo_rig(tmp_path, seconds=2.0, echo=lines.append, render={"scene": "horizon", "face_size": 64})
+    paths = run_demo_rig(tmp_path, seconds=2.0, echo=lines.append, render={"scene": "horizon", "face_size_px": 64})
     assert set(paths) == {"trial log", "path plot", "dome picture"}
     assert paths["path plot"].stat().st_size > 10_000 and paths["dome picture"].stat().st_size > 10_000
     with h5py.File(paths["trial log"], "r") as f:

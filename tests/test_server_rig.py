@@ -61,7 +61,7 @@ def test_emulator_killed_and_restarted_mid_recording(tmp_path):
 
 def test_failed_scene_load_keeps_the_previous_scene(tmp_path):
     config = _config(tmp_path, "tscene")
-    config["link"]["interface"] = "virtual"
+    config.link.interface = "virtual"
     server = Server(config, renderer_factory=small_renderer, echo=lambda line: None).start_thread()
     try:
         with antarium.Rig("tscene", config=config, timeout_s=10.0) as rig:

@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from antarium.ant.agent import VirtualAnt
 from antarium.ant.eye import Eye, EyeParams
@@ -32,22 +32,26 @@ from antarium.ant.locomotion import TrackballLegs
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.core.pose import Pose
 
+if TYPE_CHECKING:
+    from antarium.config import RigConfig
 
-def served_config(config: str | Path | dict[str, Any]) -> dict[str, Any]:
+
+def served_config(config: str | Path | dict[str, Any] | RigConfig) -> RigConfig:
     """The resolved rig config (TOML path or parsed table), checked for a served virtual ant: the server sends its
     frames to the ant's dome and reads the ant's ball from the bus."""
-    from antarium.config import load_config, resolve
+    from antarium.config import RigConfig, load_config, resolve
 
-    cfg = resolve(config) if isinstance(config, dict) else load_config(config)
-    link, loco = cfg["link"], cfg["locomotion"]
+    cfg = config if isinstance(config, RigConfig) else resolve(config) if isinstance(config, dict) \
+        else load_config(config)
+    link = cfg.link
     problems = []
-    if link["interface"] != "udp" or link["spawn_emulator"] or link["port"] == 0:
+    if link.interface != "udp" or link.spawn_emulator or link.port == 0:
         problems.append('[link] must be interface = "udp", spawn_emulator = false and a port (the ant\'s dome '
-                        f'listens there), got {link}')
-    if loco["source"] != "bus":
+                        f'listens there), got {link.model_dump()}')
+    if cfg.locomotion.source != "bus":
         problems.append(f'[locomotion] source must be "bus" (the ant\'s trackball publishes there), got '
-                        f'{loco["source"]!r}')
-    if not cfg["bus"]["enabled"]:
+                        f'{cfg.locomotion.source!r}')
+    if not cfg.bus.enabled:
         problems.append("[bus] enabled must be true")
     if problems:
         raise ValueError("rig config not fit for a served virtual ant: " + "; ".join(problems))
@@ -180,19 +184,19 @@ def served_ant(model, config: str | Path | dict[str, Any], eye_params: EyeParams
     eye = Eye.from_dome(load_dome(), eye_params)
     if eye.params.n_pn != model.n_pn:
         raise ValueError(f"the model expects {model.n_pn} PNs but the eye gives {eye.params.n_pn}")
-    name, loop_cfg = cfg["rig"]["name"], cfg["loop"]
+    name, loop_cfg = cfg.rig.name, cfg.loop
     clock = MonotonicClock()
     with contextlib.ExitStack() as stack:
-        dome = DomeHost(cfg["link"]["host"], cfg["link"]["port"])
+        dome = DomeHost(cfg.link.host, cfg.link.port)
         dome.start()
         stack.callback(dome.stop)
-        session = stack.enter_context(bus.open_session(cfg["bus"], role="client"))
+        session = stack.enter_context(bus.open_session(cfg.bus, role="client"))
         rig = stack.enter_context(Rig(name, config=cfg, session=session, timeout_s=timeout_s))
         publisher = bus.locomotion_publisher(session, name)
         stack.callback(publisher.undeclare)
         events = bus.events_key(name)
-        trackball = cfg.get("trackball") or TrackballConfig(ball_radius=loop_cfg["ball_radius"], sample_rate_hz=950)
-        legs = TrackballLegs(loop_cfg["tether"], trackball=trackball, clock=clock, step_s=1.0 / loop_cfg["rate_hz"],
+        trackball = cfg.section("trackball") or TrackballConfig(ball_radius=loop_cfg.ball_radius_m, sample_rate_hz=950)
+        legs = TrackballLegs(loop_cfg.tether, trackball=trackball, clock=clock, step_s=1.0 / loop_cfg.rate_hz,
                              on_sample=lambda s: publisher.put(wire.encode(s)),
                              on_event=lambda e: session.put(events, json.dumps(e)))
         legs.start()
@@ -201,7 +205,7 @@ def served_ant(model, config: str | Path | dict[str, Any], eye_params: EyeParams
         def publish(t: float, kind: str, data: dict) -> None:
             session.put(events, json.dumps({"t": t, "kind": kind, "data": data}, default=float))
 
-        loop = ServedLoop(rig, legs, clock, loop_cfg["rate_hz"], loop_cfg["tether"], loop_cfg["pose_every"],
+        loop = ServedLoop(rig, legs, clock, loop_cfg.rate_hz, loop_cfg.tether, loop_cfg.pose_every_frames,
                           timeout_s, on_event=publish)
         yield VirtualAnt(eye, model, loop, legs, dome.led_values, frames_per_decision)
 
@@ -239,8 +243,8 @@ def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out:
                "decisions_per_s": result.summary.decisions / seconds}
     (out / "served.json").write_text(json.dumps({"summary": summary, "events": events}, indent=2, default=float))
     picture = plot_paths(out / "served_paths.png", route, {f"{model.kind} (served rig)": result.track},
-                         title="virtual ant on the served rig", top=scene_top_view(build_scene(cfg["render"]["scene"])))
-    echo(f"virtual ant on rig {cfg['rig']['name']!r}: {'arrived' if summary['arrived'] else 'did not arrive'} after "
+                         title="virtual ant on the served rig", top=scene_top_view(build_scene(cfg.render.scene)))
+    echo(f"virtual ant on rig {cfg.rig.name!r}: {'arrived' if summary['arrived'] else 'did not arrive'} after "
          f"{summary['decisions']} decisions in {seconds:.1f} s ({summary['decisions_per_s']:.1f} decisions/s); "
          f"lateral error median {100 * summary['lateral_median']:.1f} cm\n  trial log (server): {log}\n"
          f"  summary: {out / 'served.json'}\n  picture: {picture}")

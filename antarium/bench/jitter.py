@@ -192,8 +192,8 @@ def run(args: argparse.Namespace) -> int:
     from antarium.config import load_config
     from antarium.core import realtime
 
-    loop_cfg = load_config(os.environ.get("ANTARIUM_RIG_CONFIG") or None)["loop"]
-    rate = loop_cfg["rate_hz"]
+    loop_cfg = load_config(os.environ.get("ANTARIUM_RIG_CONFIG") or None).loop
+    rate = loop_cfg.rate_hz
     period = 1.0 / rate
     seconds = 30.0 if args.seconds is None and args.frames is None else args.seconds
     slots = args.frames if args.frames is not None else int(seconds * rate)
@@ -205,17 +205,17 @@ def run(args: argparse.Namespace) -> int:
     out: dict[str, Any] = {}
 
     def skeleton() -> None:
-        if loop_cfg["cpu"] != "off" and realtime.supported() and len(os.sched_getaffinity(0)) > 1:
-            target = max(os.sched_getaffinity(0)) if loop_cfg["cpu"] == "auto" else loop_cfg["cpu"]
+        if loop_cfg.cpu != "off" and realtime.supported() and len(os.sched_getaffinity(0)) > 1:
+            target = max(os.sched_getaffinity(0)) if loop_cfg.cpu == "auto" else loop_cfg.cpu
             try:
                 os.sched_setaffinity(0, {target})  # this thread only; it ends with the benchmark
                 setup["cpu"] = target
             except OSError as exc:
                 setup["notes"].append(f"not on [loop] cpu {target} ({exc.strerror})")
-        if loop_cfg["realtime_priority"]:
+        if loop_cfg.realtime_priority:
             try:
-                realtime.set_realtime(loop_cfg["realtime_priority"])
-                setup["realtime_priority"] = loop_cfg["realtime_priority"]
+                realtime.set_realtime(loop_cfg.realtime_priority)
+                setup["realtime_priority"] = loop_cfg.realtime_priority
             except (AttributeError, OSError) as exc:
                 setup["notes"].append(f"not real-time ({type(exc).__name__}: {exc})")
         out["arrays"] = measure(MonotonicClock(), period, work, slots)

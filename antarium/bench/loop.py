@@ -91,23 +91,23 @@ def run(args: argparse.Namespace) -> int:
     seconds = 30.0 if args.seconds is None and args.frames is None else args.seconds
     config = load_config(os.environ.get("ANTARIUM_RIG_CONFIG") or None)
     with tempfile.TemporaryDirectory(prefix="antarium-bench-loop-") as tmp:
-        config["log"]["dir"] = tmp
-        if config["bus"]["enabled"] and config["bus"]["listen"] == ["tcp/127.0.0.1:7447"]:
-            config["bus"]["listen"] = [free_tcp_endpoint()]  # never collide with a running `antarium serve`
+        config.log.dir = tmp
+        if config.bus.enabled and config.bus.listen == ["tcp/127.0.0.1:7447"]:
+            config.bus.listen = [free_tcp_endpoint()]  # never collide with a running `antarium serve`
         server = Server(config, record="bench-loop", echo=lambda line: None)
-        probes = _start_probes(config["loop"]["realtime_priority"]) if getattr(args, "machine_probe", False) \
+        probes = _start_probes(config.loop.realtime_priority) if getattr(args, "machine_probe", False) \
             else None
         try:
             server.run(seconds=seconds, frames=args.frames)
         finally:
             stalls = probes.stop() if probes is not None else None
         frames = read_table(server.trial_paths[0], "frames")
-        result = summarise(frames, config["loop"]["rate_hz"], stalls)
+        result = summarise(frames, config.loop.rate_hz, stalls)
         result["rejected_frames"] = server.final_stats.get("rejected_frames", 0)
         result["link_outages"] = server.final_stats.get("link_outages", 0)
         result["far_layer"] = server.final_stats.get("far_layer")
-        result["config"] = {"render": config["render"], "loop_rate_hz": config["loop"]["rate_hz"],
-                            "link": config["link"]["interface"], "locomotion": config["locomotion"]["source"]}
+        result["config"] = {"render": config.render, "loop_rate_hz": config.loop.rate_hz,
+                            "link": config.link.interface, "locomotion": config.locomotion.source}
     _print(result)
     if args.json_out:
         with open(args.json_out, "w") as fh:

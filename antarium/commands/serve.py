@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     if args.print_config:
         import tomli_w
 
-        print(tomli_w.dumps(config), end="")
+        print(tomli_w.dumps(config.to_toml_dict()), end="")
         return 0
     if args.seconds is not None and not args.seconds > 0:
         raise ValueError(f"--seconds must be > 0, got {args.seconds}")
@@ -61,9 +61,9 @@ def run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
-    bus = config["bus"]
-    where = ", ".join(bus["listen"]) if bus["enabled"] else "bus disabled"
-    print(f"antarium serve: rig {server.rig_name!r} at {config['loop']['rate_hz']:g} frames/s; bus: {where}; "
+    bus = config.bus
+    where = ", ".join(bus.listen) if bus.enabled else "bus disabled"
+    print(f"antarium serve: rig {server.rig_name!r} at {config.loop.rate_hz:g} frames/s; bus: {where}; "
           f"trial logs in {server.log_dir}", flush=True)
     threading.Thread(target=_print_status, args=(server, args.status_every), daemon=True).start()
     frames = server.run(seconds=args.seconds)

@@ -55,9 +55,9 @@ def _open_source(args: argparse.Namespace, rig: dict[str, Any], on_sample=None, 
         from antarium.locomotion.trackball import config as tbconfig
 
         trackball = tbconfig.load(args.config)
-        if not math.isclose(trackball.ball_radius, rig["loop"]["ball_radius"]):
+        if not math.isclose(trackball.ball_radius, rig.loop.ball_radius_m):
             print(f"warning: [trackball] ball_radius {trackball.ball_radius} m differs from [loop] ball_radius "
-                  f"{rig['loop']['ball_radius']} m: the ant's motion will be scaled by their ratio", file=sys.stderr)
+                  f"{rig.loop.ball_radius_m} m: the ant's motion will be scaled by their ratio", file=sys.stderr)
         backend = None
         if args.emulate:
             from antarium.locomotion.trackball.emulator import EmulatedTrackball, walk
@@ -104,11 +104,11 @@ class _Publisher:
 def _run(args: argparse.Namespace) -> int:
     rig = _rig(args.config)
     session = None
-    if not args.no_bus and rig["bus"]["enabled"]:
+    if not args.no_bus and rig.bus.enabled:
         from antarium.bus import open_session
 
-        session = open_session(rig["bus"], role="client")
-    publisher = _Publisher(session, rig["rig"]["name"])
+        session = open_session(rig.bus, role="client")
+    publisher = _Publisher(session, rig.rig.name)
     try:
         source = _open_source(args, rig, on_sample=publisher.sample, on_event=publisher.event)
         pushes = args.source != "usb"  # the USB driver publishes from its reader thread

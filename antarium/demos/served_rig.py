@@ -24,15 +24,15 @@ def run_demo_rig(out: str | Path, seconds: float = 8.0, echo=print, render: dict
     import threading
 
     from antarium.bus import free_tcp_endpoint
-    from antarium.config import load_config
+    from antarium.config import RenderSection, load_config
     from antarium.server import Server
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     config = load_config(None)
-    config["log"]["dir"] = str(out / "trials")
-    config["render"].update(render or {})
-    config["bus"]["listen"] = [free_tcp_endpoint()]  # never collide with a running `antarium serve`
+    config.log.dir = str(out / "trials")
+    config.render = RenderSection.read({**config.render.model_dump(), **(render or {})})
+    config.bus.listen = [free_tcp_endpoint()]  # never collide with a running `antarium serve`
     server = Server(config, record="demo", echo=lambda line: None)
     rotate = threading.Timer(seconds / 2, lambda: server.command("rotate_scene", {"deg": 90}))
     server_ready = threading.Thread(target=lambda: server.wait_ready(120) and rotate.start(), daemon=True)
@@ -44,7 +44,7 @@ def run_demo_rig(out: str | Path, seconds: float = 8.0, echo=print, render: dict
     log = server.trial_paths[0]
     stats = server.final_stats
     echo(f"demo rig: {frames} frames in {seconds:g} s ({stats['late_frames']} late, target "
-         f"{config['loop']['rate_hz']:g}/s; the renderer sets the pace on a CPU), latency p50 "
+         f"{config.loop.rate_hz:g}/s; the renderer sets the pace on a CPU), latency p50 "
          f"{_ms(stats['latency'], 'p50')}, p99 {_ms(stats['latency'], 'p99')}")
     paths = {"trial log": log, "path plot": plot_path(log, out / "demo_path.png")}
     if server.final_frame is not None:

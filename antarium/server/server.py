@@ -47,9 +47,9 @@ def default_renderer_factory(render_cfg: dict[str, Any], clock: Clock | None = N
     from antarium.geometry import load_dome
     from antarium.renderers import Renderer
 
-    return Renderer(load_dome(), face_size=render_cfg["face_size"] or None, clock=clock,
-                    far_layer=render_cfg["far_layer"], near_radius=render_cfg["near_radius_m"],
-                    far_layer_error_deg=render_cfg["far_layer_error_deg"])
+    return Renderer(load_dome(), face_size=render_cfg.face_size_px or None, clock=clock,
+                    far_layer=render_cfg.far_layer, near_radius=render_cfg.near_radius_m,
+                    far_layer_error_deg=render_cfg.far_layer_error_deg)
 
 
 class Server:
@@ -64,10 +64,10 @@ class Server:
         from antarium.trial_log import check_log_dir, prepare_writer
 
         self.config = config
-        self.rig_name = bus.check_rig_name(config["rig"]["name"])
+        self.rig_name = bus.check_rig_name(config.rig.name)
         self.clock = clock or MonotonicClock()
         self.echo = echo or (lambda line: print(line, file=sys.stderr, flush=True))
-        self.log_dir = check_log_dir(config["log"]["dir"])
+        self.log_dir = check_log_dir(config.log.dir)
         prepare_writer()  # the first trial then starts at once
         self._renderer_factory = default_renderer_factory if renderer_factory is True else renderer_factory
         self.source = source if source is not None else self._open_source()
@@ -105,16 +105,16 @@ class Server:
     def _open_source(self):
         from antarium.locomotion import open_source
 
-        loco = dict(self.config["locomotion"])
-        name = loco.pop("source")
+        loco = self.config.locomotion.options
+        name = self.config.locomotion.source
         if name == "bus":
             loco.setdefault("rig", self.rig_name)
-            loco.setdefault("bus", self.config["bus"])
+            loco.setdefault("bus", self.config.bus)
         loco.setdefault("clock", self.clock)
         if name == "scripted":
-            loco.setdefault("tether", self.config["loop"]["tether"])
-        if name == "usb" and "trackball" in self.config:
-            loco.setdefault("trackball", self.config["trackball"])  # the driver parses its own section
+            loco.setdefault("tether", self.config.loop.tether)
+        if name == "usb" and self.config.section("trackball") is not None:
+            loco.setdefault("trackball", self.config.section("trackball"))  # the driver parses its own section
         try:
             return open_source(name, **loco)
         except TypeError as exc:
@@ -127,13 +127,13 @@ class Server:
             return self._link_arg
         from antarium.firmware_proto.link import open_link
 
-        cfg = self.config["link"]
-        if cfg["interface"] == "virtual":
+        cfg = self.config.link
+        if cfg.interface == "virtual":
             return open_link("virtual", clock=self.clock)
-        host, port = cfg["host"], cfg["port"]
-        if cfg["spawn_emulator"]:
+        host, port = cfg.host, cfg.port
+        if cfg.spawn_emulator:
             # real-time as hardware would answer, but below the frame loop and its helper: never holds them off
-            priority = self.config["loop"]["realtime_priority"]
+            priority = self.config.loop.realtime_priority
             self.emulator = EmulatorProcess(host, port, realtime_priority=max(1, priority - 2) if priority else 0)
             self.emulator.start()
             port = self.emulator.port
@@ -143,9 +143,9 @@ class Server:
 
     def _open_bus(self) -> None:
         if self.session is None:
-            if not self.config["bus"]["enabled"]:
+            if not self.config.bus.enabled:
                 return
-            self.session = bus.open_session(self.config["bus"], role="server")
+            self.session = bus.open_session(self.config.bus, role="server")
         s = self.session
         self._pose_pub = s.declare_publisher(bus.pose_key(self.rig_name), express=True)
         self._stats_pub = s.declare_publisher(bus.stats_key(self.rig_name), express=True)
@@ -181,12 +181,12 @@ class Server:
                 self.echo(f"antarium serve: publishing event {kind} failed: {exc}")
 
     def _on_frame(self, rec: FrameRecord) -> None:
-        loop_cfg = self.config["loop"]
+        loop_cfg = self.config.loop
         try:
-            if self._pose_pub is not None and rec.frame % loop_cfg["pose_every"] == 0:
+            if self._pose_pub is not None and rec.frame % loop_cfg.pose_every_frames == 0:
                 self._pose_pub.put(bus.encode_pose(rec.frame, rec.t_start, rec.pose, rec.scene_rotation,
                                                    rec.closed_loop, rec.fixed_tether))
-            if self._stats_pub is not None and rec.frame % loop_cfg["stats_every"] == 0:
+            if self._stats_pub is not None and rec.frame % loop_cfg.stats_every_frames == 0:
                 self._stats_pub.put(bus.encode_stats(rec.frame, self.loop.late_frames, rec.t_start, rec.latency,
                                                      _nan0(rec.render) + _nan0(rec.sample) + _nan0(rec.convert),
                                                      rec.sample, rec.encode, rec.send, rec.pacing_error))
@@ -339,7 +339,7 @@ class Server:
                 raise CommandError(f"trial_start: metadata must be JSON-serialisable: {exc}") from None
             path = log_path(self.log_dir, self.rig_name, name)
             try:
-                log = TrialLog(path, self.config, name, metadata, flush_s=self.config["log"]["flush_s"])
+                log = TrialLog(path, self.config.to_toml_dict(), name, metadata, flush_s=self.config.log.flush_s)
             except LogError as exc:
                 raise RuntimeError(f"trial_start: {exc}") from None
             if self.scene_name is not None:
@@ -389,26 +389,26 @@ class Server:
         """Build the renderer here, start the bus and run frames until `stop()`, the clock reads `until`,
         `frames` frames ran, or `seconds` passed since the first frame."""
         try:
-            loop_cfg = self.config["loop"]
-            if loop_cfg["realtime_priority"]:
-                self._set_realtime(loop_cfg["realtime_priority"])
-            if loop_cfg["cpu"] != "off" and len(getattr(os, "sched_getaffinity", lambda _: ())(0)) > 1:
+            loop_cfg = self.config.loop
+            if loop_cfg.realtime_priority:
+                self._set_realtime(loop_cfg.realtime_priority)
+            if loop_cfg.cpu != "off" and len(getattr(os, "sched_getaffinity", lambda _: ())(0)) > 1:
                 # llvmpipe (software GL) rasterises in the calling thread: the frame's GL work stays on the
                 # loop's own CPU instead of waiting for raster threads on the other (no effect on a GPU driver)
                 os.environ.setdefault("LP_NUM_THREADS", "0")
             self.link = self._open_link()
-            self.renderer = self._renderer_factory(self.config["render"], self.clock) if self._renderer_factory \
+            self.renderer = self._renderer_factory(self.config.render, self.clock) if self._renderer_factory \
                 else None
-            origin = Pose(loop_cfg["start_x"], loop_cfg["start_y"], loop_cfg["eye_height"],
-                          math.radians(loop_cfg["start_heading_deg"]))
+            origin = Pose(loop_cfg.start_x_m, loop_cfg.start_y_m, loop_cfg.eye_height_m,
+                          math.radians(loop_cfg.start_heading_deg))
             self.loop = FrameLoop(
                 clock=self.clock, source=self.source, renderer=self.renderer, link=self.link,
-                rate_hz=loop_cfg["rate_hz"], closed_loop=loop_cfg["closed_loop"], tether=loop_cfg["tether"],
-                gain_translation=loop_cfg["gain_translation"], gain_rotation=loop_cfg["gain_rotation"],
-                origin=origin, ball_radius=loop_cfg["ball_radius"], log=self.trial_log,
+                rate_hz=loop_cfg.rate_hz, closed_loop=loop_cfg.closed_loop, tether=loop_cfg.tether,
+                gain_translation=loop_cfg.gain_translation, gain_rotation=loop_cfg.gain_rotation,
+                origin=origin, ball_radius=loop_cfg.ball_radius_m, log=self.trial_log,
                 on_frame=self._on_frame, on_event=self._publish_event)
             if self.renderer is not None:
-                self.load_scene(self.config["render"]["scene"])
+                self.load_scene(self.config.render.scene)
                 if hasattr(self.renderer, "wait_far_layer") and not self.renderer.wait_far_layer(self.loop.pose):
                     self.echo("antarium serve: the far layer is not ready; the first frames are drawn in full")
             self._open_bus()
@@ -416,7 +416,7 @@ class Server:
                 if self.session is not None and hasattr(self.source, "use_session"):
                     self.source.use_session(self.session)  # a bus source shares the server's session
                 self.source.start()
-            if (self.record or self.config["log"]["record"]) and self.trial_log is None:
+            if (self.record or self.config.log.record) and self.trial_log is None:
                 self.trial_start(self.record or "recording", {})
         except BaseException as exc:
             self._start_error = exc
@@ -435,7 +435,7 @@ class Server:
         self._status_thread = threading.Thread(target=self._status_loop, name="status", daemon=True)
         self._status_thread.start()
         self._loop_thread = threading.current_thread()
-        self._isolate_loop(loop_cfg["cpu"])
+        self._isolate_loop(loop_cfg.cpu)
         self._place_threads()
         self._ready.set()
         self.loop.event("server_started", rig=self.rig_name)
