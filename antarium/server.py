@@ -523,6 +523,8 @@ class Server:
 
     def _attach_log(self, log, name: str, metadata: dict) -> None:
         self.loop.log = log
+        if hasattr(self.source, "use_log"):  # a source with a table of its own (servosphere)
+            self.source.use_log(log)
         self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path))
 
     def _trial_stop(self) -> dict[str, Any]:
@@ -543,6 +545,8 @@ class Server:
     def _detach_log(self) -> None:
         self.loop.event("trial_stopped", name=self.trial_name, path=str(self.trial_log.path))
         self.loop.log = None
+        if hasattr(self.source, "use_log"):
+            self.source.use_log(None)
 
     # -- running ---------------------------------------------------------------------------------------
     def run(self, until: float | None = None, frames: int | None = None, seconds: float | None = None) -> int:
