@@ -193,7 +193,7 @@ class Server:
             loco.setdefault("rig", self.rig)
             loco.setdefault("bus", self.config["bus"])
         loco.setdefault("clock", self.clock)
-        if name == "scripted":
+        if name in ("scripted", "servosphere"):
             loco.setdefault("tether", self.config["loop"]["tether"])
         if name == "usb" and "trackball" in self.config:
             loco.setdefault("trackball", self.config["trackball"])  # the driver parses its own section

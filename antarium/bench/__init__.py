@@ -1,0 +1,1 @@
+"""Benchmarks run by `antarium bench TARGET` (one module per target)."""
