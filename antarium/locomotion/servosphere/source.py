@@ -34,7 +34,7 @@ class ServosphereLoop:
     line counts as lost; stall_hold_s: how long the ball stays stopped after a stall before the loop retries."""
 
     def __init__(self, camera, link, tracker: Tracker, controller: Controller, link_timeout_s: float = 0.02,
-                 stall_hold_s: float = 0.5) -> None:
+                 stall_hold_s: float = 0.1) -> None:
         self.camera, self.link, self.tracker, self.controller = camera, link, tracker, controller
         self.link_timeout_s, self.stall_hold_s = float(link_timeout_s), float(stall_hold_s)
         self.geometry = controller.config.geometry
