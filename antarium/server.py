@@ -195,6 +195,8 @@ class Server:
         loco.setdefault("clock", self.clock)
         if name in ("scripted", "servosphere"):
             loco.setdefault("tether", self.config["loop"]["tether"])
+        if name == "servosphere":  # one ball: the dome's loop integrates the rotation with the same radius
+            loco.setdefault("ball_radius", self.config["loop"]["ball_radius"])
         if name == "usb" and "trackball" in self.config:
             loco.setdefault("trackball", self.config["trackball"])  # the driver parses its own section
         try:

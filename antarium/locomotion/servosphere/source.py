@@ -8,6 +8,7 @@ of `FAULTS`) stop the ball (rates ramp to 0 at the acceleration limit), are coun
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from typing import Any
@@ -135,16 +136,24 @@ class ServosphereSource(BufferedSource):
     line; camera_index; calibration: {apex_px = [x, y], mm_per_px, rotation_deg} or {image = "path.png",
     disc_diameter_mm}; kp, kd, counter_rotate; threshold (grey level), area_mm2 [min, max];
     rotors: {azimuth_deg, elevation_deg, wheel_radius, sphere_radius}; steppers: {steps_per_rev, max_rate,
-    max_accel}. `tether` and the dome's `ball_radius` are the loop's: the ball's radius here is `rotors`'."""
+    max_accel}. ball_radius (m): the dome loop's (`antarium serve` passes `[loop] ball_radius`); it is the sphere's
+    radius unless `rotors` sets one, and must then be equal. `tether`: the loop's (free_yaw, or fixed with
+    counter_rotate)."""
 
     def __init__(self, camera: str = "simulated", link: str = "simulated", simulation: dict | None = None,
                  port: str = "", baudrate: int = 1_000_000, camera_index: int | str = 0,
                  calibration: dict | None = None, kp: float = 1.25, kd: float = 0.005, counter_rotate: bool = False,
                  threshold: int = 120, area_mm2: tuple[float, float] = (5.0, 60.0), rotors: dict | None = None,
-                 steppers: dict | None = None, clock: Clock | None = None, tether: str = "free_yaw") -> None:
+                 steppers: dict | None = None, clock: Clock | None = None, tether: str = "free_yaw",
+                 ball_radius: float | None = None) -> None:
         super().__init__()
         self.clock = clock or MonotonicClock()
-        geometry = RotorGeometry(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in (rotors or {}).items()})
+        rotors = {k: (tuple(v) if isinstance(v, list) else v) for k, v in (rotors or {}).items()}
+        if ball_radius is not None:
+            if not math.isclose(rotors.setdefault("sphere_radius", ball_radius), ball_radius):
+                raise ValueError(f"servosphere rotors sphere_radius {rotors['sphere_radius']} m differs from the "
+                                 f"loop's ball_radius {ball_radius} m; allowed: one value ([loop] ball_radius)")
+        geometry = RotorGeometry(**rotors)
         limits = StepperLimits(**(steppers or {}))
         self.rig = None
         if "simulated" in (camera, link):
