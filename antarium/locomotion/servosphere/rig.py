@@ -95,12 +95,14 @@ class SimulatedRig:
     """Everything physical of a servosphere, simulated. Knobs for tests: `ant_visible`, `distractor_mm`
     (a second ant-sized blob at (x, y) mm, or None), `firmware.stalled[i]`, `port.drop_prob`/`garble_prob`.
 
-    speed (m/s), meander (rad/s s.d. of turn rate, redrawn every spurt_s), path [(x, y), ...] m: the ant's walk.
+    speed (m/s), meander (rad/s s.d. of turn rate, redrawn every spurt_s), pause_fraction (share of spurts
+    standing still: the ant stops and starts at once), path [(x, y), ...] m: the ant's walk.
     slip: fraction of the wheels' drive lost (0..0.5). latency_s: one way, serial line + USB.
     """
 
     def __init__(self, clock: Clock | None = None, *, speed: float = 0.05, meander: float = 2.0, spurt_s: float = 0.5,
-                 path: list | None = None, seed: int = 0, slip: float = 0.0, ball_tau_s: float = 0.005,
+                 pause_fraction: float = 0.0, path: list | None = None, seed: int = 0, slip: float = 0.0,
+                 ball_tau_s: float = 0.005,
                  latency_s: float = 0.001, drop_prob: float = 0.0, garble_prob: float = 0.0,
                  frame_rate: float = 700.0, size: tuple[int, int] = (640, 480), mm_per_px: float = 0.06,
                  apex_px: tuple[float, float] = (322.0, 236.5), noise_sd: float = 4.0, blur_px: float = 3.0,
@@ -118,7 +120,8 @@ class SimulatedRig:
         self.t = self.clock.now()
         self.firmware = FirmwareEmulator(self.limits, t0=self.t)
         self.port = SimulatedPort(self, latency_s, drop_prob, garble_prob, seed + 1)
-        self.walker = ScriptedSource(speed=speed, meander=meander, spurt_s=spurt_s, path=path, seed=seed,
+        self.walker = ScriptedSource(speed=speed, meander=meander, spurt_s=spurt_s, pause_fraction=pause_fraction,
+                                     path=path, seed=seed,
                                      rate_hz=1.0 / self.substep_s, ball_radius=self.geometry.sphere_radius)
         self._k = 0
         self.omega = np.zeros(3)  # ball angular velocity, rad/s
