@@ -96,7 +96,7 @@ BACKENDS: dict[str, str] = {
     "fictrac": "antarium.trackball.fictrac_source:FicTracSource",
     "fictrac-replay": "antarium.trackball.fictrac_source:FicTracReplay",
     "ant": "antarium.ant.locomotion:AntLocomotion",
-    "servosphere": "antarium.locomotion.servosphere.source:ServosphereSource",
+    "servosphere": "antarium.locomotion.servosphere.source:servosphere_source",
 }
 
 

@@ -228,6 +228,18 @@ class ServosphereSource(BufferedSource):
                 "link_errors": loop.link.errors, "tracker_faults": dict(loop.tracker.faults)}
 
 
+def servosphere_source(clock: Clock | None = None, process: bool | None = None, **options: Any):
+    """The `servosphere` back-end: on the wall clock its control loop runs in a process of its own
+    (`process.ServosphereProcess`; `process = false` keeps it in a thread here), on a `SimulatedClock` in `read()`."""
+    if process is None:
+        process = not isinstance(clock, SimulatedClock)
+    if process:
+        from antarium.locomotion.servosphere.process import ServosphereProcess
+
+        return ServosphereProcess(clock=clock, **options)
+    return ServosphereSource(clock=clock, **options)
+
+
 def _calibration(cfg: dict | None) -> Calibration:
     if not cfg:
         raise ValueError("a real servosphere needs [locomotion] calibration = {apex_px, mm_per_px} or {image}")
