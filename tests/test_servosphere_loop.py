@@ -99,3 +99,21 @@ def test_bad_source_options_name_what_is_allowed():
         open_source("servosphere", simulation={"slip": 0.9}, clock=SimulatedClock())
     with pytest.raises(ValueError, match="calibration"):
         _calibration(None)
+
+
+def test_counter_rotation_holds_the_ants_heading():
+    def heading_spread(counter_rotate):
+        clock = SimulatedClock()
+        src = open_source("servosphere", clock=clock, counter_rotate=counter_rotate,
+                          simulation={"seed": 6, "speed": 0.05, "meander": 2.0})
+        log = Rows()
+        src.use_log(log)
+        _run(src, clock, 1.5)
+        headings = np.array([r[5] for r in log.rows[350:]])
+        spread = np.abs(np.remainder(headings + math.pi, math.tau) - math.pi)  # rad from yaw_ref 0
+        yaw = sum(s.rotation[2] for s in src.read())
+        return float(np.percentile(spread, 90)), yaw
+
+    free, free_yaw = heading_spread(False)
+    held, _ = heading_spread(True)
+    assert held < math.radians(15) < free and free_yaw == 0.0

@@ -23,7 +23,7 @@ class ControllerConfig:
     kp: float = 1.25
     kd: float = 0.005
     counter_rotate: bool = False
-    kp_yaw: float = 5.0  # (rad/s)/rad, only with counter_rotate
+    kp_yaw: float = 20.0  # (rad/s)/rad, only with counter_rotate: a turn of 2 rad/s is held to 0.1 rad
     yaw_ref_deg: float = 0.0
     geometry: RotorGeometry = field(default_factory=RotorGeometry)
     limits: StepperLimits = field(default_factory=StepperLimits)
