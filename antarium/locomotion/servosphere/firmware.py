@@ -59,7 +59,12 @@ class FirmwareEmulator:
         """Bytes from the host arriving at time `t`; returns the reply bytes."""
         self.advance(t)
         out = b""
-        for msg in self.decoder.feed(data):
+        messages = self.decoder.feed(data)
+        bad = sum(self.decoder.errors.values())
+        if bad != self._bad_seen:  # reported in this chunk's replies already
+            self._bad_seen = bad
+            self.faults |= p.FAULT_BAD_MESSAGE
+        for msg in messages:
             self._last_command = t
             if isinstance(msg, p.SetRates):
                 if not self.faults & (p.FAULT_STALL_1 | p.FAULT_STALL_2 | p.FAULT_STALL_3):
@@ -73,10 +78,6 @@ class FirmwareEmulator:
                 self.faults |= p.FAULT_BAD_MESSAGE
                 continue
             out += p.encode(self.status(msg.seq))
-        bad = sum(self.decoder.errors.values())
-        if bad != self._bad_seen:
-            self._bad_seen = bad
-            self.faults |= p.FAULT_BAD_MESSAGE
         return out
 
     def status(self, seq: int) -> p.Status:
