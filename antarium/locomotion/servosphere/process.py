@@ -130,4 +130,4 @@ def _child_main(conn, options: dict[str, Any], batch_s: float) -> None:
     except (BrokenPipeError, EOFError, OSError):  # the parent went away
         pass
     finally:
-        src.loop.link.stop()
+        src.stop()

@@ -20,8 +20,6 @@ MAX_PAYLOAD = 64
 FAULT_STALL_1, FAULT_STALL_2, FAULT_STALL_3 = 0x01, 0x02, 0x04
 FAULT_WATCHDOG = 0x08  # no valid command within the watchdog time: motors ramped to 0
 FAULT_BAD_MESSAGE = 0x10  # the firmware received a message it could not decode
-FAULT_NAMES = {FAULT_STALL_1: "stall_1", FAULT_STALL_2: "stall_2", FAULT_STALL_3: "stall_3",
-               FAULT_WATCHDOG: "watchdog", FAULT_BAD_MESSAGE: "bad_message"}
 
 
 class ProtocolError(ValueError):

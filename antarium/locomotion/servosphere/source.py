@@ -44,6 +44,7 @@ class ServosphereLoop:
         self.fault_counts = dict.fromkeys(FAULTS, 0)
         self._t_prev: float | None = None
         self._xy_prev: tuple[float, float] | None = None
+        self._cam_mm_s: tuple[float, float] | None = None
         self._last_reply_t: float | None = None
         self._link_errors = 0
         self._steps: np.ndarray | None = None
@@ -56,7 +57,7 @@ class ServosphereLoop:
         t, image = self.camera.grab()
         dt = t - self._t_prev if self._t_prev is not None else 1.0 / self.camera.frame_rate
         self._t_prev = t
-        det = self.tracker.update(image, self._walk_mm_s(dt))
+        det = self.tracker.update(image, self._walk_mm_s())
         samples, fw_faults = self._replies(t)
         faults = _BIT[det.fault] if det.fault else 0
         if self._last_reply_t is None:
@@ -83,16 +84,20 @@ class ServosphereLoop:
         omega = self.controller.omega
         steps = self._steps if self._steps is not None else np.zeros(3, np.int64)
         row = (t, self.frame, det.x_mm, det.y_mm, det.orientation, det.heading, *omega, *rates, *steps, faults)
-        self._xy_prev = None if det.fault else (det.x_mm, det.y_mm)
+        xy = None if det.fault else (det.x_mm, det.y_mm)
+        self._cam_mm_s = ((xy[0] - self._xy_prev[0]) / dt, (xy[1] - self._xy_prev[1]) / dt) \
+            if xy is not None and self._xy_prev is not None and dt > 0 else None
+        self._xy_prev = xy
         return samples, row
 
-    def _walk_mm_s(self, dt: float) -> tuple[float, float] | None:
-        """The ant's walk over the ball's surface: its motion in the camera minus the surface's (mm/s)."""
-        if self._xy_prev is None or self.tracker.last_px is None:
+    def _walk_mm_s(self) -> tuple[float, float] | None:
+        """The ant's walk over the ball's surface (mm/s, dome frame): its velocity in the camera over the last
+        frame minus the apex surface's velocity (omega_y R, -omega_x R) for the ball rotation asked for."""
+        if self._cam_mm_s is None:
             return None
         wx, wy, _ = self.controller.omega
         r_mm = self.geometry.sphere_radius * 1000.0
-        return (-wy * r_mm, wx * r_mm)
+        return self._cam_mm_s[0] - wy * r_mm, self._cam_mm_s[1] + wx * r_mm
 
     def _replies(self, t: float) -> tuple[list[BallSample], int]:
         samples = []
@@ -180,6 +185,7 @@ class ServosphereSource(BufferedSource):
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._catch_up = isinstance(self.clock, SimulatedClock)
+        self._closed = False
         self.step_s = 0.0  # wall time spent in steps (s), for the status line and the benchmark
 
     def use_log(self, log) -> None:
@@ -212,8 +218,11 @@ class ServosphereSource(BufferedSource):
         if self._thread is not None:
             self._thread.join(2.0)
             self._thread = None
-        if self.loop.link is not None:
+        if not self._closed:  # the firmware ramps the rotors to 0; then the port and the camera are released
+            self._closed = True
             self.loop.link.stop()
+            self.loop.link.close()
+            self.loop.camera.close()
 
     def read(self) -> list[BallSample]:
         if self._catch_up:
@@ -225,7 +234,9 @@ class ServosphereSource(BufferedSource):
     def status(self) -> dict[str, Any]:
         loop = self.loop
         return {"connected": True, "frames": loop.frame, "faults": dict(loop.fault_counts),
-                "link_errors": loop.link.errors, "tracker_faults": dict(loop.tracker.faults)}
+                "faults_now": [name for name, bit in _BIT.items() if loop.last_faults & bit],
+                "link": {"sent": loop.link.sent, "received": loop.link.received, "errors": loop.link.errors},
+                "tracker_faults": dict(loop.tracker.faults)}
 
 
 def servosphere_source(clock: Clock | None = None, process: bool | None = None, **options: Any):
