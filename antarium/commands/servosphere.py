@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
         options = dict(load_config(args.config)["locomotion"])
         if options.pop("source") != "servosphere":
             raise ValueError(f"{args.config}: [locomotion] source must be \"servosphere\"")
-    src = open_source("servosphere", clock=clock, **options)
+    src = open_source("servosphere", clock=clock, process=False, **options)  # the loop here: its rig, its rows
     rows: list[tuple] = []
     src.use_log(type("Rows", (), {"add_servosphere": staticmethod(rows.append)})())
     radius = src.loop.geometry.sphere_radius
