@@ -18,18 +18,21 @@ def test_the_loop_runs_in_its_own_process_and_hands_everything_back():
     assert isinstance(src, ServosphereProcess)
     rows = Rows()
     src.use_log(rows)
+    t_start = time.monotonic()
     src.start()
     try:
-        time.sleep(1.0)
+        deadline = time.monotonic() + 20.0  # 700 frames a second unless the machine is overloaded
+        while src.status()["frames"] < 200 and time.monotonic() < deadline:
+            time.sleep(0.05)
         samples = src.read()
         status = src.status()
     finally:
         src.stop()
-    assert status["connected"] and status["frames"] > 100  # 700 a second when the machine is not overloaded
+    assert status["connected"] and status["frames"] >= 200
     assert len(samples) > 50
     assert all(a.seq < b.seq and a.t <= b.t for a, b in zip(samples[:-1], samples[1:], strict=True))
-    assert abs(time.monotonic() - samples[-1].t) < 1.0  # the frame loop's clock
-    assert np.linalg.norm(np.sum([s.rotation for s in samples], axis=0)) > 0.05  # rad: the ball turned
+    assert t_start <= samples[0].t and samples[-1].t <= time.monotonic()  # the frame loop's clock
+    assert np.linalg.norm(np.sum([s.rotation for s in samples], axis=0)) > 0.01  # rad: the ball turned
     assert len(rows) >= status["frames"] - 10 and rows[-1][1] >= status["frames"]
     assert src.status()["connected"] is False
 
