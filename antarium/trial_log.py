@@ -43,6 +43,15 @@ SAMPLE_DTYPE = np.dtype([
     ("t", "<f8"), ("seq", "<i8"), ("rx", "<f8"), ("ry", "<f8"), ("rz", "<f8"), ("t_device", "<f8"), ("quality", "<f4"),
 ])
 
+#: per-camera-frame servosphere table (source "servosphere"; empty otherwise): tracker error from the apex (mm),
+#: body axis and resolved heading (rad), ball angular velocity asked for (rad/s), rotor rates sent (steps/s),
+#: the firmware's newest step counts, and the fault bits (`antarium.locomotion.servosphere.source.FAULTS`)
+SERVOSPHERE_DTYPE = np.dtype([
+    ("t", "<f8"), ("frame", "<i8"), ("err_x_mm", "<f4"), ("err_y_mm", "<f4"), ("orientation", "<f4"),
+    ("heading", "<f4"), ("omega_x", "<f4"), ("omega_y", "<f4"), ("omega_z", "<f4"), ("rate1", "<f4"),
+    ("rate2", "<f4"), ("rate3", "<f4"), ("steps1", "<i8"), ("steps2", "<i8"), ("steps3", "<i8"), ("faults", "<u4"),
+])
+
 
 def _text_dtypes():
     import h5py
@@ -119,7 +128,7 @@ class TrialLog:
             self._proc.stop(5)
             raise LogError(f"cannot create trial log {str(self.path)!r}: {detail}")
         self.flush_s = float(flush_s)
-        self._tables = ("frames", "locomotion", "events", "commands", "scenes")
+        self._tables = ("frames", "locomotion", "events", "commands", "scenes", "servosphere")
         self._pending: dict[str, list] = {table: [] for table in self._tables}
         self._lock = threading.Lock()
         self._send_lock = threading.Lock()
@@ -141,6 +150,10 @@ class TrialLog:
         for s in samples:
             t_dev = s.t_device if s.t_device is not None else float("nan")
             self._append("locomotion", (s.t, s.seq, *s.rotation, t_dev, s.quality))
+
+    def add_servosphere(self, row: tuple) -> None:
+        """One row in `SERVOSPHERE_DTYPE` field order."""
+        self._append("servosphere", row)
 
     def add_event(self, t: float, kind: str, data: Any = None) -> None:
         self._append("events", (t, kind, _json(data)))
@@ -304,14 +317,14 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
 
     import h5py
 
-    dtypes = {"frames": FRAME_DTYPE, "locomotion": SAMPLE_DTYPE, **_text_dtypes()}
+    dtypes = {"frames": FRAME_DTYPE, "locomotion": SAMPLE_DTYPE, **_text_dtypes(), "servosphere": SERVOSPHERE_DTYPE}
     try:
         with h5py.File(path, "w-", libver=LIBVER, locking=False) as f:
             for key, value in attrs.items():
                 f.attrs[key] = value
             for table, dtype in dtypes.items():
                 f.create_dataset(table, shape=(0,), maxshape=(None,), dtype=dtype,
-                                 chunks=(1024 if table in ("frames", "locomotion") else 64,))
+                                 chunks=(1024 if table in ("frames", "locomotion", "servosphere") else 64,))
     except (OSError, ValueError) as exc:
         conn.send(("error", str(exc)))
         return

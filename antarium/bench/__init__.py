@@ -11,4 +11,5 @@ TARGETS: dict[str, str] = {
     "protocol": "antarium.bench.protocol:run",
     "render": "antarium.bench.render:run",
     "jitter": "antarium.bench.jitter:run",
+    "servosphere": "antarium.bench.servosphere:run",
 }

@@ -137,6 +137,7 @@ BACKENDS: dict[str, str] = {
     "fictrac": "antarium.locomotion.fictrac.source:FicTracSource",
     "fictrac-replay": "antarium.locomotion.fictrac.source:FicTracReplay",
     "ant": "antarium.ant.locomotion:AntLocomotion",
+    "servosphere": "antarium.locomotion.servosphere.process:servosphere_source",
 }
 
 

@@ -111,8 +111,10 @@ class Server:
             loco.setdefault("rig", self.rig_name)
             loco.setdefault("bus", self.config.bus)
         loco.setdefault("clock", self.clock)
-        if name == "scripted":
+        if name in ("scripted", "servosphere"):
             loco.setdefault("tether", self.config.loop.tether)
+        if name == "servosphere":  # one ball: the dome's loop integrates the rotation with the same radius
+            loco.setdefault("ball_radius", self.config.loop.ball_radius_m)
         if name == "usb" and self.config.section("trackball") is not None:
             loco.setdefault("trackball", self.config.section("trackball"))  # the driver parses its own section
         try:
@@ -363,6 +365,8 @@ class Server:
 
     def _attach_log(self, log, name: str, metadata: dict) -> None:
         self.loop.log = log
+        if hasattr(self.source, "use_log"):  # a source with a table of its own (servosphere)
+            self.source.use_log(log)
         self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path))
 
     def trial_stop(self) -> dict[str, Any]:
@@ -383,6 +387,8 @@ class Server:
     def _detach_log(self) -> None:
         self.loop.event("trial_stopped", name=self.trial_name, path=str(self.trial_log.path))
         self.loop.log = None
+        if hasattr(self.source, "use_log"):
+            self.source.use_log(None)
 
     # -- running ---------------------------------------------------------------------------------------
     def run(self, until: float | None = None, frames: int | None = None, seconds: float | None = None) -> int:

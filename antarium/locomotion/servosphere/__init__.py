@@ -1,0 +1,44 @@
+"""The servosphere: a free ant kept on a ball's apex by camera tracking, PD control and three omniwheel rotors
+(Goulard et al. 2021); the ball's rotation is the ant's walk. See docs/servosphere.md.
+
+Camera and motor link each sit behind one interface with a registry of back-ends imported lazily (python-can
+style); `simulated` back-ends come from `rig.SimulatedRig`.
+
+    rig = SimulatedRig(clock)
+    link = open_motor_link("simulated", rig=rig)       # or open_motor_link("serial", url="/dev/ttyACM0")
+    camera = open_camera("simulated", rig=rig)         # or open_camera("opencv", index=0)
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import Any
+
+#: back-end name -> "module:factory"
+MOTOR_LINKS: dict[str, str] = {
+    "simulated": "antarium.locomotion.servosphere.rig:open_simulated_link",
+    "serial": "antarium.locomotion.servosphere.link:open_serial_link",
+}
+CAMERAS: dict[str, str] = {
+    "simulated": "antarium.locomotion.servosphere.rig:open_simulated_camera",
+    "opencv": "antarium.locomotion.servosphere.camera:OpenCVCamera",
+}
+
+
+def _open(registry: dict[str, str], kind: str, name: str, kwargs: dict[str, Any]):
+    try:
+        target = registry[name]
+    except KeyError:
+        raise ValueError(f"unknown servosphere {kind} {name!r}; allowed: {', '.join(sorted(registry))}") from None
+    module_name, attr = target.split(":")
+    return getattr(import_module(module_name), attr)(**kwargs)
+
+
+def open_motor_link(name: str, **kwargs: Any):
+    """A `link.MotorLink` from back-end `name`."""
+    return _open(MOTOR_LINKS, "motor link", name, kwargs)
+
+
+def open_camera(name: str, **kwargs: Any):
+    """A camera (`grab() -> (t, uint8 (H, W))`, `frame_rate`, `close()`) from back-end `name`."""
+    return _open(CAMERAS, "camera", name, kwargs)

@@ -1,0 +1,87 @@
+"""Servosphere kinematics (Goulard et al. 2021, Eqs. 2-6), the PD controller and the steppers' limits."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from antarium.locomotion.servosphere.controller import Controller, ControllerConfig
+from antarium.locomotion.servosphere.kinematics import RotorGeometry, StepperLimits, inverse_eq6, rotor_matrix
+
+_angle = st.floats(-180, 180)
+_elev = st.floats(15, 75)
+
+
+@settings(max_examples=60, deadline=None)
+@given(az=st.tuples(_angle, _angle, _angle), el=st.tuples(_elev, _elev, _elev),
+       omega=st.tuples(*[st.floats(-20, 20)] * 3), rw=st.floats(0.005, 0.05), rs=st.floats(0.02, 0.2))
+def test_eq4_and_its_inverse_round_trip(az, el, omega, rw, rs):
+    m = rotor_matrix(az, el)
+    if abs(np.linalg.det(m)) < 1e-2:  # nearly coplanar axes are refused (tested below)
+        return
+    geo = RotorGeometry(az, el, rw, rs)
+    motor = geo.motor_speeds(omega)
+    tolerance = 1e-6 * (1 + max(map(abs, omega))) / abs(np.linalg.det(m))  # rad/s; conditioning of RMat
+    assert geo.sphere_omega(motor) == pytest.approx(omega, abs=tolerance)
+
+
+def test_eq6_cofactor_inverse_is_the_matrix_inverse():
+    m = rotor_matrix((0, 120, 240), (60, 60, 60))
+    assert inverse_eq6(m) @ m == pytest.approx(np.eye(3), abs=1e-12)
+
+
+def test_paper_rig_axes_and_a_pure_roll():
+    geo = RotorGeometry()
+    assert geo.rmat[:, 0] == pytest.approx([0.5, 0.0, math.sqrt(3) / 2])  # azimuth 0, elevation 60 deg
+    assert np.linalg.norm(geo.rmat, axis=0) == pytest.approx(np.ones(3))
+    # a yaw turns the three rotors equally; a roll about y leaves rotor 1 (axis in the x-z plane) still
+    yaw = geo.motor_speeds([0, 0, 1.0])
+    assert yaw == pytest.approx(np.full(3, yaw[0])) and yaw[0] > 0
+    roll_y = geo.motor_speeds([0, 1.0, 0])
+    assert roll_y[0] == pytest.approx(0.0, abs=1e-12) and roll_y[1] == pytest.approx(-roll_y[2])
+
+
+def test_coplanar_rotors_are_refused_with_what_is_allowed():
+    with pytest.raises(ValueError, match="coplanar.*allowed"):
+        RotorGeometry(elevation_deg=(0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="3 rotor azimuths"):
+        rotor_matrix((0, 120), (60, 60))
+
+
+def test_stepper_limits_clip_rate_and_acceleration():
+    lim = StepperLimits(steps_per_rev=200, max_rate=1000.0, max_accel=10000.0)
+    out = lim.limit(np.array([5000.0, -5000.0, 10.0]), np.zeros(3), 0.01)
+    assert out == pytest.approx([100.0, -100.0, 10.0])
+    assert lim.limit(np.array([5000.0, 0, 0]), np.array([995.0, 0, 0]), 0.01)[0] == pytest.approx(1000.0)
+    with pytest.raises(ValueError, match="max_rate"):
+        StepperLimits(max_rate=0.0)
+
+
+def test_pd_moves_the_apex_surface_toward_the_ant():
+    ctl = Controller(ControllerConfig(kd=0.0))
+    ctl.update((2.0, -1.0), math.nan, 0.01)
+    wx, wy, wz = ctl.omega
+    # surface velocity at the apex is (wy R, -wx R): it must point from the ant back to the apex (-2, +1)
+    assert wy == pytest.approx(-2.5) and -wx == pytest.approx(1.25) and wz == 0.0
+
+
+def test_pd_derivative_and_stop_on_no_measurement():
+    cfg = ControllerConfig(kp=0.0, kd=0.01)
+    ctl = Controller(cfg)
+    ctl.update((0.0, 0.0), 0.0, 0.001)
+    ctl.update((0.1, 0.0), 0.0, 0.001)  # 100 mm/s
+    assert ctl.omega[1] == pytest.approx(-1.0)
+    rates = ctl.rates.copy()
+    ctl.update(None, 0.0, 0.001)
+    assert not ctl.omega.any()
+    assert np.all(np.abs(ctl.rates) <= np.abs(rates))  # ramping toward 0 at the acceleration limit
+
+
+def test_counter_rotation_turns_the_ball_against_the_ant():
+    ctl = Controller(ControllerConfig(counter_rotate=True, kp_yaw=2.0))
+    ctl.update((0.0, 0.0), math.radians(30), 0.001)
+    assert ctl.omega[2] == pytest.approx(-2.0 * math.radians(30))
+    with pytest.raises(ValueError, match="kp must be"):
+        ControllerConfig(kp=-1.0)

@@ -1,0 +1,147 @@
+"""The motor link: one test class run against every back-end. `simulated` is the rig's firmware emulator behind
+its simulated line; `serial` is pyserial on a pseudo-terminal whose other end runs the same firmware emulator
+(the lowest seam: our encode/decode runs on both sides)."""
+
+import os
+import select
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from antarium.core.clock import SimulatedClock
+from antarium.locomotion.servosphere import MOTOR_LINKS, open_motor_link
+from antarium.locomotion.servosphere import protocol as p
+from antarium.locomotion.servosphere.firmware import FirmwareEmulator
+from antarium.locomotion.servosphere.rig import SimulatedRig
+
+
+class PtyFirmware:
+    """The firmware emulator answering on the master side of a pseudo-terminal, in wall time."""
+
+    def __init__(self):
+        self.master, self.slave = os.openpty()
+        self.path = os.ttyname(self.slave)
+        self.firmware = FirmwareEmulator(watchdog_s=1.0, t0=time.monotonic())
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self.master], [], [], 0.01)
+            now = time.monotonic()
+            self.firmware.advance(now)
+            if ready:
+                reply = self.firmware.receive(os.read(self.master, 4096), now)
+                if reply:
+                    os.write(self.master, reply)
+
+    def close(self):
+        self._stop.set()
+        self._thread.join(1.0)
+        os.close(self.master)
+        os.close(self.slave)
+
+
+@pytest.fixture(params=sorted(MOTOR_LINKS))
+def backend(request):
+    """(link, firmware emulator, wait(seconds))"""
+    if request.param == "simulated":
+        clock = SimulatedClock()
+        rig = SimulatedRig(clock)
+        rig.firmware.watchdog_s = 1.0
+
+        def wait(seconds):
+            clock.advance(seconds)
+            rig.advance(clock.now())
+
+        yield open_motor_link("simulated", rig=rig), rig.firmware, wait
+        return
+    pty = PtyFirmware()
+    link = open_motor_link("serial", url=pty.path)
+    yield link, pty.firmware, time.sleep
+    link.close()
+    pty.close()
+
+
+def _replies(link, wait, n=1, timeout=2.0):
+    out = []
+    for _ in range(int(timeout / 0.01)):
+        out += link.poll()
+        if len(out) >= n:
+            break
+        wait(0.01)
+    return out
+
+
+class TestEveryLink:
+    def test_rates_are_acknowledged_with_growing_step_counts(self, backend):
+        link, _, wait = backend
+        seq = link.send_rates([2000, -2000, 0])
+        (status, steps0), = _replies(link, wait)
+        assert status.seq == seq and status.faults == 0
+        wait(0.2)
+        link.send_rates([2000, -2000, 0])
+        status, steps = _replies(link, wait)[-1]
+        assert steps[0] > steps0[0] + 50 and steps[1] < steps0[1] - 50 and steps[2] == steps0[2]
+
+    def test_stop_ramps_the_rotors_to_zero(self, backend):
+        link, firmware, wait = backend
+        link.send_rates([4000, 4000, 4000])
+        _replies(link, wait)
+        wait(0.1)
+        link.stop()
+        _replies(link, wait)
+        wait(0.1)
+        link.clear_faults()
+        (_, a), = _replies(link, wait)
+        wait(0.1)
+        link.clear_faults()
+        (_, b), = _replies(link, wait)
+        assert np.array_equal(a, b)
+
+    def test_a_stalled_rotor_is_a_latched_fault_that_clears(self, backend):
+        link, firmware, wait = backend
+        firmware.stalled[1] = True
+        link.send_rates([1000, 1000, 1000])
+        _replies(link, wait)
+        wait(0.05)
+        link.send_rates([1000, 1000, 1000])
+        status, _ = _replies(link, wait)[-1]
+        assert status.faults & p.FAULT_STALL_2 and not np.any(firmware.target)
+        firmware.stalled[1] = False
+        link.clear_faults()
+        status, _ = _replies(link, wait)[-1]
+        assert status.faults == 0
+
+    def test_garbage_on_the_line_is_counted_not_misread(self, backend):
+        link, firmware, wait = backend
+        link.port.write(b"\xa5\x5a\x01\x01\x0e" + bytes(16))  # a SetRates with a bad CRC
+        link.send_rates([0, 0, 0])
+        status, _ = _replies(link, wait)[-1]
+        assert status.faults & p.FAULT_BAD_MESSAGE and not np.any(firmware.target)
+
+
+def test_step_counters_unwrap_across_int32():
+    class Replay:
+        def __init__(self, data):
+            self.data = data
+
+        def read(self):
+            data, self.data = self.data, b""
+            return data
+
+    from antarium.locomotion.servosphere.link import MotorLink
+
+    top = 2 ** 31 - 10
+    wrapped = top + 30 - 2 ** 32
+    link = MotorLink(Replay(p.encode(p.Status(1, 0, top, 0, 0, 0)) + p.encode(p.Status(2, 10, wrapped, 0, 0, 0))))
+    (_, a), (_, b) = link.poll()
+    assert b[0] - a[0] == 30
+
+
+def test_unknown_link_names_what_is_allowed():
+    with pytest.raises(ValueError, match="allowed: serial, simulated"):
+        open_motor_link("can")
