@@ -23,12 +23,10 @@ from antarium.ant.eye import Eye, EyeParams
 from antarium.ant.locomotion import AntLocomotion, BusLegs, TrackballLegs
 from antarium.core.ball import BALL_RADIUS_M
 from antarium.core.clock import Clock, SimulatedClock
-from antarium.core.pose import Pose
 from antarium.core.rates import DOME_RATE_HZ, FRAME_PERIOD_S
 
 #: eye height above the ground at ant scale (m)
 EYE_HEIGHT_M = 0.01
-#: the frame loop's rate (frames/s): the dome's
 
 
 @contextlib.contextmanager
@@ -46,6 +44,7 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
     an emulated USB trackball on the loop's clock, and the real driver reading it is the loop's source
     (`TrackballLegs`); its default reports at 950 Hz, five per frame.
     """
+    from antarium.config import LoopSection
     from antarium.firmware_proto.link import open_link
     from antarium.geometry import load_dome
     from antarium.renderers import Renderer
@@ -88,7 +87,7 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
             stack.callback(source.stop)
             legs = BusLegs(session, rig, tether, clock=clock)
             stack.callback(legs.close)
-        loop = FrameLoop(clock=clock, source=source, renderer=renderer, link=link, tether=tether, log=log,
-                         origin=Pose(0.0, 0.0, eye_height, 0.0), rate_hz=DOME_RATE_HZ,
-                         ball_radius=legs.driver.config.ball_radius if trackball is not None else BALL_RADIUS_M)
+        loop_cfg = LoopSection(tether=tether, eye_height_m=eye_height, rate_hz=DOME_RATE_HZ,
+                               ball_radius_m=legs.driver.config.ball_radius if trackball is not None else BALL_RADIUS_M)
+        loop = FrameLoop.from_config(loop_cfg, clock=clock, source=source, renderer=renderer, link=link, log=log)
         yield VirtualAnt(eye, model, loop, legs, link.emulator.led_values, frames_per_decision)

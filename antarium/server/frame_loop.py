@@ -29,7 +29,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from operator import attrgetter
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,6 +39,9 @@ from antarium.core.pose import Pose
 from antarium.core.rates import DOME_RATE_HZ
 from antarium.locomotion import LocomotionSource
 from antarium.trial_log import FRAME_DTYPE
+
+if TYPE_CHECKING:
+    from antarium.config import LoopSection
 
 #: how many recent frames the statistics (percentiles, frame rate) cover
 STATS_WINDOW = 2048
@@ -99,6 +102,15 @@ def _check_gain(name: str, value: Any) -> float:
 class FrameLoop:
     """Paced frames; see the module docstring. Control methods run in the loop's thread (or through
     `call_soon` from others); they validate first and leave the state unchanged on a ValueError."""
+
+    @classmethod
+    def from_config(cls, loop: LoopSection, **parts: Any) -> FrameLoop:
+        """The frame loop a `[loop]` section describes; `parts`: clock, source, renderer, link, log, on_frame,
+        on_event (the server's rig and the virtual ant's both assemble their loop here)."""
+        origin = Pose(loop.start_x_m, loop.start_y_m, loop.eye_height_m, math.radians(loop.start_heading_deg))
+        return cls(rate_hz=loop.rate_hz, closed_loop=loop.closed_loop, tether=loop.tether,
+                   gain_translation=loop.gain_translation, gain_rotation=loop.gain_rotation, origin=origin,
+                   ball_radius=loop.ball_radius_m, **parts)
 
     def __init__(self, *, clock: Clock, source: LocomotionSource | None, renderer=None, link=None,
                  rate_hz: float = DOME_RATE_HZ, closed_loop: bool = True, tether: str = "free_yaw",

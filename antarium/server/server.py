@@ -26,7 +26,6 @@ import numpy as np
 from antarium import bus
 from antarium.core import realtime
 from antarium.core.clock import Clock, MonotonicClock
-from antarium.core.pose import Pose
 from antarium.server.commands import COMMANDS, CommandError, parse_command
 from antarium.server.emulator_process import EmulatorProcess
 from antarium.server.frame_loop import FrameLoop, FrameRecord
@@ -405,14 +404,9 @@ class Server:
             self.link = self._open_link()
             self.renderer = self._renderer_factory(self.config.render, self.clock) if self._renderer_factory \
                 else None
-            origin = Pose(loop_cfg.start_x_m, loop_cfg.start_y_m, loop_cfg.eye_height_m,
-                          math.radians(loop_cfg.start_heading_deg))
-            self.loop = FrameLoop(
-                clock=self.clock, source=self.source, renderer=self.renderer, link=self.link,
-                rate_hz=loop_cfg.rate_hz, closed_loop=loop_cfg.closed_loop, tether=loop_cfg.tether,
-                gain_translation=loop_cfg.gain_translation, gain_rotation=loop_cfg.gain_rotation,
-                origin=origin, ball_radius=loop_cfg.ball_radius_m, log=self.trial_log,
-                on_frame=self._on_frame, on_event=self._publish_event)
+            self.loop = FrameLoop.from_config(
+                loop_cfg, clock=self.clock, source=self.source, renderer=self.renderer, link=self.link,
+                log=self.trial_log, on_frame=self._on_frame, on_event=self._publish_event)
             if self.renderer is not None:
                 self.load_scene(self.config.render.scene)
                 if hasattr(self.renderer, "wait_far_layer") and not self.renderer.wait_far_layer(self.loop.pose):
