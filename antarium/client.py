@@ -80,6 +80,11 @@ class Rig:
         self._alive = threading.Event()
 
     # -- connection ------------------------------------------------------------------------------------
+    @property
+    def session(self):
+        """The open zenoh session (None before `connect`): subscribe to other streams of the rig through it."""
+        return self._session
+
     def connect(self) -> Rig:
         """Open the session and wait until the server's liveliness token is seen."""
         if self._session is None:

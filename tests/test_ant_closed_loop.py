@@ -100,14 +100,14 @@ def test_the_ant_sees_what_the_panels_show_and_leaves_a_trial_log(trained, tmp_p
     with virtual_rig(trained, eye_params=EYE, renderer_kwargs={"face_size": FACE}, log_path=tmp_path / "ant.h5") as ant:
         ant.place(*ROUTE.start, 0.0)
         ant.frame()
-        rendered = ant.loop._frame_buf.copy()
+        rendered = ant.loop.last_frame.copy()
         np.testing.assert_array_equal(ant.read_leds(), ant.loop.link.emulator.led_values())
         seen = ant.look().pns()[0]
         assert np.corrcoef(seen, ant.eye.look(rendered).pns()[0])[0, 1] > 0.99
         for panel in range(20, 35):  # dim panels in the emulator only: the renderer's frame is unchanged
             ant.loop.link.emulator.set_brightness(panel, 0)
         ant.frame()
-        assert np.corrcoef(ant.look().pns()[0], ant.eye.look(ant.loop._frame_buf).pns()[0])[0, 1] < 0.95
+        assert np.corrcoef(ant.look().pns()[0], ant.eye.look(ant.loop.last_frame).pns()[0])[0, 1] < 0.95
         follow_route(ant, ROUTE, 5)
     frames = read_table(tmp_path / "ant.h5", "frames")
     events = read_table(tmp_path / "ant.h5", "events")

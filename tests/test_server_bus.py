@@ -76,9 +76,9 @@ def test_bad_commands_are_refused_with_the_state_unchanged(served, command, para
 
 def test_unknown_command_and_bad_json_are_refused(served):
     server, rig = served
-    replies = list(rig._session.get(bus.rig_key("tb", "cmd", "fly"), payload=b"{}", timeout=5))
+    replies = list(rig.session.get(bus.rig_key("tb", "cmd", "fly"), payload=b"{}", timeout=5))
     assert json.loads(replies[0].err.payload.to_bytes())["error"].startswith("unknown command 'fly'")
-    replies = list(rig._session.get(bus.command_key("tb", "set_pose"), payload=b"{x:", timeout=5))
+    replies = list(rig.session.get(bus.command_key("tb", "set_pose"), payload=b"{x:", timeout=5))
     assert "not JSON" in json.loads(replies[0].err.payload.to_bytes())["error"]
 
 
@@ -114,7 +114,7 @@ def test_status_and_streams(served):
     assert status["rig"] == "tb" and status["frames"] > 0 and status["target_rate_hz"] == 190.0
     assert "latency" in status and status["locomotion"]["connected"] is True
     received = []
-    sub = rig._session.declare_subscriber(bus.status_key("tb"), lambda s: received.append(s))
+    sub = rig.session.declare_subscriber(bus.status_key("tb"), lambda s: received.append(s))
     assert wait_for(lambda: len(received) >= 1, 3.0)
     sub.undeclare()
     assert json.loads(received[0].payload.to_bytes())["rig"] == "tb"
@@ -193,4 +193,4 @@ def test_a_server_starts_once_and_with_accepts_a_started_one(tmp_path):
         with pytest.raises(ServerError, match="started already; a server starts once"):
             server.start_thread()
         assert wait_for(lambda: server.loop.frame > 0, 5.0)  # the one server runs
-    assert not server._thread.is_alive()
+    assert not any(t.name == "antarium-server tb" for t in threading.enumerate())  # and its thread ended
