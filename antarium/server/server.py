@@ -14,7 +14,6 @@ from __future__ import annotations
 import gc
 import json
 import math
-import os
 import sys
 import threading
 from collections.abc import Callable
@@ -24,17 +23,15 @@ from typing import Any
 import numpy as np
 
 from antarium import bus
-from antarium.core import realtime
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.server.commands import COMMANDS, CommandError, parse_command
 from antarium.server.emulator_process import EmulatorProcess
 from antarium.server.frame_loop import FrameLoop, FrameRecord
+from antarium.server.placement import LoopPlacement
 
 #: events that are also printed on stderr: an operator must notice them
 ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "frame_rejected")
 COMMAND_TIMEOUT_S = 60.0
-#: how long another thread may keep the GIL while the frame loop waits for it (s); Python's default is 5 ms
-GIL_SWITCH_INTERVAL_S = 2e-4
 
 
 class ServerError(RuntimeError):
@@ -84,10 +81,7 @@ class Server:
         self.record = record
         self.trial_paths: list[Path] = []
         self.final_stats: dict[str, Any] = {}
-        self._isolation = None  # antarium.core.realtime.Isolation when [loop] cpu pins the frame loop
-        self._loop_tid = 0
-        self._realtime_set = False
-        self._switch_interval: float | None = None
+        self.placement = LoopPlacement(config.loop, self.echo)
         self.final_frame = None  # the last LED frame sent, kept after the loop stopped
         self._entities: list = []
         self._pose_pub = self._stats_pub = None
@@ -199,7 +193,7 @@ class Server:
         time (`FrameLoop.when_idle`), so that they never take the GIL from a frame; this thread runs what the
         loop has not run within a second (a loop blocked, e.g. by a scene load)."""
         while not self._stopping.wait(1.0):
-            for task in (self._place_threads, self._publish_status):
+            for task in (self.placement.place_threads, self._publish_status):
                 claim = threading.Lock()  # whoever takes it runs the task: the loop's idle time or this thread
 
                 def once(task=task, claim=claim) -> None:
@@ -395,12 +389,7 @@ class Server:
         `frames` frames ran, or `seconds` passed since the first frame."""
         try:
             loop_cfg = self.config.loop
-            if loop_cfg.realtime_priority:
-                self._set_realtime(loop_cfg.realtime_priority)
-            if loop_cfg.cpu != "off" and len(getattr(os, "sched_getaffinity", lambda _: ())(0)) > 1:
-                # llvmpipe (software GL) rasterises in the calling thread: the frame's GL work stays on the
-                # loop's own CPU instead of waiting for raster threads on the other (no effect on a GPU driver)
-                os.environ.setdefault("LP_NUM_THREADS", "0")
+            self.placement.before_building()
             self.link = self._open_link()
             self.renderer = self._renderer_factory(self.config.render, self.clock) if self._renderer_factory \
                 else None
@@ -428,15 +417,10 @@ class Server:
         # over these object graphs would stall a frame for milliseconds.
         gc.collect()
         gc.freeze()
-        # Another thread of ours (the log sender, the status thread, the bus' callbacks) holding the GIL when a
-        # frame is due keeps it until it blocks or this interval passes: 5 ms by default, a whole frame period.
-        self._switch_interval = sys.getswitchinterval()
-        sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
         self._status_thread = threading.Thread(target=self._status_loop, name="status", daemon=True)
         self._status_thread.start()
         self._loop_thread = threading.current_thread()
-        self._isolate_loop(loop_cfg.cpu)
-        self._place_threads()
+        self.placement.before_frames()
         self._ready.set()
         self.loop.event("server_started", rig=self.rig_name)
         if self._stopping.is_set():  # stopped (a signal) while starting
@@ -448,31 +432,6 @@ class Server:
             return self.loop.run(until=until, frames=frames)
         finally:
             self._shutdown()
-
-    def _isolate_loop(self, which: int | str) -> None:
-        """[loop] cpu: this (the frame loop's) thread alone on that CPU; warns if that cannot be done."""
-        if which == "off":
-            return
-        if not realtime.supported():
-            if which != "auto":
-                self.echo("antarium serve: [loop] cpu needs Linux (sched_setaffinity, /proc); running unpinned")
-            return
-        try:
-            self._isolation = realtime.Isolation(which)
-        except ValueError as exc:
-            if which != "auto":  # "auto" on a one-CPU machine: nothing to say
-                self.echo(f"antarium serve: {exc}; running unpinned")
-            return
-        self._loop_tid = threading.get_native_id()
-
-    def _set_realtime(self, priority: int) -> None:
-        """SCHED_FIFO for this (the frame loop's) thread; the threads and processes it starts begin ordinary
-        (`antarium.core.realtime.set_realtime`). Warns if not allowed."""
-        try:
-            realtime.set_realtime(priority)
-            self._realtime_set = True
-        except (AttributeError, PermissionError, OSError) as exc:
-            self.echo(f"antarium serve: realtime priority {priority} not granted ({exc}); running without it")
 
     def wait_ready(self, timeout_s: float | None = None) -> bool:
         """Block until the first frame is about to run (or starting failed); False on timeout."""
@@ -539,28 +498,11 @@ class Server:
             release()
         self._unpin()
 
-    def _place_threads(self) -> None:
-        """[loop] cpu for the threads and processes started since (they begin with their starter's CPUs); run at
-        start and then once a second."""
-        if self._isolation is not None:
-            self._isolation.apply(self._loop_tid)
-
     def _unpin(self) -> None:
-        """Undo [loop] cpu, realtime_priority and the GIL switch interval (a script goes on running)."""
-        if self._switch_interval is not None:
-            sys.setswitchinterval(self._switch_interval)
-            self._switch_interval = None
+        """Undo the loop's placement (a script goes on running); the status thread places threads until it ends."""
         if self._status_thread is not None and self._status_thread is not threading.current_thread():
-            self._status_thread.join(2.0)  # it places the threads once a second
-        isolation, self._isolation = self._isolation, None
-        if isolation is not None:
-            isolation.release()
-        if self._realtime_set:
-            self._realtime_set = False
-            try:
-                realtime.set_ordinary()
-            except OSError:
-                pass
+            self._status_thread.join(2.0)
+        self.placement.release()
 
     def __enter__(self) -> Server:
         return self if self._thread is not None else self.start_thread()
