@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "emulate": "antarium.commands.emulate",
     "trackball": "antarium.commands.trackball",
     "ant": "antarium.commands.ant",
+    "monitor": "antarium.commands.monitor",
 }
 
 
