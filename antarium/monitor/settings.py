@@ -12,7 +12,7 @@ DEFAULTS: dict[str, Any] = {
     "port": 8050,  # TCP port; 0: one the OS chooses (printed)
     "allow": ["127.0.0.1/32", "::1/128"],  # addresses or networks whose browsers may open the page
     "commands": False,  # the page may send pause / rotate scene / start / stop trial
-    "leds_every": 6,  # the server publishes the LED stream every N frames (190/6 = 32 Hz); 0: never
+    "leds_every": 5,  # the server publishes the LED stream every N frames (190/5 = 38 Hz); 0: never
     "update_hz": 60.0,  # most updates a second pushed to each browser
 }
 #: commands the page may send (when `commands = true`), validated by the server like any bus command
