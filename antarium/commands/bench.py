@@ -15,6 +15,7 @@ TARGETS: dict[str, str] = {
     "protocol": "antarium.firmware_proto.bench:run",
     "render": "antarium.renderers.bench:run",
     "jitter": "antarium.jitter_bench:run",
+    "monitor": "antarium.bench.monitor:run",
 }
 
 DOME_RATE_HZ = 190.0

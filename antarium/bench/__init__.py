@@ -1,0 +1,1 @@
+"""Benchmarks run by `antarium bench` (see `antarium.commands.bench.TARGETS`)."""
