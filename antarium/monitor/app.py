@@ -18,6 +18,8 @@ from antarium import bus
 from antarium.monitor.hub import Hub
 from antarium.monitor.settings import PAGE_COMMANDS, allowed
 
+#: LED frames sent to a page and not yet drawn there, at most
+IN_FLIGHT = 2
 #: side of the equal-area map (CSS pixels)
 MAP_SIZE = 560
 
@@ -54,7 +56,7 @@ def make_app(session, rig: str, settings: dict[str, Any]):
     hub = Hub(session, rig)
     geometry = json.dumps(dome_geometry())
     page = resources.files("antarium.monitor").joinpath("page.html").read_text()
-    clients: set = set()
+    clients: dict = {}  # websocket -> LED frames it may still be sent before it says "drawn"
     period = 1.0 / settings["update_hz"]
 
     @web.middleware
@@ -74,13 +76,15 @@ def make_app(session, rig: str, settings: dict[str, Any]):
         await ws.prepare(request)
         await ws.send_str(json.dumps({"type": "hello", "rig": rig, "commands": settings["commands"],
                                       "page_commands": list(PAGE_COMMANDS)}))
-        clients.add(ws)
+        clients[ws] = IN_FLIGHT
         try:
             async for msg in ws:
                 if msg.type == WSMsgType.ERROR:
                     break
+                if msg.type == WSMsgType.TEXT and msg.data == "drawn":  # the page is done with one LED frame
+                    clients[ws] = min(IN_FLIGHT, clients[ws] + 1)
         finally:
-            clients.discard(ws)
+            clients.pop(ws, None)
         return ws
 
     async def command(request):
@@ -101,8 +105,9 @@ def make_app(session, rig: str, settings: dict[str, Any]):
         return web.json_response(body, status=200 if ok else 400)
 
     async def pump(app):
-        """Push what is new to every page, at most `update_hz` times a second; a page still busy with the
-        previous update skips this one (its newest LED frame comes with the next)."""
+        """Push what is new to every page, at most `update_hz` times a second. A page gets a new LED frame only
+        while fewer than `IN_FLIGHT` it was sent are not yet drawn (it says "drawn" for each), and only the newest:
+        a slow browser sees fewer frames, never older ones (no queue builds up between the bus and the screen)."""
         seen: dict[Any, dict[str, int]] = {}
         sending: dict[Any, asyncio.Task] = {}
         loop = asyncio.get_running_loop()
@@ -116,7 +121,9 @@ def make_app(session, rig: str, settings: dict[str, Any]):
                 task = sending.get(ws)
                 if task is not None and not task.done():
                     continue
-                leds, updates = hub.since(seen.setdefault(ws, {}))
+                leds, updates = hub.since(seen.setdefault(ws, {}), leds=clients[ws] > 0)
+                if leds is not None:
+                    clients[ws] -= 1
                 if leds is not None or updates:
                     sending[ws] = asyncio.create_task(_send(ws, leds, updates))
             for ws in list(seen):

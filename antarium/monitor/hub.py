@@ -117,11 +117,12 @@ class Hub:
             self.alive = sample.kind == zenoh.SampleKind.PUT
             self.alive_seq += 1
 
-    def since(self, seen: dict[str, int]) -> tuple[bytes | None, dict[str, Any]]:
-        """(the newest LED payload if not seen, JSON-able updates not seen); `seen` is updated in place."""
+    def since(self, seen: dict[str, int], leds: bool = True) -> tuple[bytes | None, dict[str, Any]]:
+        """(the newest LED payload if not seen and `leds`, JSON-able updates not seen); `seen` is updated."""
         with self._lock:
-            leds = self.leds if self.leds_seq != seen.get("leds", 0) else None
-            seen["leds"] = self.leds_seq
+            leds = self.leds if leds and self.leds_seq != seen.get("leds", 0) else None
+            if leds is not None:
+                seen["leds"] = self.leds_seq
             out: dict[str, Any] = {}
             new_path = self.path_seq - seen.get("path", 0)
             if new_path:
