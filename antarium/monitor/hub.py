@@ -94,6 +94,11 @@ class Hub:
         with self._lock:
             self.status = status
             self.status_seq += 1
+            name = status.get("trial")
+            if name is None:
+                self.trial = None
+            elif self.trial is None or self.trial["name"] != name:  # started before the monitor subscribed
+                self.trial = {"name": name, "metadata": None, "t_start": None}
 
     def _on_event(self, sample) -> None:
         try:
