@@ -31,17 +31,34 @@ def dome_geometry() -> dict[str, Any]:
 
     dome = load_dome()
     d = np.asarray(dome.directions)
-    colat = np.arccos(np.clip(d[:, 2], -1.0, 1.0))
-    r = 2.0 * np.sin(colat / 2.0)  # Lambert azimuthal equal-area about the zenith
-    az = np.arctan2(d[:, 1], d[:, 0])
-    scale = (MAP_SIZE / 2 - 4) / r.max()
-    px = np.round(MAP_SIZE / 2 + scale * r * np.cos(az)).astype(int)
-    py = np.round(MAP_SIZE / 2 - scale * r * np.sin(az)).astype(int)
+    scale = (MAP_SIZE / 2 - 4) / _lambert(d).max()
+
+    def to_map(v: np.ndarray) -> np.ndarray:  # unit vectors (n, 3) -> map pixels (n, 2), +y down
+        r, az = _lambert(v), np.arctan2(v[:, 1], v[:, 0])
+        return np.stack([MAP_SIZE / 2 + scale * r * np.cos(az), MAP_SIZE / 2 - scale * r * np.sin(az)], axis=1)
+
+    px, py = np.round(to_map(d)).astype(int).T
+    # a UV pixel's panel x and y axes on the map (pixels per radian): polariser bars are drawn along
+    # cos(angle) * ax + sin(angle) * ay
+    uv = np.asarray(dome.uv_index)
+    axes = np.asarray(dome.panel_axes)[np.asarray(dome.panel)[uv]]
+    step = 1e-3
+    on_map = [(to_map(_unit(d[uv] + step * axes[:, k])) - to_map(d[uv])) / step for k in (0, 1)]
     corners = np.asarray(dome.panel_corners)
     corners = corners / np.linalg.norm(corners, axis=-1, keepdims=True)
     return {"size": MAP_SIZE, "x": px.tolist(), "y": py.tolist(), "uv": np.asarray(dome.is_uv).astype(int).tolist(),
             "dirs": np.round(d, 4).ravel().tolist(), "panels": np.round(corners, 4).ravel().tolist(),
-            "map_radius": float(scale * 2.0 * math.sin(math.pi / 4))}
+            "uv_index": uv.tolist(), "uv_ax": np.round(on_map[0], 2).ravel().tolist(),
+            "uv_ay": np.round(on_map[1], 2).ravel().tolist()}
+
+
+def _lambert(v: np.ndarray) -> np.ndarray:
+    """Radius of unit vectors (n, 3) in the Lambert azimuthal equal-area map about the zenith (0..2)."""
+    return 2.0 * np.sin(np.arccos(np.clip(v[:, 2], -1.0, 1.0)) / 2.0)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
 def refusal(address: str | None, rig: str, allow: list[str]) -> str:
