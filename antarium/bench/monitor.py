@@ -1,8 +1,9 @@
 """`antarium bench monitor`: the monitor page in headless chromium, and the frame loop with the monitor on and off.
 
-Runs `antarium bench loop` twice on the same rig config (`$ANTARIUM_RIG_CONFIG` or the embedded default): first
-with no LED stream and no monitor, then with `[monitor] enabled` (the LED stream every `leds_every` frames, the
-monitor process) and the page open in Debian's headless chromium (driven by Selenium) for the whole run. Reports the
+Runs `antarium bench loop` three times on the same rig config (`$ANTARIUM_RIG_CONFIG` or the embedded default):
+"off" (no LED stream, no monitor), "monitor" (`[monitor] enabled`: the LED stream every `leds_every` frames and the
+monitor process, no page open) and "page" (the same with the page open in Debian's headless chromium, driven by
+Selenium, for the whole run). Reports the
 loop's figures for both (late frames, latency) and, from the page itself: first paint, first LED frame drawn,
 updates drawn per second and frame -> screen latency (the LED frame's hand-over on the server, `t_wall`, to the
 end of its drawing in the browser's animation frame; both clocks are this computer's).
@@ -38,23 +39,25 @@ class PageWatcher(threading.Thread):
         super().__init__(name="page-watcher", daemon=True)
         self.url = url
         self.stop_event = threading.Event()
+        self.browser_ready = threading.Event()
         self.result: dict[str, Any] = {}
 
     def run(self) -> None:
         from selenium import webdriver
         from selenium.webdriver.chrome.service import Service
 
+        options = webdriver.ChromeOptions()
+        options.binary_location = CHROMIUM
+        for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1500,1100"):
+            options.add_argument(arg)
+        driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+        self.browser_ready.set()
         while not self.stop_event.is_set():
             try:
                 urllib.request.urlopen(self.url, timeout=1).close()
                 break
             except OSError:
                 time.sleep(0.2)
-        options = webdriver.ChromeOptions()
-        options.binary_location = CHROMIUM
-        for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1500,1100"):
-            options.add_argument(arg)
-        driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
         try:
             driver.get(self.url)
             time.sleep(2.0)  # warm-up
@@ -86,19 +89,20 @@ def run(args: argparse.Namespace) -> int:
     base = load_config(os.environ.get("ANTARIUM_RIG_CONFIG") or None)
     results: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="antarium-bench-monitor-") as tmp:
-        for mode in ("off", "on"):
+        for mode in ("off", "monitor", "page"):
             config = json.loads(json.dumps(base))
             port = _free_port()
-            config["monitor"] = {**config.get("monitor", {}), "enabled": mode == "on", "port": port}
+            config["monitor"] = {**config.get("monitor", {}), "enabled": mode != "off", "port": port}
             if mode == "off":
                 config["monitor"]["leds_every"] = 0
             path = os.path.join(tmp, f"monitor-{mode}.toml")
             with open(path, "w") as fh:
                 fh.write(tomli_w.dumps(config))
             print(f"--- monitor {mode} ---", flush=True)
-            watcher = PageWatcher(f"http://127.0.0.1:{port}/") if mode == "on" else None
+            watcher = PageWatcher(f"http://127.0.0.1:{port}/") if mode == "page" else None
             if watcher is not None:
                 watcher.start()
+                watcher.browser_ready.wait(60)  # the browser is started before the loop, not during it
             os.environ["ANTARIUM_RIG_CONFIG"] = path
             loop_json = os.path.join(tmp, f"loop-{mode}.json")
             loop_bench.run(argparse.Namespace(seconds=args.seconds, frames=args.frames, json_out=loop_json,
@@ -109,8 +113,8 @@ def run(args: argparse.Namespace) -> int:
             with open(loop_json) as fh:
                 loop = json.load(fh)
             results[mode] = {"loop": loop, "page": watcher.result if watcher is not None else None}
-    page = results["on"]["page"]
-    print("--- the page (monitor on) ---")
+    page = results["page"]["page"]
+    print("--- the page ---")
     if page:
         f2s = page["frame_to_screen_ms"]
         print(f"  first contentful paint {page['first_contentful_paint_ms']:.0f} ms, first LED frame drawn "
@@ -119,10 +123,10 @@ def run(args: argparse.Namespace) -> int:
         if f2s:
             print(f"  frame -> screen p50 {f2s['p50']:.1f}  p99 {f2s['p99']:.1f}  max {f2s['max']:.1f} ms "
                   f"({f2s['n']} frames)")
-    for mode in ("off", "on"):
+    for mode in ("off", "monitor", "page"):
         r = results[mode]["loop"]
         lat = r["latency"]
-        print(f"  loop, monitor {mode:3s}: {r['achieved_rate_hz']:.1f} Hz, {r['late_frames']} late of {r['frames']}, "
+        print(f"  loop, {mode:7s}: {r['achieved_rate_hz']:.1f} Hz, {r['late_frames']} late of {r['frames']}, "
               f"latency p50 {lat['p50_ms']:.2f} p99 {lat['p99_ms']:.2f} ms")
     if args.json_out:
         with open(args.json_out, "w") as fh:
