@@ -61,6 +61,26 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
+#: most object points sent for the path view's world map
+WORLD_POINTS = 12000
+
+
+def world_top_view(scene: str) -> dict[str, Any]:
+    """{"scene", "points": [x, y, ...] (m, world frame, at most WORLD_POINTS objects' vertices above the ground)}
+    or {"scene", "error"} when the scene cannot be built here."""
+    from antarium.ant.plots import scene_top_view
+    from antarium.renderers import build_scene
+
+    try:
+        spec = json.loads(scene) if scene.startswith("{") else scene
+        top = scene_top_view(build_scene(spec))
+    except Exception as exc:  # noqa: BLE001 - a file only the server can read, a bad spec: the path stays on grid
+        return {"scene": scene, "error": f"no top view of {scene!r}: {exc}", "points": []}
+    if len(top) > WORLD_POINTS:
+        top = top[np.random.default_rng(0).choice(len(top), WORLD_POINTS, replace=False)]
+    return {"scene": scene, "points": np.round(top[:, :2], 3).ravel().tolist()}
+
+
 def refusal(address: str | None, rig: str, allow: list[str]) -> str:
     return (f"antarium monitor: the address {address} may not open the monitor of rig {rig!r}; allowed: "
             f"{', '.join(allow)} ([monitor] allow in the rig config)")
@@ -103,6 +123,17 @@ def make_app(session, rig: str, settings: dict[str, Any]):
         finally:
             clients.pop(ws, None)
         return ws
+
+    worlds: dict[str, dict] = {}
+
+    async def world_json(request):
+        """The current scene's objects seen from above (for the path view), built once per scene name."""
+        name = (hub.status or {}).get("scene")
+        if name is None:
+            return web.json_response({"scene": None, "points": []})
+        if name not in worlds:
+            worlds[name] = await asyncio.get_running_loop().run_in_executor(None, world_top_view, name)
+        return web.json_response(worlds[name])
 
     async def command(request):
         name = request.match_info["name"]
@@ -160,6 +191,7 @@ def make_app(session, rig: str, settings: dict[str, Any]):
     app = web.Application(middlewares=[access])
     app.router.add_get("/", index)
     app.router.add_get("/geometry.json", geometry_json)
+    app.router.add_get("/world.json", world_json)
     app.router.add_get("/ws", websocket)
     app.router.add_post("/cmd/{name}", command)
     app.on_startup.append(start_pump)
