@@ -10,7 +10,7 @@ UV_VERSION  := 0.13.9
 PIP_VERSION := 25.3
 LOCK_TOOL   := .lock-tool
 
-.PHONY: demo test lint install system-check lock clean
+.PHONY: demo test lint install system-check browser-check lock clean
 
 # System libraries we cannot pip-install: EGL (libglvnd) and Mesa's software GL driver (llvmpipe).
 system-check:
@@ -19,6 +19,13 @@ system-check:
 	@ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1' && ldconfig -p 2>/dev/null | grep -q 'libGL.so.1' || \
 	  { echo "Missing system EGL/GL libraries. Install them with:"; \
 	    echo "  sudo apt-get install -y libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri"; exit 1; }
+
+# The monitor's browser tests need Debian's chromium and its driver: installed here when root, else reported.
+browser-check:
+	@command -v chromium >/dev/null && command -v chromedriver >/dev/null || \
+	  { if [ "$$(id -u)" = 0 ]; then apt-get update -qq && apt-get install -y chromium chromium-driver; else \
+	    echo "Missing chromium (the monitor's browser tests). Install it with:"; \
+	    echo "  sudo apt-get install -y chromium chromium-driver"; exit 1; fi; }
 
 $(VENV)/.installed-test: pyproject.toml $(LOCK)
 	$(MAKE) system-check
@@ -32,7 +39,7 @@ install: $(VENV)/.installed-test
 demo: install
 	$(BIN)/antarium demo --out $(OUT)
 
-test: install
+test: install browser-check
 	$(BIN)/ruff check .
 	$(BIN)/pytest
 

@@ -158,9 +158,38 @@ class LogSection(Section):
     record: bool = False
 
 
+class MonitorSection(Section):
+    """The browser monitor (`antarium monitor`, docs/monitor.md)."""
+
+    NAME: ClassVar[str] = "monitor"
+    enabled: bool = Field(False, description="`antarium serve` starts the monitor as a process of its own")
+    host: str = Field("127.0.0.1", description="address the web server listens on")
+    port: int = Field(8050, ge=0, le=65535, description="TCP port; 0: one the OS chooses (printed)")
+    allow: list[str] = Field(default_factory=lambda: ["127.0.0.1/32", "::1/128"],
+                             description="addresses or networks whose browsers may open the page")
+    commands: bool = Field(False, description="the page may send pause / rotate scene / start / stop trial")
+    leds_every_frames: int = Field(5, ge=0, le=100_000, description="LED stream every N frames; 0: never")
+    update_hz: float = _finite(1.0, 240.0, 60.0, "most updates a second pushed to each browser")
+    RENAMED: ClassVar[dict[str, str]] = {"leds_every": "leds_every_frames"}
+
+    @field_validator("allow")
+    @classmethod
+    def _networks(cls, v: list[str]) -> list[str]:
+        import ipaddress
+
+        out = []
+        for spec in v:
+            try:
+                out.append(str(ipaddress.ip_network(spec, strict=False)))
+            except ValueError:
+                raise ValueError(f"{spec!r} is not an address or network (e.g. '127.0.0.1', '192.168.10.0/24')"
+                                 ) from None
+        return out
+
+
 #: the sections this module checks, by name
 SECTIONS: dict[str, type[Section]] = {s.NAME: s for s in (
-    RigSection, LoopSection, LocomotionSection, LinkSection, RenderSection, BusSection, LogSection)}
+    RigSection, LoopSection, LocomotionSection, LinkSection, RenderSection, BusSection, LogSection, MonitorSection)}
 #: sections owned by another part, kept as tables for it to parse with its own code
 FOREIGN_SECTIONS = ("trackball", "ant")
 
@@ -181,6 +210,7 @@ class RigConfig(BaseModel):
     render: RenderSection = Field(default_factory=RenderSection)
     bus: BusSection = Field(default_factory=BusSection)
     log: LogSection = Field(default_factory=LogSection)
+    monitor: MonitorSection = Field(default_factory=MonitorSection)
     foreign: dict[str, dict[str, Any]] = Field(default_factory=dict)
 
     def section(self, name: str) -> dict[str, Any] | None:

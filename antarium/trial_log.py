@@ -11,6 +11,7 @@ Every dataset and its units are listed in `docs/logs.md`.
 
 from __future__ import annotations
 
+import atexit
 import datetime as _dt
 import hashlib
 import json
@@ -267,6 +268,15 @@ def prepare_writer() -> None:
 def _start_writer() -> ChildProcess:
     """`python -m antarium.trial_log FD`: the writer, importing numpy and h5py while it waits for its trial."""
     return ChildProcess("antarium.trial_log", connect=True)
+
+
+@atexit.register
+def _end_spare() -> None:
+    """The unused spare ends with its parent (it reads the end of its connection and returns)."""
+    with _spare_lock:
+        if _spare is not None:
+            _spare.close()
+            _spare.wait(5.0)
 
 
 def _take_writer() -> ChildProcess:

@@ -12,4 +12,5 @@ TARGETS: dict[str, str] = {
     "render": "antarium.bench.render:run",
     "jitter": "antarium.bench.jitter:run",
     "servosphere": "antarium.bench.servosphere:run",
+    "monitor": "antarium.bench.monitor:run",
 }

@@ -85,6 +85,7 @@ class Server:
         self.final_frame = None  # the last LED frame sent, kept after the loop stopped
         self._entities: list = []
         self._pose_pub = self._stats_pub = None
+        self._leds_pub = self.monitor = None  # antarium.monitor: LED stream publisher, monitor process
         self._ready = threading.Event()
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
@@ -147,6 +148,10 @@ class Server:
         self._entities += [self._pose_pub, self._stats_pub,
                            s.declare_queryable(bus.rig_key(self.rig_name, "cmd", "*"), self._on_query),
                            s.liveliness().declare_token(bus.alive_key(self.rig_name))]
+        from antarium.monitor.process import open_led_stream, start_monitor
+
+        self._leds_pub = open_led_stream(s, self.rig_name, self.config)
+        self.monitor = start_monitor(self.config)
 
     # -- bus traffic -----------------------------------------------------------------------------------
     def _on_query(self, query) -> None:
@@ -185,6 +190,8 @@ class Server:
                 self._stats_pub.put(bus.encode_stats(rec.frame, self.loop.late_frames, rec.t_start, rec.latency,
                                                      _nan0(rec.render) + _nan0(rec.sample) + _nan0(rec.convert),
                                                      rec.sample, rec.encode, rec.send, rec.pacing_error))
+            if self._leds_pub is not None:
+                self._leds_pub.offer(rec.frame, rec.t_start, self.loop.last_frame)
         except Exception as exc:  # the bus must never stop the stimulus  # noqa: BLE001
             self.loop.fault("bus", rec.t_sent, exc)
 
@@ -478,6 +485,9 @@ class Server:
                 self.trial_stop()
             except RuntimeError as exc:
                 self.echo(f"antarium serve: closing the trial log: {exc}")
+        for part in (self.monitor, self._leds_pub):
+            if part is not None:
+                part.close()
         for entity in reversed(self._entities):
             try:
                 entity.undeclare()

@@ -1,0 +1,207 @@
+"""The monitor page in a real browser (Debian's headless chromium driven by Selenium), against `antarium serve`
+(the embedded default: emulator on loopback, habitat, scripted walker) and `antarium monitor`, on loopback.
+
+Checked from the page itself: the map's pixels at known LED positions are the colours of the LED frame the server
+sent to the dome (the frame number the page shows, read from the bus' LED stream), after a scene rotation
+commanded from the page; the path grows while the walker moves; the stats update; a rig that goes away is shown
+as disconnected; a page opened from an address the rig does not allow gets a clear refusal.
+"""
+
+import shutil
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from antarium import bus
+from antarium.monitor.led_stream import decode_leds, led_key
+
+CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
+
+
+def _start_monitor(config, *extra):
+    """`antarium monitor` on a free port; returns (process, page URL) once it listens."""
+    proc = subprocess.Popen([sys.executable, "-m", "antarium", "monitor", "--config", str(config), "--port", "0",
+                             *extra], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    line = proc.stdout.readline()
+    assert " at http://" in line, line + proc.stdout.read()
+    return proc, line.split(" at ", 1)[1].split()[0]
+
+
+def _stop(proc):
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def _wait(predicate, timeout_s, what):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"not within {timeout_s} s: {what}")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not (shutil.which(CHROMIUM) and shutil.which(CHROMEDRIVER)):  # the Makefile's system check installs them
+        pytest.fail("Debian's chromium and chromium-driver are missing: sudo apt-get install -y chromium "
+                    "chromium-driver (make system-check does it as root)")
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1500,1100",
+                "--use-angle=swiftshader", "--enable-unsafe-swiftshader"):
+        options.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+    driver.set_page_load_timeout(20)
+    driver.set_script_timeout(20)
+    yield driver
+    driver.quit()
+
+
+@pytest.fixture()
+def rig(tmp_path):
+    """`antarium serve` (embedded default, on free loopback ports) and a monitor with page commands on."""
+    config, endpoint = tmp_path / "rig.toml", bus.free_tcp_endpoint()
+    config.write_text(f"""
+[rig]
+name = "tmon"
+[bus]
+listen = ["{endpoint}"]
+[loop]
+realtime_priority = 0
+[log]
+dir = "{tmp_path / 'logs'}"
+[monitor]
+commands = true
+""")
+    serve = subprocess.Popen([sys.executable, "-m", "antarium", "serve", "--config", str(config)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    monitor, url = _start_monitor(config)
+    try:
+        yield endpoint, serve, url
+    finally:
+        _stop(serve)
+        _stop(monitor)
+
+
+def _state(driver):
+    return driver.execute_script(
+        "const M = window.antariumMonitor; return {alive: M.alive, frame: M.frame, drawn: M.drawn, "
+        "path: M.pathLength, status: M.statusCount, stats: M.statsCount, "
+        "rotation: document.getElementById('poseinfo').textContent, conn: document.getElementById('conn').textContent}")
+
+
+def test_the_page_shows_the_dome_the_path_and_the_stats_live(browser, rig):
+    endpoint, serve, url = rig
+    session = bus.open_session({"connect": [endpoint]}, role="client")
+    frames: dict[int, np.ndarray] = {}
+    lock = threading.Lock()
+
+    def keep(sample):
+        d = decode_leds(sample.payload.to_bytes())
+        with lock:
+            frames[d["frame"]] = d["values"].copy()
+            for old in sorted(frames)[:-400]:
+                del frames[old]
+
+    sub = session.declare_subscriber(led_key("tmon"), keep)
+    try:
+        browser.get(url)
+        _wait(lambda: _state(browser)["alive"] and _state(browser)["drawn"] > 3, 30, "the page shows LED frames")
+        first = _state(browser)
+        assert "LIVE" in first["conn"]
+
+        # a scene rotation commanded from the page (commands = true): the server validates it and replies
+        reply = browser.execute_async_script(
+            "const done = arguments[0]; window.antariumMonitor.command('rotate_scene', {deg: 90}).then(done);")
+        assert reply["ok"] is True and abs(reply["result"]["scene_rotation_deg"] - 90.0) < 1e-6, reply
+        refused = browser.execute_async_script(
+            "const done = arguments[0]; window.antariumMonitor.command('rotate_scene', {deg: 1e9}).then(done);")
+        assert "deg" in refused["error"], refused  # the server's own validation, relayed to the page
+        _wait(lambda: "90.0" in _state(browser)["rotation"], 10, "the page shows the scene rotated by 90°")
+
+        # the map at known LED positions has the colours of the frame it says it shows
+        geo = browser.execute_script("const g = window.antariumMonitor.geometry; return {x: g.x, y: g.y, uv: g.uv};")
+        xy = np.stack([geo["x"], geo["y"]], axis=1)
+        _, first_at, counts = np.unique(xy, axis=0, return_index=True, return_counts=True)
+        own_pixel = first_at[counts == 1]  # LEDs alone on their map pixel
+        rng = np.random.default_rng(0)
+        leds = np.sort(rng.choice(own_pixel, 200, replace=False)).tolist()
+        snap = browser.execute_script("return window.antariumMonitor.snapshot(arguments[0]);", leds)
+        with lock:
+            values = frames.get(snap["frame"])
+        assert values is not None, f"frame {snap['frame']} not seen on the LED stream ({len(frames)} kept)"
+        level = np.round(255 * np.sqrt(values[leds].astype(float) / 65535))
+        uv = np.asarray(geo["uv"], bool)[leds]
+        want = np.where(uv[:, None], np.stack([level[:, 0], 0 * level[:, 0], level[:, 0]], 1),
+                        np.stack([0 * level[:, 0], level[:, 0], level[:, 1]], 1))
+        got = np.asarray(snap["colours"], float)
+        assert np.abs(got - want).max() <= 1, np.abs(got - want).max()
+        assert want[:, 1:].max() > 20  # the habitat lights the dome: the comparison is not of black on black
+
+        # the path grows while the walker moves, the stats update
+        before = _state(browser)
+        time.sleep(1.5)
+        after = _state(browser)
+        assert after["path"] > before["path"]
+        assert after["status"] > before["status"] and after["stats"] > before["stats"]
+        assert after["frame"] > before["frame"]
+
+        # the rig goes away: the page says so
+        _stop(serve)
+        _wait(lambda: "DISCONNECTED" in _state(browser)["conn"], 10, "the page shows the rig disconnected")
+    finally:
+        sub.undeclare()
+        session.close()
+
+
+def test_a_page_from_an_address_the_rig_does_not_allow_is_refused(browser, tmp_path):
+    config = tmp_path / "rig.toml"
+    config.write_text(f"""
+[bus]
+listen = ["{bus.free_tcp_endpoint()}"]
+[monitor]
+allow = ["192.168.10.0/24"]
+""")
+    monitor, url = _start_monitor(config)
+    try:
+        browser.get(url)
+        text = browser.find_element("tag name", "body").text
+        assert "address 127.0.0.1 may not open the monitor of rig 'rig1'; allowed: 192.168.10.0/24" in text, text
+        status = browser.execute_async_script(
+            "const done = arguments[0]; fetch('/cmd/trial_stop', {method: 'POST', body: '{}'})"
+            ".then(r => r.text().then(t => done([r.status, t])));")
+        assert status[0] == 403 and "may not open" in status[1]
+    finally:
+        _stop(monitor)
+
+
+def test_page_commands_are_refused_unless_the_config_enables_them(browser, tmp_path):
+    config = tmp_path / "rig.toml"
+    config.write_text(f"""
+[bus]
+listen = ["{bus.free_tcp_endpoint()}"]
+""")
+    monitor, url = _start_monitor(config)
+    try:
+        browser.get(url)
+        reply = browser.execute_async_script(
+            "const done = arguments[0]; fetch('/cmd/rotate_scene', {method: 'POST', body: '{\"deg\": 90}'})"
+            ".then(r => r.json().then(b => done([r.status, b])));")
+        assert reply[0] == 403 and "commands from the page are off" in reply[1]["error"], reply
+        assert not browser.find_element("id", "cmds").is_displayed()
+        _wait(lambda: "DISCONNECTED" in _state(browser)["conn"], 10, "the page shows that no server runs")
+    finally:
+        _stop(monitor)
