@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from antarium.ball import BALL_RADIUS_M, pole_motion
+from antarium.ball import BALL_RADIUS_M, arc_step, pole_motion
 from antarium.clock import Clock
 from antarium.locomotion import LocomotionSource
 from antarium.pose import Pose
@@ -262,11 +262,8 @@ class FrameLoop:
         gt, gr, fixed = self.gain_translation, self.gain_rotation, self.tether == "fixed"
         for s in samples:
             dx, dy, dyaw = pole_motion(s.rotation, self.ball_radius)
-            if fixed:
-                heading += gr * dyaw
-            c, sn = math.cos(heading), math.sin(heading)
-            x += gt * (c * dx - sn * dy)
-            y += gt * (sn * dx + c * dy)
+            wx, wy, heading = arc_step(heading, gt * dx, gt * dy, gr * dyaw if fixed else 0.0)
+            x, y = x + wx, y + wy
         self.pose = Pose(x, y, self.pose.z, math.remainder(heading, math.tau))
 
     def _check_locomotion(self, now: float) -> None:
