@@ -54,6 +54,9 @@ def run(args: argparse.Namespace) -> int:
     pose = Pose.from_deg(*args.pos, heading_deg=args.heading)
     if args.width < 64:
         raise ValueError(f"--width must be at least 64 pixels, got {args.width}")
+    if args.pos[2] < 0:
+        raise ValueError(f"--pos Z is the eye's height above the ground (z = 0) in metres and must be >= 0, "
+                         f"got {args.pos[2]:g}")
     check_png_path(args.out, "--out")  # both names checked before anything is rendered or written
     if args.cube:
         check_png_path(args.cube, "--cube")
