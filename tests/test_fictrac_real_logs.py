@@ -107,3 +107,23 @@ def test_the_docs_say_which_fictrac_speaks_tcp():
     text = (Path(__file__).parents[1] / "docs" / "fictrac.md").read_text()
     assert "FicTrac 2.1 sends **UDP only**" in text and '`transport = "tcp"` fits the 2.0 releases' in text
     assert "cannot disagree" not in text
+
+
+def test_a_live_datagram_cut_inside_its_last_field_is_counted(tmp_path):
+    import socket
+    import time
+
+    with open_source("fictrac", port=0) as src:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            whole = [format_line(frame(i, 1000.0 + 10 * i)) + "\n" for i in (1, 2)]
+            cut = format_line(frame(3, 1030.0)._replace(time_of_day_ms=43_200_123.456))[:-5]
+            for text in (*whole, cut):
+                tx.sendto(text.encode(), src.address)
+        deadline = time.monotonic() + 5.0
+        while src.status()["lines"] < 3:
+            assert time.monotonic() < deadline
+            time.sleep(0.005)
+        status = src.status()
+        got = src.read()
+    assert [s.seq for s in got] == [1, 2]
+    assert status["malformed"] == 1 and "cut short" in status["last_error"]

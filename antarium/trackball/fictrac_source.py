@@ -83,6 +83,7 @@ class FicTracSource(BufferedSource):
         self._sock: socket.socket | None = None
         self._last_frame: float | None = None
         self._tcp_connected = False
+        self._sender_terminates = False  # the sender ends its lines with a newline (FicTrac does)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -148,8 +149,16 @@ class FicTracSource(BufferedSource):
             except OSError as exc:
                 self._stats.last_error = f"udp receive failed: {exc}"
                 continue
-            for line in data.splitlines():
-                if line.strip():
+            # FicTrac ends each line with a newline: once a sender has done so, a datagram without one was cut
+            terminated = data.endswith(b"\n")
+            self._sender_terminates = self._sender_terminates or terminated
+            lines = data.splitlines()
+            for k, line in enumerate(lines):
+                if k == len(lines) - 1 and self._sender_terminates and not terminated:
+                    self._stats.counts["lines"] += 1
+                    self._stats.counts["malformed"] += 1
+                    self._stats.last_error = "FicTrac datagram cut short (its line has no end of line)"
+                elif line.strip():
                     self._line(line)
 
     def _run_tcp(self) -> None:
