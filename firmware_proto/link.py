@@ -17,7 +17,7 @@ from antarium.geometry.constants import LEDS_PER_PANEL, N_ACTUATORS, N_PANELS, N
 from .config import check_percent, encode_brightness, encode_dot_correction
 from .control import encode_hello, encode_latch, encode_status_request
 from .errors import ProtocolError
-from .header import SEQ_MODULO
+from .header import PROTOCOL_VERSION, SEQ_MODULO
 from .polariser import angles_to_codes, encode_polarisers
 from .replies import OP_ACTUATORS, OP_COUNTERS, OP_FAULTS, OP_TEMPERATURES, OP_VERSION, STATUS_OPCODES, decode_reply
 from .video import VIDEO_PAYLOAD_SIZE, encode_frame
@@ -37,8 +37,23 @@ def open_link(interface: str, **kwargs) -> Link:
     return getattr(import_module(module_name), cls_name)(**kwargs)
 
 
+#: no reply for this long is an outage: the link says HELLO again (the distributor may have rebooted)
+OUTAGE_S = 1.0
+#: an unanswered HELLO is repeated, with the next status request, after this long (seconds)
+HELLO_RETRY_S = 0.5
+
+
+class IncompatibleDistributor(RuntimeError):
+    """The distributor's VERSION names a protocol this host does not speak: no frame is sent."""
+
+
 class Link(ABC):
-    """What every back-end offers; a back-end implements `_transmit` and `_receive`."""
+    """What every back-end offers; a back-end implements `_transmit` and `_receive`.
+
+    The link says HELLO when it opens and again with a status request every `HELLO_RETRY_S` until a VERSION reply
+    arrives (a
+    distributor that boots after the host still gets one), and again after an outage of `OUTAGE_S`.
+    """
 
     #: `telemetry(wait_s=0)` sends a new STATUS_REQUEST at most this often (seconds); a request with wait_s > 0
     #: always goes out. Answering one costs the distributor about 2 ms, so a frame loop polling every frame
@@ -57,6 +72,9 @@ class Link(ABC):
                          "replies_received": 0, "replies_rejected": 0}
         self.closed = False
         self.last_timings: dict[str, float] = {}
+        self.hello_pending = True           # no VERSION since the link opened or since the last outage
+        self._last_hello_t: float | None = None
+        self.incompatible: str | None = None
 
     # ---- back-end seam ----
     @abstractmethod
@@ -83,6 +101,8 @@ class Link(ABC):
 
         Raises ValueError on a bad frame (nothing sent); never raises for transport problems (counted).
         """
+        if self.incompatible:
+            raise IncompatibleDistributor(self.incompatible)
         seq = self._seq
         t0 = time.perf_counter()
         rows = encode_frame(frame, seq, out=self._frame_buf)
@@ -135,6 +155,7 @@ class Link(ABC):
         """Ask for the distributor's VERSION reply; returns it if it arrives within `wait_s`."""
         self._tag = (self._tag + 1) % 256
         self.send(encode_hello(self._tag))
+        self._last_hello_t = time.monotonic()
         self._drain(wait_s, until={OP_VERSION})
         return self._status.get("version")
 
@@ -145,15 +166,26 @@ class Link(ABC):
         `wait_s` seconds (0: only what has already arrived; never blocks). Keys: "link" (this side's counters),
         "connected" (an answer ever arrived) and, once the distributor has answered: "age_s" (since the last
         reply), "counters", "temperature_c", "current_a", "faults", "fault_total", "polariser_codes",
-        "polariser_angles", "holding", and "version" after `hello`.
+        "polariser_angles", "holding", "version" (protocol, firmware, panels, capabilities and their names) once
+        HELLO was answered, "hello" ("waiting" until then and after an outage, else "answered") and "incompatible"
+        (the reason) when the distributor's protocol version is not ours.
         """
         now = time.monotonic()
         if wait_s > 0 or self._last_request_t is None or now - self._last_request_t >= self.status_interval_s:
+            if self._last_reply_t is not None and now - self._last_reply_t > OUTAGE_S:
+                self.hello_pending = True
+            if self.hello_pending and (self._last_hello_t is None or now - self._last_hello_t >= HELLO_RETRY_S):
+                self._tag = (self._tag + 1) % 256
+                self.send(encode_hello(self._tag))
+                self._last_hello_t = now
             self._tag = (self._tag + 1) % 256
             self.send(encode_status_request(self._tag))
             self._last_request_t = now
         self._drain(wait_s, until=set(STATUS_OPCODES), tag=self._tag)
-        out = {**self._status, "link": dict(self.counters), "connected": self._last_reply_t is not None}
+        out = {**self._status, "link": dict(self.counters), "connected": self._last_reply_t is not None,
+               "hello": "waiting" if self.hello_pending else "answered"}
+        if self.incompatible:
+            out["incompatible"] = self.incompatible
         if self._last_reply_t is not None:
             out["age_s"] = time.monotonic() - self._last_reply_t
         return out
@@ -183,6 +215,11 @@ class Link(ABC):
         s = self._status
         if opcode == OP_VERSION:
             s["version"] = f
+            self.hello_pending = False
+            v = f["protocol_version"]
+            self.incompatible = None if v == PROTOCOL_VERSION else (
+                f"the distributor speaks protocol version {v}; this host speaks {PROTOCOL_VERSION}: no frames are "
+                f"sent (update the host or the distributor's firmware {f['firmware_major']}.{f['firmware_minor']})")
         elif opcode == OP_COUNTERS:
             s["counters"] = f
         elif opcode == OP_TEMPERATURES:

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .channels import rgb_to_gbu, srgb_to_linear
+from .mesh_text import TEXT_SUFFIXES, MeshTextError, load_text_mesh
 from .scene import MAX_TEXTURE_SIDE, MeshData, SceneObject
 
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl")
@@ -55,7 +56,12 @@ def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
     import trimesh
 
     try:
-        loaded = trimesh.load(str(path), force="scene", process=False)
+        if path.suffix.lower() in TEXT_SUFFIXES:
+            loaded = load_text_mesh(path)
+        else:
+            loaded = trimesh.load(str(path), force="scene", process=False)
+    except MeshTextError:
+        raise
     except Exception as exc:  # trimesh raises many types for corrupt files
         raise ValueError(f"cannot read mesh file {path}: {type(exc).__name__}: {exc}") from exc
     objects: dict[str, SceneObject] = {}

@@ -98,6 +98,9 @@ def equirect_lookup(image: np.ndarray, d: np.ndarray) -> np.ndarray:
     return out
 
 
+ASPECT_TOLERANCE = 0.01  # of the width: how far from 2:1 an equirectangular image may be
+
+
 @dataclass
 class Panorama:
     """Far-field panorama layer from an equirectangular image file or an (H, W, 3|4) array (sRGB in [0, 1])."""
@@ -125,6 +128,10 @@ class Panorama:
         h, w = img.shape[:2]
         if w < 8 or h < 4:
             raise ValueError(f"panorama {self.source} is too small ({w}x{h} pixels)")
+        if abs(w - 2 * h) > max(1.0, ASPECT_TOLERANCE * 2 * h):
+            name = self.source if isinstance(self.source, (str, Path)) else "array"
+            raise ValueError(f"panorama {name} is {w}x{h} pixels: an equirectangular image spans 360 x 180 degrees, "
+                             f"so its width must be twice its height (within {ASPECT_TOLERANCE:.0%})")
         rgb = img[:, :, :3] * self.exposure if is_float else srgb_to_linear(img[:, :, :3])
         uv = None
         if self.uv is not None:

@@ -42,7 +42,7 @@ def _open_fictrac(tmp_path):
 
 def _open_replay(tmp_path):
     path = tmp_path / "log.dat"
-    path.write_text("\n".join(_fictrac_line(i)[4:] for i in range(1, 6)))
+    path.write_text("".join(_fictrac_line(i)[4:] + "\n" for i in range(1, 6)))  # FicTrac ends every line
     clock = SimulatedClock()
     src = open_source("fictrac-replay", path=path, clock=clock)
     return src, lambda: clock.advance(1.0)

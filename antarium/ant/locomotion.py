@@ -20,7 +20,7 @@ import threading
 import time
 from typing import Any
 
-from antarium.core.ball import BALL_RADIUS_M, check_tether
+from antarium.core.ball import BALL_RADIUS_M, check_tether, chord_ratio
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.core.rates import FRAME_PERIOD_S
 from antarium.locomotion import BallSample, LocomotionSource
@@ -55,8 +55,9 @@ class AntLocomotion(LocomotionSource):
         if self.tether == "free_yaw":
             self.yaw = math.remainder(self.yaw + turn, math.tau)
             rotation = (forward * math.sin(self.yaw) / r, -forward * math.cos(self.yaw) / r, 0.0)
-        else:
-            rotation = (0.0, -forward / r, -turn)
+        else:  # the loop integrates a step along its arc: this chord is the turn, then the walk
+            arc = forward / chord_ratio(turn)
+            rotation = (arc * math.sin(0.5 * turn) / r, -arc * math.cos(0.5 * turn) / r, -turn)
         sample = BallSample(self.clock.now(), self._seq, rotation, None, 1.0)
         self._seq += 1
         self._pending.append(sample)

@@ -68,8 +68,9 @@ def load_model(path: str | os.PathLike):
         data = np.load(path, allow_pickle=False)
     except FileNotFoundError:
         raise
-    except (OSError, ValueError) as exc:
-        raise ModelFileError(f"{path}: not an antarium ant model file ({exc})") from None
+    except (OSError, ValueError):  # numpy's own message would suggest unpickling an untrusted file
+        raise ModelFileError(f"{path}: not an antarium ant model file (not a NumPy .npz archive; "
+                             f"write one with `antarium ant learn`)") from None
     with data:
         if "format" not in data.files or str(data["format"]) != FORMAT:
             raise ModelFileError(f"{path}: not an antarium ant model file (no format tag {FORMAT!r})")

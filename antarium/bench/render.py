@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 
 import numpy as np
@@ -105,6 +106,11 @@ def measure(renderer, scene, frames: int, warmup: int = 20) -> dict:
             "render_ms": ms[0], "sample_ms": ms[1], "convert_ms": ms[2]}
 
 
+def _progress(text: str) -> None:
+    """One progress line on stderr, at once (the table on stdout stays clean)."""
+    print(f"bench render: {text} ...", file=sys.stderr, flush=True)
+
+
 def run(args) -> int:
     from antarium.geometry import load_dome
     from antarium.renderers.gl import describe
@@ -115,9 +121,12 @@ def run(args) -> int:
         raise ValueError(f"--frames must be positive, got {frames}")
     dome = load_dome()
     results = []
+    _progress("building the scenes (the habitat takes a while)")
+    loads = workloads()
     print(f"{'workload':<14}{'triangles':>10}{'frames/s':>10}{'x190 Hz':>9}{'goal':>7}{'render ms':>11}"
           f"{'sample ms':>11}{'convert ms':>12}{'CPU ms':>8}")
-    for name, (make, kwargs) in workloads().items():
+    for i, (name, (make, kwargs)) in enumerate(loads.items()):
+        _progress(f"workload {i + 1}/{len(loads)} {name!r}: {frames} frames")
         renderer = Renderer(dome, **kwargs)
         try:
             r = measure(renderer, make(), frames)
@@ -133,7 +142,7 @@ def run(args) -> int:
         goal_txt = f"{r['fps'] / goal:6.2f}x" if goal else "     -"
         print(f"{name:<14}{r['triangles']:>10}{r['fps']:>10.1f}{r['x_dome_rate']:>9.2f}{goal_txt:>7}"
               f"{r['render_ms']:>11.2f}{r['sample_ms']:>11.2f}{r['convert_ms']:>12.2f}"
-              f"{r['cpu_ms_per_frame']:>8.2f}")
+              f"{r['cpu_ms_per_frame']:>8.2f}", flush=True)
     device = results[0]["renderer"]["gl"]
     layered = next(r for r in results if r["workload"] == "habitat-layer")
     print(f"GL: {device}. Face size {results[0]['renderer']['face_size']}; habitat-layer: near meshes at "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from importlib import import_module
 
 from antarium.bench import TARGETS
@@ -21,5 +22,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.seconds is not None and not (math.isfinite(args.seconds) and args.seconds > 0):
+        raise ValueError(f"--seconds must be a positive number of seconds, got {args.seconds:g}")
+    if args.frames is not None and args.frames < 1:
+        raise ValueError(f"--frames must be at least 1, got {args.frames}")
+    if not (math.isfinite(args.work_ms) and args.work_ms >= 0):
+        raise ValueError(f"--work-ms must be a number of milliseconds >= 0, got {args.work_ms:g}")
     module_name, func = TARGETS[args.target].split(":")
     return int(getattr(import_module(module_name), func)(args) or 0)

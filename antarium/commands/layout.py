@@ -10,7 +10,9 @@ HELP = "print the LED layout summary, draw it, export the per-LED table, or rege
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", default=".", help="folder for the pictures (default: current folder)")
+    parser.add_argument("--out", default=None,
+                        help="folder for the pictures (default: the current folder, and none with --export or "
+                             "--regenerate unless --out is given)")
     parser.add_argument("--no-pictures", action="store_true", help="print the summary only")
     parser.add_argument("--export", metavar="FILE", help="write the full per-LED table (.csv or .json)")
     parser.add_argument("--regenerate", action="store_true",
@@ -65,10 +67,10 @@ def run(args: argparse.Namespace) -> int:
         from antarium.geometry.table import export_table
 
         print(f"per-LED table: {export_table(dome, args.export)}")
-    if not args.no_pictures:
+    if not args.no_pictures and (args.out is not None or not (args.export or args.regenerate)):
         from antarium.plots.layout import dome_3d, mollweide_map
 
-        out = Path(args.out)
+        out = Path(args.out or ".")
         out.mkdir(parents=True, exist_ok=True)
         print(f"picture: {mollweide_map(dome, out / 'layout_mollweide.png')}")
         print(f"picture: {dome_3d(dome, out / 'layout_3d.png')}")

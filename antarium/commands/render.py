@@ -47,13 +47,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from antarium.core.pose import Pose
     from antarium.geometry import load_dome
-    from antarium.plots.dome_map import atlas_image, led_map, save_png
+    from antarium.plots.dome_map import atlas_image, check_png_path, led_map, save_png
     from antarium.renderers.library import build_scene
     from antarium.renderers.renderer import Renderer
 
     pose = Pose.from_deg(*args.pos, heading_deg=args.heading)
     if args.width < 64:
         raise ValueError(f"--width must be at least 64 pixels, got {args.width}")
+    if args.pos[2] < 0:
+        raise ValueError(f"--pos Z is the eye's height above the ground (z = 0) in metres and must be >= 0, "
+                         f"got {args.pos[2]:g}")
+    check_png_path(args.out, "--out")  # both names checked before anything is rendered or written
+    if args.cube:
+        check_png_path(args.cube, "--cube")
     scene = build_scene(parse_scene_spec(args.scene, args.settings))  # bad scenes fail before GL starts
     dome = load_dome()
     renderer = Renderer(dome, face_size=args.face_size)

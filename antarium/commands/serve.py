@@ -18,6 +18,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="print a status line every S seconds (default 10; 0: never)")
 
 
+def link_line(server) -> str:
+    """Where the frames go: the UDP address in use (the spawned emulator's port is chosen by the OS)."""
+    from antarium.firmware_proto import DEFAULT_PORT
+
+    address = getattr(server.link, "address", None)
+    if server.link is None:
+        return "antarium serve: no dome link"
+    if address is None:
+        return "antarium serve: dome link: virtual (emulator in this process)"
+    spawned = f" (spawned emulator, OS-chosen port; a distributor listens on {DEFAULT_PORT})" \
+        if getattr(server, "emulator", None) is not None else ""
+    return f"antarium serve: dome link: udp {address[0]}:{address[1]}{spawned}"
+
+
+def _announce_link(server) -> None:
+    if server.wait_ready(None):
+        print(link_line(server), flush=True)
+
+
 def _print_status(server, every_s: float) -> None:
     """One line every `every_s` seconds: frame rate, late frames, latency, alarms."""
     import time
@@ -65,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
     where = ", ".join(bus.listen) if bus.enabled else "bus disabled"
     print(f"antarium serve: rig {server.rig_name!r} at {config.loop.rate_hz:g} frames/s; bus: {where}; "
           f"trial logs in {server.log_dir}", flush=True)
+    threading.Thread(target=_announce_link, args=(server,), daemon=True).start()
     threading.Thread(target=_print_status, args=(server, args.status_every), daemon=True).start()
     frames = server.run(seconds=args.seconds)
     stats = server.final_stats

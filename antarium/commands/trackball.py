@@ -33,7 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--unplug-at", type=float, default=None,
                         help="emulated device: pull the cable after this many seconds (demo of unplug handling)")
     parser.add_argument("--replug-after", type=float, default=0.5, help="emulated device: replug after (s)")
-    parser.add_argument("--transport", default="udp", choices=("udp", "tcp"), help="FicTrac transport")
+    parser.add_argument("--transport", default="udp", choices=("udp", "tcp"),
+                        help="FicTrac transport (FicTrac 2.1 sends UDP only; tcp fits 2.0)")
     parser.add_argument("--host", default="127.0.0.1", help="FicTrac: UDP address to bind / TCP host to connect")
     parser.add_argument("--port", type=int, default=5000, help="FicTrac socket port")
     parser.add_argument("--path", default=None, help="FicTrac .dat log for --source fictrac-replay")

@@ -71,11 +71,19 @@ def atlas_image(cube: np.ndarray) -> np.ndarray:
     return _to_srgb8(rgb[:, ::-1].reshape(6 * n, n, 3))
 
 
+def check_png_path(path: str | Path, what: str = "image") -> Path:
+    """`path` as a Path; ValueError in one line unless its name ends in .png."""
+    path = Path(path)
+    if path.suffix.lower() != ".png":
+        raise ValueError(f"{what} {str(path)!r} must be a .png file name (e.g. {path.with_suffix('.png').name!r})")
+    return path
+
+
 def save_png(image: np.ndarray, path: str | Path) -> Path:
-    """Write an (H, W, 3) uint8 RGB image as PNG."""
+    """Write an (H, W, 3) uint8 RGB image as PNG (the name must end in .png)."""
     import cv2
 
-    path = Path(path)
+    path = check_png_path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), image[:, :, ::-1]):
         raise ValueError(f"cannot write image {path} (is the suffix .png and the folder writable?)")

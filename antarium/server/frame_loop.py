@@ -33,10 +33,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from antarium.core.ball import BALL_RADIUS_M, check_tether, pole_motion
+from antarium.core.ball import BALL_RADIUS_M, arc_step, check_tether, pole_motion
 from antarium.core.clock import Clock
 from antarium.core.pose import Pose
 from antarium.core.rates import DOME_RATE_HZ
+from antarium.firmware_proto.budget import LinkBudget, max_frame_rate
 from antarium.locomotion import LocomotionSource
 from antarium.trial_log import FRAME_DTYPE
 
@@ -166,6 +167,8 @@ class FrameLoop:
         self._failed_datagrams = 0
         self._t_first: float | None = None
         self._polariser_heading: float | None = None
+        #: the dome link's bit budget at 100 Mbit/s (None where the frames alone exceed it: nothing to share)
+        self.link_budget = LinkBudget(rate_hz) if rate_hz <= max_frame_rate() else None
         self._polarisers_dirty = False
         self._sky_present = False
         if renderer is not None:
@@ -275,11 +278,8 @@ class FrameLoop:
         gt, gr, fixed = self.gain_translation, self.gain_rotation, self.tether == "fixed"
         for s in samples:
             dx, dy, dyaw = pole_motion(s.rotation, self.ball_radius)
-            if fixed:
-                heading += gr * dyaw
-            c, sn = math.cos(heading), math.sin(heading)
-            x += gt * (c * dx - sn * dy)
-            y += gt * (sn * dx + c * dy)
+            wx, wy, heading = arc_step(heading, gt * dx, gt * dy, gr * dyaw if fixed else 0.0)
+            x, y = x + wx, y + wy
         self.pose = Pose(x, y, self.pose.z, math.remainder(heading, math.tau))
 
     def _check_locomotion(self, now: float) -> None:
@@ -355,17 +355,22 @@ class FrameLoop:
             self._last_reject_event_t = t
             self.event("frame_rejected", reason=reason, rejected_frames=self.rejected_frames)
 
-    def _send_polarisers(self, pose: Pose) -> None:
-        """Polariser angles to the link: a commanded override, or the sky's for this pose (when they change)."""
-        if self.polariser_override is not None:
-            if self._polarisers_dirty:
-                self.link.send_polarisers(self.polariser_override)
-                self._polarisers_dirty = False
-            return
-        if self._polarisers_dirty or (self._sky_present and pose.heading != self._polariser_heading):
-            self.link.send_polarisers(self.renderer.polariser_angles())
-            self._polarisers_dirty = False
+    def _send_polarisers(self, pose: Pose) -> bool:
+        """Polariser angles to the link, after the frame: a commanded override, or the sky's for this pose (when
+        they change); deferred to a later period while the link has no room for them (`LinkBudget`)."""
+        override = self.polariser_override is not None
+        if not (self._polarisers_dirty or (not override and self._sky_present
+                                           and pose.heading != self._polariser_heading)):
+            return False
+        if self.link_budget is not None and not self.link_budget.update_fits():
+            self.link_budget.deferred += 1
+            return False
+        angles = self.polariser_override if override else self.renderer.polariser_angles()
+        sent = self.link.send_polarisers(angles)
+        self._polarisers_dirty = False
+        if not override:
             self._polariser_heading = pose.heading
+        return sent
 
     def step(self) -> FrameRecord:
         """Run one frame (waiting for its slot on the clock) and return what happened."""
@@ -404,12 +409,15 @@ class FrameLoop:
                 self.fault("render", t_start, exc)
         if self.link is not None and self._frame_buf is not None:
             t0 = clock.now()
-            if self.renderer is not None and hasattr(self.renderer, "polariser_angles"):
-                self._send_polarisers(pose)
             try:
                 self.link.send_frame(self._frame_buf)
             except ValueError as exc:  # a frame breaking the LED-frame contract is not sent; the loop goes on
                 self._frame_rejected(t0, str(exc))
+            update_sent = False
+            if self.renderer is not None and hasattr(self.renderer, "polariser_angles"):
+                update_sent = self._send_polarisers(pose)
+            if self.link_budget is not None:
+                self.link_budget.period(update_sent)
             t1 = clock.now()
             link_timings = getattr(self.link, "last_timings", None) or {}
             encode = link_timings.get("encode", math.nan)

@@ -1,23 +1,25 @@
 """FicTrac as a `LocomotionSource`: its live socket stream (UDP or TCP) and replay of its `.dat` logs.
 
     open_source("fictrac", transport="udp", host="127.0.0.1", port=5000)   # we receive FicTrac's datagrams
-    open_source("fictrac", transport="tcp", host="127.0.0.1", port=5000)   # we connect to FicTrac's socket
+    open_source("fictrac", transport="tcp", host="127.0.0.1", port=5000)   # FicTrac 2.0 (2.1 sends UDP only)
     open_source("fictrac-replay", path="run.dat", speed=1.0, clock=clock)
 
 Malformed lines are counted (`status()["malformed"]`) and skipped; a jump of FicTrac's frame counter is
-counted as a gap, a step back as a reset (FicTrac restarted tracking). The live source calls itself
-connected while frames arrive at least every `timeout_s`.
+counted as a gap; a step back of it, or of the sequence counter (column 23: FicTrac reset its tracking), as
+a reset. The live source calls itself connected while frames arrive at least every `timeout_s`.
 """
 
 from __future__ import annotations
 
 import socket
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.locomotion import BallSample, LocomotionSource, ReaderSource
 from antarium.locomotion.fictrac.protocol import FicTracFrame, FicTracParseError, parse_line, to_sample
+from antarium.locomotion.fictrac.timeline import replay_times
 
 TRANSPORTS = ("udp", "tcp")
 MAX_LINE = 4096  # bytes; a longer line without newline is garbage
@@ -28,7 +30,7 @@ class _Counters:
 
     def __init__(self) -> None:
         self.counts = dict.fromkeys(("lines", "frames", "malformed", "gaps", "lost_frames", "resets"), 0)
-        self._prev: int | None = None
+        self._prev: tuple[int, int] | None = None  # frame counter, sequence counter
         self.last_error = ""
 
     def parse(self, line: bytes | str) -> FicTracFrame | None:
@@ -40,13 +42,13 @@ class _Counters:
             self.last_error = str(exc)
             return None
         if self._prev is not None:
-            step = frame.frame - self._prev
-            if step > 1:
+            step = frame.frame - self._prev[0]
+            if step < 1 or frame.seq < self._prev[1]:  # FicTrac restarted, or reset its tracking (column 23)
+                self.counts["resets"] += 1
+            elif step > 1:
                 self.counts["gaps"] += 1
                 self.counts["lost_frames"] += step - 1
-            elif step < 1:
-                self.counts["resets"] += 1
-        self._prev = frame.frame
+        self._prev = (frame.frame, frame.seq)
         self.counts["frames"] += 1
         return frame
 
@@ -78,6 +80,7 @@ class FicTracSource(ReaderSource):
         self._sock: socket.socket | None = None
         self._last_frame: float | None = None
         self._tcp_connected = False
+        self._sender_terminates = False  # the sender ends its lines with a newline (FicTrac does)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -138,8 +141,16 @@ class FicTracSource(ReaderSource):
             except OSError as exc:
                 self._stats.last_error = f"udp receive failed: {exc}"
                 continue
-            for line in data.splitlines():
-                if line.strip():
+            # FicTrac ends each line with a newline: once a sender has done so, a datagram without one was cut
+            terminated = data.endswith(b"\n")
+            self._sender_terminates = self._sender_terminates or terminated
+            lines = data.splitlines()
+            for k, line in enumerate(lines):
+                if k == len(lines) - 1 and self._sender_terminates and not terminated:
+                    self._stats.counts["lines"] += 1
+                    self._stats.counts["malformed"] += 1
+                    self._stats.last_error = "FicTrac datagram cut short (its line has no end of line)"
+                elif line.strip():
                     self._line(line)
 
     def _run_tcp(self) -> None:
@@ -178,7 +189,12 @@ class FicTracSource(ReaderSource):
 
 
 class FicTracReplay(LocomotionSource):
-    """A FicTrac `.dat` log played back on `clock`, paced by its timestamps (field 22) divided by `speed`."""
+    """A FicTrac `.dat` log played back on `clock`, paced by its timestamps (field 22) divided by `speed`.
+
+    Field 22 is repaired first (`fictrac_timeline.replay_times`: a log made from a video holds wall-clock times
+    in its first and last frames); a sample's `t_device` is that repaired time, seconds from the first frame.
+    A last line without its end of line (the log was cut while being written) is counted malformed.
+    """
 
     def __init__(
         self, path: str | Path, clock: Clock | None = None, speed: float = 1.0, max_match_error: float | None = None
@@ -190,7 +206,7 @@ class FicTracReplay(LocomotionSource):
         self.speed = float(speed)
         self.max_match_error = max_match_error
         self._stats = _Counters()
-        self._frames: list[tuple[float, FicTracFrame]] = []
+        self._frames: list[tuple[float, FicTracFrame, float]] = []  # (replay offset s, frame, log time s)
         self._next = 0
         self._t0: float | None = None
 
@@ -198,21 +214,23 @@ class FicTracReplay(LocomotionSource):
         if self._t0 is not None:
             return
         try:
-            lines = self.path.read_bytes().splitlines()
+            data = self.path.read_bytes()
         except FileNotFoundError:
             raise FileNotFoundError(f"FicTrac log {str(self.path)!r} not found") from None
-        first = None
-        latest = 0.0
-        for line in lines:
+        lines, frames = data.splitlines(), []
+        for k, line in enumerate(lines):
             if not line.strip():
                 continue
-            frame = self._stats.parse(line)
-            if frame is None:
+            if k == len(lines) - 1 and not data.endswith(b"\n"):
+                self._stats.counts["lines"] += 1
+                self._stats.counts["malformed"] += 1
+                self._stats.last_error = f"the last line of {self.path.name} is cut short (no end of line)"
                 continue
-            if first is None:
-                first = frame.timestamp_ms
-            latest = max(latest, (frame.timestamp_ms - first) * 1e-3 / self.speed)  # never backwards
-            self._frames.append((latest, frame))
+            frame = self._stats.parse(line)
+            if frame is not None:
+                frames.append(frame)
+        times = replay_times([f.timestamp_ms for f in frames])
+        self._frames = [(float(t) / self.speed, f, float(t)) for t, f in zip(times, frames, strict=True)]
         self._t0 = self.clock.now()
 
     def read(self) -> list[BallSample]:
@@ -222,8 +240,9 @@ class FicTracReplay(LocomotionSource):
         out = []
         frames = self._frames
         while self._next < len(frames) and frames[self._next][0] <= elapsed:
-            offset, frame = frames[self._next]
-            out.append(to_sample(frame, self._t0 + offset, self.max_match_error))
+            offset, frame, t_log = frames[self._next]
+            sample = to_sample(frame, self._t0 + offset, self.max_match_error)
+            out.append(replace(sample, t_device=t_log))  # the log's own time, repaired, never backwards
             self._next += 1
         return out
 

@@ -1,0 +1,93 @@
+"""The dome link's bit budget runs in code: 66 bytes of overhead a datagram, polariser updates where they fit."""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from antarium.core.clock import SimulatedClock
+from antarium.firmware_proto.budget import FRAME_BITS, POLARISER_BITS, LinkBudget, max_frame_rate, wire_bits
+from antarium.locomotion import BallSample, LocomotionSource
+from antarium.server.frame_loop import FrameLoop
+
+
+def test_the_budget_counts_66_bytes_a_datagram_and_pads_the_latch():
+    assert wire_bits(1112) == 8 * (1112 + 66)
+    assert wire_bits(4) == 8 * 84                      # the spec's own 84-byte LATCH
+    assert FRAME_BITS == 518_992 and POLARISER_BITS == 8 * (994 + 66)
+    assert max_frame_rate() == pytest.approx(192.7, abs=0.05)
+    assert max_frame_rate(extra_bits=POLARISER_BITS) == pytest.approx(189.6, abs=0.05)
+
+
+def test_frames_beyond_the_link_are_refused():
+    with pytest.raises(ValueError, match="at most 192.7 frames/s"):
+        LinkBudget(200.0)
+
+
+def test_at_190_hz_an_update_every_frame_does_not_fit_and_is_deferred():
+    budget, sent = LinkBudget(190.0), []
+    for _ in range(700):
+        ok = budget.update_fits()
+        budget.period(ok)
+        sent.append(ok)
+        # the next frame always ends within its period
+        assert budget.backlog + FRAME_BITS <= budget.period_bits + 1e-6
+    share = np.mean(sent)
+    assert 0.5 < share < 1.0 and budget.backlog >= 0
+    # the sustained share is what the spare bits allow
+    spare = budget.period_bits - FRAME_BITS
+    assert share == pytest.approx(spare / POLARISER_BITS, abs=0.01)
+    assert LinkBudget(150.0).update_fits()   # with room to spare every update goes out
+
+
+class _Turning(LocomotionSource):
+    """A fixed-tether ant turning every frame, so the sky's polariser angles change every frame."""
+
+    def __init__(self, clock):
+        self.clock, self.seq = clock, 0
+
+    def read(self):
+        self.seq += 1
+        return [BallSample(self.clock.now(), self.seq, (0.0, 0.0, 0.01))]
+
+    def status(self):
+        return {"connected": True}
+
+
+class _Link:
+    def __init__(self):
+        self.updates = 0
+
+    def send_frame(self, frame):
+        return 0
+
+    def send_polarisers(self, angles):
+        self.updates += 1
+        return True
+
+    def telemetry(self, wait_s=0.0):
+        return {}
+
+
+class _SkyRenderer:
+    scene = SimpleNamespace(sky=object())
+    last_timings = {}
+
+    def render(self, pose, out=None):
+        return np.zeros((20350, 2), np.uint16)
+
+    def polariser_angles(self):
+        return np.zeros((55, 9))
+
+
+def test_the_frame_loop_defers_polariser_updates_the_link_cannot_carry():
+    clock = SimulatedClock()
+    link = _Link()
+    loop = FrameLoop(clock=clock, source=_Turning(clock), renderer=_SkyRenderer(), link=link, tether="fixed",
+                     rate_hz=190.0)
+    loop.renderer_changed()
+    for _ in range(380):
+        loop.step()
+    assert 190 < link.updates < 380 and loop.link_budget.deferred == 380 - link.updates
+    assert not math.isnan(loop.link_budget.backlog)
