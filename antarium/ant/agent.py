@@ -84,7 +84,9 @@ class VirtualAnt:
         pose = self.loop.pose
         self.legs.read()  # steps not yet taken are dropped
         self._queued = (0.0, 0.0)
-        self._sensed_at = (x, y)  # a carried ant feels no walk
+        self._sensed_at = (x, y)  # a carried ant feels no walk, and sees no flow
+        if hasattr(self.model, "carried"):
+            self.model.carried()
         if self.legs.tether == "free_yaw":
             self.loop.set_pose(Pose(x, y, pose.z, pose.heading))
             self.legs.turn_to(heading - pose.heading)
@@ -137,7 +139,7 @@ class VirtualAnt:
         last = self._sensed_at or (x, y)
         self._sensed_at = (x, y)
         view = self.eye.look(leds, yaw=yaw) if getattr(self.model, "needs_view", True) else None
-        return Senses(view, reading, math.hypot(x - last[0], y - last[1]), leds)
+        return Senses(view, reading, math.hypot(x - last[0], y - last[1]), leds, yaw)
 
     def act(self, forward: float, turn: float) -> None:
         """Queue a command: it is walked during the next `frame()`."""

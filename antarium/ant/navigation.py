@@ -30,6 +30,7 @@ class Senses:
     compass: CompassReading
     travelled: float
     leds: np.ndarray | None = None
+    yaw: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,9 @@ class CXModelParams:
     noise: float = 0.1
     cpu4_gain: float = 0.0025
     leak: float = 0.0
+    avoid: bool = False               # add the optic-flow collision avoidance's turn after CPU1
+    flow_method: str = "filter"       # filter | foe (antarium.ant.optic_flow)
+    flow_gain: float = 0.5            # rad of avoidance turn at full imbalance
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -69,6 +73,23 @@ class CXModel:
         self.n_pn = n_pn
         self.cx = CentralComplex(self.params.cx())
         self.learned_views = 0
+        self._ofca = None
+
+    def avoidance(self, senses: Senses) -> tuple[float, dict[str, float]]:
+        """The optic-flow turn (rad, > 0 left) since the previous call (the dome's flow set up on first use)."""
+        if self._ofca is None:
+            from antarium.ant.optic_flow import CollisionAvoidance, FlowParams, OpticFlow
+            from antarium.geometry import load_dome
+
+            flow = OpticFlow.from_dome(load_dome(), FlowParams(method=self.params.flow_method,
+                                                               gain=self.params.flow_gain))
+            self._ofca = CollisionAvoidance(flow)
+        return self._ofca.turn(senses.leds, senses.yaw)
+
+    def carried(self) -> None:
+        """The ant was put down elsewhere: no optic flow from the jump."""
+        if self._ofca is not None:
+            self._ofca.forget()
 
     def reset(self) -> None:
         """Nothing: the memory is kept between runs (store / restore it for vector memory)."""
@@ -99,6 +120,10 @@ class CXModel:
         self.cx.steering(extra, k)
         motor = self.cx.motor()
         turn = float(np.clip(self.params.turn_gain * motor, -self.params.max_turn, self.params.max_turn))
+        if self.params.avoid:
+            flow_turn, flow_trace = self.avoidance(senses)
+            more = {**more, **flow_trace}
+            turn = float(np.clip(turn + flow_turn, -self.params.max_turn, self.params.max_turn))
         return Command(self.params.step, turn, {**trace, **more, "motor": motor})
 
 
