@@ -78,3 +78,18 @@ def test_homing_metrics_of_a_straight_return():
     assert m["outbound_length_m"] == pytest.approx(2.0)
     assert m["closest_approach_m"] == pytest.approx(0.1)
     assert m["tortuosity"] == pytest.approx(1.9 / 1.9)
+
+
+@pytest.mark.parametrize("kind", ["cx", "cxmb", "one_ring"])
+def test_central_complex_models_round_trip_through_model_files(kind, tmp_path):
+    from antarium.ant.eye import EyeParams
+    from antarium.ant.models import make_model
+    from antarium.ant.storage import load_model, save_model
+
+    model = make_model(kind, 800, noise=0.0, **({} if kind == "cx" else {"n_kc": 2000}))
+    for _ in range(50):
+        model.cx.step(0.4, 0.5)
+    path = save_model(tmp_path / f"{kind}.npz", model, EyeParams())
+    back, _, _ = load_model(path)
+    assert back.kind == kind and back.params == model.params
+    assert np.array_equal(back.cx.memory(), model.cx.memory())

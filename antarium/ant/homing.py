@@ -209,3 +209,137 @@ def summarise(outcomes: list[HomingOutcome]) -> dict[str, Any]:
             "tortuosity_median": float(np.median([o.tortuosity for o in outcomes])),
             "search_median_share": float(np.median([o.search_median_share for o in outcomes])),
             "decisions_per_s_closed_loop": float(np.median([o.decisions_per_s for o in outcomes]))}
+
+
+def walk_outbound_avoiding(ant, turns: np.ndarray, step: float) -> Trip:
+    """Like `walk_outbound`, with the model's optic-flow avoidance turn added to each turn of the random walk."""
+    ant.place(0.0, 0.0, float(turns[0]))
+    xy, heading, traces = [], [], []
+    ant.frame()
+    ant.sense()
+    for turn in turns[1:]:
+        ant.frame()
+        senses = ant.sense()
+        trace = ant.model.observe(senses)
+        flow_turn, flow_trace = ant.model.avoidance(senses)
+        traces.append({**trace, **flow_trace})
+        _record(ant, xy, heading)
+        ant.act(step, float(np.clip(turn + flow_turn, -0.5, 0.5)))
+    return Trip(np.asarray(xy), np.asarray(heading), traces)
+
+
+@dataclass
+class ArenaOutcome:
+    seed: int
+    compass: str
+    outbound_length_m: float
+    collisions_outbound: int
+    collisions_cx: int
+    collisions_cxmb: int
+    collisions_cx_again: int
+    closest_cx_share: float
+    closest_cxmb_share: float
+    closest_cx_again_share: float
+    learned_views: int
+
+
+def arena_trial(ant, clutter, seed: int, n_outbound: int, n_inbound: int):
+    """Mitchell 2019's seed task with a CXMB ant (avoiding by optic flow throughout): outbound through the clutter;
+    home by the CX while the MBONs learn (trip 1); back at the feeder with the outbound memory restored, home by
+    CXMB (trip 2); and again by the CX alone (trip 2, comparison). Returns (ArenaOutcome, trips)."""
+    model = ant.model
+    model.cx.reset()
+    out = walk_outbound_avoiding(ant, outbound_turns(seed, n_outbound), model.params.step)
+    memory = model.home_memory()
+    feeder, feeder_heading = out.xy[-1], float(out.heading[-1])
+    trips = {"outbound": out}
+    for name, learning, use_mbons in (("cx", True, False), ("cxmb", False, True), ("cx_again", False, False)):
+        if name != "cx":
+            ant.place(float(feeder[0]), float(feeder[1]), feeder_heading)
+            ant.frame()
+            ant.sense()
+            model.restore(memory)
+        model.learning, model.use_mbons = learning, use_mbons
+        trips[name] = walk_home(ant, n_inbound)
+    model.learning = False
+    length = homing_metrics(out, trips["cx"])["outbound_length_m"]
+    close = {k: homing_metrics(out, trips[k])["closest_approach_share"] for k in ("cx", "cxmb", "cx_again")}
+    outcome = ArenaOutcome(seed, model.params.compass, length, clutter.collisions(out.xy),
+                           clutter.collisions(trips["cx"].xy), clutter.collisions(trips["cxmb"].xy),
+                           clutter.collisions(trips["cx_again"].xy), close["cx"], close["cxmb"], close["cx_again"],
+                           model.learned_views)
+    return outcome, trips
+
+
+def plot_arena(path, clutter, trips: dict[str, Trip], title: str) -> Path:
+    """Cylinders (grey discs) and the four trips of one arena run; PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 7))
+    for (x, y), r in zip(clutter.centres, clutter.radii, strict=True):
+        ax.add_patch(plt.Circle((x, y), r, color="0.4"))
+    styles = {"outbound": ("0.6", "outbound (random walk + optic flow)"), "cx": ("C0", "home 1: CX (MBONs learn)"),
+              "cxmb": ("C3", "home 2: CXMB (memory restored)"), "cx_again": ("C2", "home 2: CX alone (restored)")}
+    for name, trip in trips.items():
+        colour, label = styles[name]
+        ax.plot(*trip.xy.T, color=colour, lw=0.9, label=label)
+    ax.plot(0, 0, "*", color="k", ms=14, label="nest")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title)
+    ax.legend(fontsize=7, loc="best")
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound: int | None = None,
+                    compass: str = "sky", kind: str = "cxmb", model_params: dict | None = None, echo=None,
+                    arena: dict | None = None) -> dict[str, Any]:
+    """The seed's cluttered-arena task for each seed (a fresh arena and a fresh model per seed); writes
+    `arena_<compass>.json` and one picture per seed into `out_dir` (when given); returns the summary."""
+    from antarium.ant.clutter import clutter_scene, make_clutter
+    from antarium.ant.models import make_model
+    from antarium.ant.world import virtual_rig
+
+    n_inbound = n_inbound or n_outbound
+    outcomes: list[ArenaOutcome] = []
+    out = Path(out_dir) if out_dir is not None else None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    for seed in seeds:
+        clutter = make_clutter(seed, **(arena or {}))
+        model = make_model(kind, EyeParams().n_pn, **{"compass": compass, "avoid": True, "seed": seed,
+                                                      **(model_params or {})})
+        with virtual_rig(model, scene=clutter_scene(clutter), renderer_kwargs={"face_size": FACE_SIZE},
+                         compass=compass) as ant:
+            for _ in range(40):
+                ant.frame()
+            outcome, trips = arena_trial(ant, clutter, seed, n_outbound, n_inbound)
+        outcomes.append(outcome)
+        if out is not None:
+            plot_arena(out / f"arena_{compass}_seed{seed:02d}.png", clutter, trips,
+                       f"cluttered arena, seed {seed} ({compass} compass)")
+        if echo is not None:
+            echo(f"arena seed {seed}: closest CX {100 * outcome.closest_cx_share:.2f} %, CXMB "
+                 f"{100 * outcome.closest_cxmb_share:.2f} %, CX again {100 * outcome.closest_cx_again_share:.2f} %; "
+                 f"collisions out {outcome.collisions_outbound}, CX {outcome.collisions_cx}, CXMB "
+                 f"{outcome.collisions_cxmb}")
+    summary = {
+        "runs": len(outcomes), "compass": compass,
+        "closest_cx_share_median": float(np.median([o.closest_cx_share for o in outcomes])),
+        "closest_cxmb_share_median": float(np.median([o.closest_cxmb_share for o in outcomes])),
+        "closest_cx_again_share_median": float(np.median([o.closest_cx_again_share for o in outcomes])),
+        "runs_without_collision": sum(o.collisions_outbound + o.collisions_cx + o.collisions_cxmb
+                                      + o.collisions_cx_again == 0 for o in outcomes),
+    }
+    if out is not None:
+        (out / f"arena_{compass}.json").write_text(json.dumps(
+            {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
+             "n_inbound": n_inbound}, indent=2, default=float))
+    return summary

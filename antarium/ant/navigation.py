@@ -1,5 +1,5 @@
-"""Central-complex navigation models of the virtual ant: Stone et al. 2017's path integration (CX) and Zhang's
-eight-MBON CXMB (Mitchell 2019, section 2.5).
+"""Central-complex navigation models of the virtual ant: Stone et al. 2017's path integration (CX), Zhang's
+eight-MBON CXMB (Mitchell 2019, section 2.5) and Mitchell's One Ring (CX + MB + optic-flow avoidance at CPU1).
 
 These models decide from `Senses` (what `VirtualAnt.sense()` gives: the view, the compass reading, the distance
 walked since the last decision as the loop integrated it from the ball), not from the view alone. Per decision:
@@ -84,7 +84,7 @@ class CXModel:
             flow = OpticFlow.from_dome(load_dome(), FlowParams(method=self.params.flow_method,
                                                                gain=self.params.flow_gain))
             self._ofca = CollisionAvoidance(flow)
-        return self._ofca.turn(senses.leds, senses.yaw)
+        return self._ofca.turn(senses.leds, senses.yaw, senses.travelled)
 
     def carried(self) -> None:
         """The ant was put down elsewhere: no optic flow from the jump."""
@@ -154,7 +154,8 @@ class CXMBModel(CXModel):
         super().__init__(n_pn, params)
         self.kc = KenyonCells(n_pn, params.n_kc, params.pn_per_kc, params.kappa, params.seed)
         self.mbons = mbons or {f"tb1_{j}": MBON(params.n_kc) for j in range(N_COLUMNS)}
-        self.learning = False
+        self.learning = False      # True: learn every view into the current TB1 direction's MBON (first trip)
+        self.use_mbons = True      # False: steer by the CX alone (the comparison trip)
 
     def tb1_column(self) -> int:
         """The TB1 column of the current heading (TB1 is least active at the heading's column)."""
@@ -171,15 +172,59 @@ class CXMBModel(CXModel):
         active = self.kc.active(view.pns((0.0,)))
         return np.array([self.mbons[f"tb1_{j}"].novelty(active)[0] for j in range(N_COLUMNS)])
 
+    def mbon_input(self, view) -> tuple[np.ndarray, dict[str, float]]:
+        """Equations 2-3 laid out as CPU4 (16,): the normalised inverse MBON responses. MBON column j says "head
+        towards j"; CPU4 holds the outbound vector, which CPU1 steers away from, so the columns turn by 4."""
+        m = self.responses(view)
+        inverse = 1.0 - m / max(m.sum(), 1e-12)
+        return np.tile(np.roll(inverse, N_COLUMNS // 2), 2), {"mbon_best": float(np.argmin(m)),
+                                                              "mbon_contrast": float(m.max() - m.min())}
+
     def _extra(self, senses: Senses):
         if self.learning:
             self.learn(senses.view)
             return None, 1.0, {"learning_column": float(self.tb1_column())}
-        m = self.responses(senses.view)
-        inverse = 1.0 - m / max(m.sum(), 1e-12)
-        # MBON column j says "head towards j"; CPU4 holds the outbound vector, steered away from: rotate by 4
-        as_memory = np.tile(np.roll(inverse, N_COLUMNS // 2), 2)
-        return as_memory, self.params.k, {"mbon_best": float(np.argmin(m)), "mbon_contrast": float(m.max() - m.min())}
+        if not self.use_mbons:
+            return None, 1.0, {}
+        extra, trace = self.mbon_input(senses.view)
+        return extra, self.params.k, trace
 
 
-NAVIGATION_MODELS = {"cx": (CXModel, CXModelParams), "cxmb": (CXMBModel, CXMBParams)}
+@dataclass(frozen=True)
+class OneRingParams(CXMBParams):
+    """One Ring (Mitchell 2019): CPU4, the MBONs and the optic flow join at CPU1 with weights k_cx, k_mb, k_of."""
+
+    k_cx: float = 0.6
+    k_mb: float = 0.2
+    k_of: float = 0.2
+
+    def __post_init__(self) -> None:
+        CXMBParams.__post_init__(self)
+        w = (self.k_cx, self.k_mb, self.k_of)
+        if min(w) < 0 or not math.isclose(sum(w), 1.0, abs_tol=1e-9):
+            raise ValueError(f"One Ring weights k_cx, k_mb, k_of must be >= 0 and sum to 1, got {w}")
+
+
+class OneRingModel(CXMBModel):
+    """Path integration, visual memory and collision avoidance combined at CPU1. The optic-flow turn becomes a
+    desired heading (compass heading + turn), coded on the ring like the MBONs' (a cosine bump whose height is the
+    turn's share of its gain; flat without flow)."""
+
+    kind = "one_ring"
+
+    def _extra(self, senses: Senses):
+        if self.learning:
+            return super()._extra(senses)
+        p = self.params
+        mb, trace = self.mbon_input(senses.view) if self.use_mbons else (np.full(2 * N_COLUMNS, 0.5), {})
+        flow_turn, flow_trace = self.avoidance(senses)
+        strength = min(1.0, abs(flow_turn) / p.flow_gain)
+        desired = senses.compass.heading + flow_turn
+        of = np.tile(0.5 + 0.5 * strength * np.cos(PREFS - (desired + math.pi)), 2)
+        rest = p.k_mb + p.k_of
+        extra = (p.k_mb * mb + p.k_of * of) / rest if rest > 0 else None
+        return extra, p.k_cx, {**trace, **flow_trace}
+
+
+NAVIGATION_MODELS = {"cx": (CXModel, CXModelParams), "cxmb": (CXMBModel, CXMBParams),
+                     "one_ring": (OneRingModel, OneRingParams)}

@@ -9,7 +9,8 @@ between frames is the translation's alone; the pixels' azimuths are taken relati
 Two ways to turn (both return a turn in rad, > 0 = left, and their trace):
 - "filter" (the earlier filtering method): the expected flow of a forward translation (unit nearness,
   -(f - (f.d) d) for forward f) is matched with the observed flow; the nearness per pixel is the projection on
-  it; the ant turns away from the side (left: body azimuth 0..90 deg, right: -90..0) with more nearness,
+  it (1/m once divided by the distance walked; only pixels nearer than `react_distance` count); the ant turns
+  away from the side (left: body azimuth 0..90 deg, right: -90..0) with more nearness,
   turn = -gain * (L - R) / (L + R + half_nearness).
 - "foe" (the seed's focus-of-expansion method): the FOE is fitted by least squares (eq. 1: A = [u v],
   b = x v - y u) in body azimuth / elevation coordinates over the frontal field, and the obstacle is located by
@@ -35,7 +36,8 @@ class FlowParams:
     method: str = "filter"
     gain: float = 0.5                 # rad of turn at full imbalance
     max_turn: float = 0.4             # rad per decision
-    half_nearness: float = 10.0       # summed nearness (both sides) at which the turn reaches half its gain
+    react_distance: float = 0.2       # m: pixels whose flow puts them nearer than this count
+    half_nearness: float = 500.0      # summed nearness (1/m, both sides) at which the turn reaches half its gain
     frontal_deg: float = 90.0         # the sides span body azimuth 0..frontal (left) and -frontal..0 (right)
 
     def __post_init__(self) -> None:
@@ -94,8 +96,10 @@ class OpticFlow:
         gtt = np.einsum("mki,mk->mi", g, t)
         return -np.linalg.solve(gtg, gtt[..., None])[..., 0]
 
-    def avoid(self, before: np.ndarray, after: np.ndarray, yaw: float) -> tuple[float, dict[str, float]]:
-        """The turn (rad, > 0 left) away from the nearer side for an ant facing dome azimuth `yaw`, and a trace."""
+    def avoid(self, before: np.ndarray, after: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict]:
+        """The turn (rad, > 0 left) away from the nearer side for an ant facing dome azimuth `yaw` that walked
+        `travelled` m between the frames, and a trace. A pixel's nearness (1/m) is its flow over the flow of a
+        unit-distance translation, divided by the distance walked."""
         p = self.params
         flow = self.flow(before, after)
         rel = np.remainder(self.azimuth - yaw + math.pi, math.tau) - math.pi
@@ -117,6 +121,8 @@ class OpticFlow:
             centre = float(np.clip(foe[0], -math.radians(p.frontal_deg), math.radians(p.frontal_deg)))
             trace["foe_azimuth"] = centre
             nearness = np.sqrt((flow ** 2).sum(1) / np.maximum(norm2, 1e-12))
+        nearness = nearness / max(travelled, 1e-6)
+        nearness = np.where(nearness > 1.0 / p.react_distance, nearness, 0.0)
         left = float(nearness[ok & (rel > centre)].sum())
         right = float(nearness[ok & (rel < centre)].sum())
         trace.update(flow_left=left, flow_right=right)
@@ -136,9 +142,9 @@ class CollisionAvoidance:
     def forget(self) -> None:
         self._last = None
 
-    def turn(self, leds: np.ndarray, yaw: float) -> tuple[float, dict[str, float]]:
+    def turn(self, leds: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict[str, float]]:
         leds = np.array(leds, copy=True)
         last, self._last = self._last, leds
-        if last is None:
+        if last is None or travelled <= 0:
             return 0.0, {"flow_turn": 0.0}
-        return self.flow.avoid(last, leds, yaw)
+        return self.flow.avoid(last, leds, yaw, travelled)
