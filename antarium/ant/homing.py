@@ -343,3 +343,56 @@ def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound:
             {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
              "n_inbound": n_inbound}, indent=2, default=float))
     return summary
+
+
+def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int | None = None,
+                 lateral: float = 0.5, ks=(1.0, 0.8, 0.5, 0.0), compass: str = "sky", scene: Any = "habitat",
+                 echo=None) -> dict[str, Any]:
+    """PI against visual memory: a CXMB ant walks out (random walk), homes once by its CX while its MBONs learn the
+    homeward views, and is then put down `lateral` m to the left of the feeder with its outbound memory restored.
+    PI points to a fictive nest displaced as far; the views point back to the learned route. For each k (CPU4's
+    weight; 1 = PI alone, 0 = the MBONs alone) the ant homes again; reports its closest approach to the real and
+    to the fictive nest. Writes `displacement_<compass>.json` and `.png` into `out_dir` (when given)."""
+    from antarium.ant.models import make_model
+    from antarium.ant.world import virtual_rig
+
+    n_inbound = n_inbound or n_outbound
+    model = make_model("cxmb", EyeParams().n_pn, compass=compass, seed=seed)
+    trips: dict[str, Trip] = {}
+    result: dict[str, Any] = {"seed": seed, "lateral_m": lateral, "compass": compass, "runs": {}}
+    with virtual_rig(model, scene=scene, renderer_kwargs={"face_size": FACE_SIZE}, compass=compass) as ant:
+        for _ in range(40):
+            ant.frame()
+        model.cx.reset()
+        out = walk_outbound(ant, outbound_turns(seed, n_outbound), model.params.step)
+        memory = model.home_memory()
+        model.learning = True
+        trips["home 1: CX, MBONs learn"] = walk_home(ant, n_inbound)
+        model.learning = False
+        fx, fy = out.xy[-1]
+        h = float(out.heading[-1])
+        left = np.array([-math.sin(h), math.cos(h)])
+        start = np.array([fx, fy]) + lateral * left
+        fictive = lateral * left
+        for k in ks:
+            ant.place(float(start[0]), float(start[1]), h)
+            ant.frame()
+            ant.sense()
+            model.restore(memory)
+            model.params = type(model.params)(**{**asdict(model.params), "k": k})
+            trip = walk_home(ant, n_inbound)
+            trips[f"displaced, k = {k}"] = trip
+            result["runs"][str(k)] = {
+                "closest_to_nest_m": float(np.hypot(*trip.xy.T).min()),
+                "closest_to_fictive_nest_m": float(np.hypot(*(trip.xy - fictive).T).min())}
+            if echo is not None:
+                echo(f"k = {k}: closest to nest {result['runs'][str(k)]['closest_to_nest_m']:.2f} m, to the fictive "
+                     f"nest {result['runs'][str(k)]['closest_to_fictive_nest_m']:.2f} m")
+    if out_dir is not None:
+        path = Path(out_dir)
+        path.mkdir(parents=True, exist_ok=True)
+        (path / f"displacement_{compass}.json").write_text(json.dumps(result, indent=2, default=float))
+        pictures = {name: (out, trip) for name, trip in trips.items()}
+        result["png"] = str(plot_trips(path / f"displacement_{compass}.png", pictures,
+                                       f"displaced {lateral} m left of the feeder: PI vs visual memory"))
+    return result

@@ -1,5 +1,5 @@
-"""`antarium ant learn | run | evaluate | demo | serve | homing | arena`: the virtual ant on an emulated rig (no
-hardware needed)."""
+"""`antarium ant learn | run | evaluate | demo | serve | homing | arena | displace`: the virtual ant on an emulated
+rig (no hardware needed)."""
 
 from __future__ import annotations
 
@@ -85,6 +85,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                      "by CXMB with the vector memory restored; collisions counted")
     _trips(p)
     p.add_argument("--model", choices=("cxmb", "one_ring"), default="cxmb")
+    p = sub.add_parser("displace", help="PI vs visual memory: a CXMB ant homes once (its MBONs learn), is put down "
+                                        "beside the feeder with its memory restored, and homes for several k")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--steps", type=int, default=600, help="outbound decisions of 1 cm (default 600)")
+    p.add_argument("--lateral-cm", type=float, default=50.0, help="put down this far left of the feeder")
+    p.add_argument("--compass", choices=("sky", "ideal"), default="sky")
+    p.add_argument("--scene", default="habitat")
+    p.add_argument("--out", required=True)
 
 
 def _trips(p: argparse.ArgumentParser) -> None:
@@ -131,6 +139,16 @@ def run(args: argparse.Namespace) -> int:
         return _run(args)
     if args.action in ("homing", "arena"):
         return _run_trips(args)
+    if args.action == "displace":
+        import json
+
+        from antarium.ant.homing import displacement
+
+        if args.steps < 2:
+            raise ValueError(f"--steps must be >= 2, got {args.steps}")
+        print(json.dumps(displacement(args.out, args.seed, args.steps, None, args.lateral_cm / 100.0,
+                                      compass=args.compass, scene=args.scene, echo=print), indent=2))
+        return 0
     if args.action == "serve":
         from antarium.ant.served import run_served
 
