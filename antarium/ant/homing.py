@@ -224,7 +224,7 @@ def walk_outbound_avoiding(ant, turns: np.ndarray, step: float) -> Trip:
         flow_turn, flow_trace = ant.model.avoidance(senses)
         traces.append({**trace, **flow_trace})
         _record(ant, xy, heading)
-        ant.act(step, float(np.clip(turn + flow_turn, -0.5, 0.5)))
+        ant.act(step, float(np.clip(turn + flow_turn, -ant.model.params.max_turn, ant.model.params.max_turn)))
     return Trip(np.asarray(xy), np.asarray(heading), traces)
 
 
