@@ -47,7 +47,7 @@ class CXModelParams:
     leak: float = 0.0
     avoid: bool = False               # add the optic-flow collision avoidance's turn after CPU1
     flow_method: str = "filter"       # filter | foe (antarium.ant.optic_flow)
-    flow_gain: float = 0.5            # rad of avoidance turn at full imbalance
+    flow_gain: float = 0.15           # rad of avoidance turn at full imbalance (0.5 out-turned the CX in clutter)
     seed: int = 0
 
     def __post_init__(self) -> None:
