@@ -49,7 +49,7 @@ def test_wrong_version_shape_or_kind_is_refused(tmp_path):
     model = make_model("antcar", N_PN)
     path = save_model(tmp_path / "m.npz", model, EyeParams())
     _rewrite(path, version=np.array(FORMAT_VERSION + 1))
-    with pytest.raises(ModelFileError, match=f"version {FORMAT_VERSION + 1} cannot be read; allowed: 1, 2"):
+    with pytest.raises(ModelFileError, match=f"version {FORMAT_VERSION + 1} cannot be read; allowed: 1, 2, 3"):
         load_model(path)
     # a version 1 file (eye without row_gain) is still read, with the plain eye
     path = save_model(tmp_path / "m.npz", model, EyeParams(row_gain=True))

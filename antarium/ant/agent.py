@@ -50,7 +50,8 @@ class VirtualAnt:
 
     def __init__(self, eye: Eye, model, loop, legs: AntLocomotion | BusLegs | TrackballLegs,
                  read_leds: Callable[[], np.ndarray], frames_per_decision: int = 1,
-                 delivery_timeout_s: float = 2.0) -> None:
+                 delivery_timeout_s: float = 2.0, compass=None,
+                 read_polarisers: Callable[[], np.ndarray] | None = None) -> None:
         if isinstance(legs, BusLegs):
             if not hasattr(loop.source, "received"):
                 raise ValueError("legs on the bus need a frame loop reading the bus (open_source('bus', ...))")
@@ -65,6 +66,8 @@ class VirtualAnt:
         self.frames_per_decision = int(frames_per_decision)
         self.delivery_timeout_s = float(delivery_timeout_s)
         self._queued: tuple[float, float] = (0.0, 0.0)
+        self.compass, self.read_polarisers = compass, read_polarisers
+        self._sensed_at: tuple[float, float] | None = None
 
     # -- where the ant is ------------------------------------------------------------------------------
     @property
@@ -81,6 +84,9 @@ class VirtualAnt:
         pose = self.loop.pose
         self.legs.read()  # steps not yet taken are dropped
         self._queued = (0.0, 0.0)
+        self._sensed_at = (x, y)  # a carried ant feels no walk, and sees no flow
+        if hasattr(self.model, "carried"):
+            self.model.carried()
         if self.legs.tether == "free_yaw":
             self.loop.set_pose(Pose(x, y, pose.z, pose.heading))
             self.legs.turn_to(heading - pose.heading)
@@ -114,6 +120,27 @@ class VirtualAnt:
     def look(self) -> View:
         return self.eye.look(self.read_leds(), yaw=self.legs.yaw)
 
+    def sense(self):
+        """`Senses` for the central-complex models: the view, the compass (the sky compass reads the dome's UV
+        pixels and polarisers; the ideal one the true heading) and the distance walked since the last `sense`,
+        as the loop integrated it from the ball."""
+        from antarium.ant.compass import IdealCompass
+        from antarium.ant.navigation import Senses
+
+        if self.compass is None:
+            raise ValueError("this ant has no compass (virtual_rig(..., compass='sky' | 'ideal'))")
+        leds = self.read_leds()
+        yaw = self.legs.yaw
+        if isinstance(self.compass, IdealCompass):
+            reading = self.compass.read_true(self.heading)
+        else:
+            reading = self.compass.read(leds, self.read_polarisers(), yaw)
+        x, y = self.position
+        last = self._sensed_at or (x, y)
+        self._sensed_at = (x, y)
+        view = self.eye.look(leds, yaw=yaw) if getattr(self.model, "needs_view", True) else None
+        return Senses(view, reading, math.hypot(x - last[0], y - last[1]), leds, yaw)
+
     def act(self, forward: float, turn: float) -> None:
         """Queue a command: it is walked during the next `frame()`."""
         self._queued = (float(forward), float(turn))
@@ -121,7 +148,7 @@ class VirtualAnt:
     def decide(self):
         """Show the current pose, look, decide and queue the command; returns the `Command`."""
         self.frame()
-        cmd = self.model.decide(self.look())
+        cmd = self.model.decide(self.sense() if getattr(self.model, "uses_senses", False) else self.look())
         self.act(cmd.forward, cmd.turn)
         return cmd
 

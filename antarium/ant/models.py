@@ -8,21 +8,14 @@ internal signals (familiarities, motivation) in `Command.trace` for the trial lo
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
+from antarium.ant.command import Command
 from antarium.ant.eye import View
 from antarium.ant.mushroom_body import MBON, KenyonCells
-
-
-@dataclass(frozen=True, slots=True)
-class Command:
-    """One decision: `forward` metres along the body axis (negative: backward), `turn` radians (CCW)."""
-
-    forward: float
-    turn: float
-    trace: dict[str, float] = field(default_factory=dict)
+from antarium.ant.navigation import NAVIGATION_MODELS
 
 
 def oscillation_angles(amplitude: float, step: float, phase: float = 0.0) -> np.ndarray:
@@ -243,10 +236,11 @@ class PerfectMemoryModel:
 
 MODELS = {"antcar": (AntcarModel, AntcarParams), "ardin": (ArdinModel, ArdinParams),
           "perfect_memory": (PerfectMemoryModel, PerfectMemoryParams)}
+MODELS.update(NAVIGATION_MODELS)
 
 
 def make_model(kind: str, n_pn: int, **overrides):
-    """A fresh model of `kind` (antcar | ardin | perfect_memory) with parameters overridden by keyword."""
+    """A fresh model of `kind` (a key of MODELS) with parameters overridden by keyword."""
     try:
         cls, params_cls = MODELS[kind]
     except KeyError:

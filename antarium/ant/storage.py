@@ -4,7 +4,7 @@
 |------------------|-----------------------|----------------------------------------------------------------|
 | format           | str                   | "antarium-ant-model"                                           |
 | version          | int                   | FORMAT_VERSION                                                 |
-| kind             | str                   | antcar, ardin or perfect_memory                                |
+| kind             | str                   | a key of `models.MODELS` (antcar, ardin, perfect_memory, cx, ...) |
 | params           | str (JSON)            | the model's parameters (the KC wiring is rebuilt from `seed`)  |
 | eye              | str (JSON)            | the `EyeParams` the model learned with                         |
 | n_pn             | int                   | projection neurons                                             |
@@ -12,6 +12,7 @@
 | n_kc_<name>      | int                   | KCs of MBON <name>                                             |
 | views            | float16 (n, n_pn)     | perfect memory's stored views                                  |
 | learned_views    | int                   | views learned                                                  |
+| cpu4             | float64 (16,)         | the CX's CPU4 memory (cx, cxmb, one_ring; version >= 3)        |
 | route            | float64 (n, 2)        | the learned route, metres (optional)                           |
 """
 
@@ -29,9 +30,9 @@ from antarium.ant.models import MODELS, PerfectMemoryModel
 from antarium.ant.mushroom_body import MBON
 
 FORMAT = "antarium-ant-model"
-FORMAT_VERSION = 2
-#: versions this code reads: 1 lacks the eye's `row_gain` (False then), otherwise the same
-READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+#: versions this code reads: 1 lacks the eye's `row_gain` (False then); 3 adds the central-complex models' CPU4
+READABLE_VERSIONS = (1, 2, 3)
 
 
 class ModelFileError(ValueError):
@@ -49,9 +50,11 @@ def save_model(path: str | os.PathLike, model, eye_params: EyeParams, route: np.
     if isinstance(model, PerfectMemoryModel):
         arrays["views"] = model.views.astype(np.float16)
     else:
-        for name, mbon in model.mbons.items():
+        for name, mbon in getattr(model, "mbons", {}).items():
             arrays[f"mbon_{name}"] = mbon.packed()
             arrays[f"n_kc_{name}"] = np.array(mbon.n_kc)
+    if hasattr(model, "cx"):
+        arrays["cpu4"] = model.cx.memory()
     if route is not None:
         arrays["route"] = np.asarray(route, np.float64)
     tmp = path.with_name(path.name + ".tmp")
@@ -99,7 +102,7 @@ def load_model(path: str | os.PathLike):
         else:
             model = cls(n_pn, params)
             mbons = {}
-            for name, mbon in model.mbons.items():
+            for name, mbon in getattr(model, "mbons", {}).items():
                 key = f"mbon_{name}"
                 if key not in data.files:
                     raise ModelFileError(f"{path}: MBON {name!r} missing")
@@ -110,8 +113,16 @@ def load_model(path: str | os.PathLike):
                     mbons[name] = MBON.from_packed(data[key], n_kc)
                 except ValueError as exc:
                     raise ModelFileError(f"{path}: {exc}") from None
-            model.mbons = mbons
+            if hasattr(model, "mbons"):
+                model.mbons = mbons
             model.learned_views = int(data["learned_views"])
+            if hasattr(model, "cx"):
+                if "cpu4" not in data.files:
+                    raise ModelFileError(f"{path}: the {kind} model's CPU4 memory (cpu4) is missing")
+                try:
+                    model.restore(data["cpu4"])
+                except ValueError as exc:
+                    raise ModelFileError(f"{path}: {exc}") from None
         route = data["route"] if "route" in data.files else None
     return model, eye_params, route
 
@@ -120,4 +131,7 @@ def mbon_bytes(model) -> dict[str, int]:
     """Bytes of memory per MBON (bit-packed), or of the stored views for perfect memory ({'views': bytes})."""
     if isinstance(model, PerfectMemoryModel):
         return {"views": int(model.views.astype(np.float16).nbytes)}
-    return {name: int(mbon.packed().nbytes) for name, mbon in model.mbons.items()}
+    sizes = {name: int(mbon.packed().nbytes) for name, mbon in getattr(model, "mbons", {}).items()}
+    if hasattr(model, "cx"):
+        sizes["cpu4"] = int(model.cx.memory().nbytes)
+    return sizes

@@ -34,12 +34,14 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
                 clock: Clock | None = None, log_path: str | Path | None = None, log_metadata: dict | None = None,
                 frames_per_decision: int = 1, eye_height: float = EYE_HEIGHT_M,
                 renderer_kwargs: dict | None = None, bus: dict | None = None,
-                rig: str = "rig1", trackball: Any = None) -> Iterator[VirtualAnt]:
+                rig: str = "rig1", trackball: Any = None, compass: str | None = None) -> Iterator[VirtualAnt]:
     """A `VirtualAnt` with `model` in a frame loop on an emulated dome showing `scene`.
 
     log_path: write an HDF5 trial log there (like a real trial's), or None.
     bus: a `[bus]` section: the ant's steps then travel as ball rotations over zenoh (`BusLegs`) to the frame
     loop's "bus" locomotion source for rig `rig`, as a trackball's would; None: the in-process "ant" source.
+    compass: "sky" (read from the emulated panels' UV pixels and polarisers) or "ideal" (the true heading), for
+    the central-complex models; default: the model's `params.compass` if it has one.
     trackball: True, or a `[trackball]` section (dict, file, `TrackballConfig`): the ant's steps move the ball of
     an emulated USB trackball on the loop's clock, and the real driver reading it is the loop's source
     (`TrackballLegs`); its default reports at 950 Hz, five per frame.
@@ -90,4 +92,15 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
         loop_cfg = LoopSection(tether=tether, eye_height_m=eye_height, rate_hz=DOME_RATE_HZ,
                                ball_radius_m=legs.driver.config.ball_radius if trackball is not None else BALL_RADIUS_M)
         loop = FrameLoop.from_config(loop_cfg, clock=clock, source=source, renderer=renderer, link=link, log=log)
-        yield VirtualAnt(eye, model, loop, legs, link.emulator.led_values, frames_per_decision)
+        yield VirtualAnt(eye, model, loop, legs, link.emulator.led_values, frames_per_decision,
+                         compass=make_compass(compass or getattr(model.params, "compass", "sky"), dome),
+                         read_polarisers=link.emulator.polariser_angles)
+
+
+def make_compass(kind: str, dome):
+    """The ant's compass: "sky" (`SkyCompass` on `dome`) or "ideal"."""
+    from antarium.ant.compass import COMPASSES, IdealCompass, SkyCompass
+
+    if kind not in COMPASSES:
+        raise ValueError(f"compass {kind!r} not known; allowed: {', '.join(COMPASSES)}")
+    return SkyCompass.from_dome(dome) if kind == "sky" else IdealCompass()

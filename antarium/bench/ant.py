@@ -70,6 +70,9 @@ def measure(seconds: float = 2.0, n_frames: int = 20) -> dict:
     sizes = mbon_bytes(antcar)
     out["bytes_per_route_mbon"] = max(sizes["left"], sizes["right"])
     out["bytes_per_place_mbon"] = max(sizes["nest"], sizes["feeder"])
+    from antarium.bench.ant_cx import measure as measure_cx
+
+    out.update(measure_cx(_rate, seconds, n_frames))
     out["ratios"] = {
         "decisions_vs_goal_1000": out["antcar_decisions_per_s"] / GOAL_DECISIONS_PER_S,
         "decisions_vs_dome_190": out["antcar_decisions_per_s"] / DOME_RATE_HZ,
@@ -108,6 +111,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"  memory per route MBON: {result['bytes_per_route_mbon']} B "
           f"= {r['route_mbon_bytes_vs_goal_2000']:.2f} x goal 2000 B, whatever the route length; "
           f"place MBON {result['bytes_per_place_mbon']} B")
+    rc = result["ratios_cx"]
+    print(f"  sky compass + CX step (LED frame):       {result['compass_cx_step_per_s']:8.0f} /s "
+          f"= {rc['compass_cx_vs_goal_10000']:.2f} x goal 10000/s (compass alone {result['compass_per_s']:.0f} /s)")
+    for kind, text in (("cx", "CX"), ("cxmb", "CXMB + optic flow"), ("one_ring", "One Ring")):
+        print(f"  {text + ' decisions (LED frame):':40s} {result[f'{kind}_decisions_per_s']:8.0f} /s "
+              f"= {rc[f'{kind}_vs_goal_1000']:.2f} x goal 1000/s; memory {result[f'{kind}_memory_bytes']} B")
     if args.json_out:
         with open(args.json_out, "w") as fh:
             json.dump(result, fh, indent=2)

@@ -1,4 +1,5 @@
-"""`antarium ant learn | run | evaluate | demo | serve`: the virtual ant on an emulated rig (no hardware needed)."""
+"""`antarium ant learn | run | evaluate | demo | serve | homing | arena | displace`: the virtual ant on an emulated
+rig (no hardware needed)."""
 
 from __future__ import annotations
 
@@ -77,6 +78,50 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--lateral-cm", type=float, default=0.0, help="release this far left of the route start")
     p.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
     p.add_argument("--max-decisions", type=int, default=None)
+    p = sub.add_parser("homing", help="Stone 2017's foraging task: random outbound routes, home by CX path "
+                                      "integration; pictures and pi_homing_<compass>.json")
+    _trips(p)
+    p = sub.add_parser("arena", help="the cluttered arena: outbound with optic-flow avoidance, home by CX, then "
+                                     "by CXMB with the vector memory restored; collisions counted")
+    _trips(p)
+    p.add_argument("--model", choices=("cxmb", "one_ring"), default="cxmb")
+    p = sub.add_parser("displace", help="PI vs visual memory: a CXMB ant homes once (its MBONs learn), is put down "
+                                        "beside the feeder with its memory restored, and homes for several k")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--steps", type=int, default=600, help="outbound decisions of 1 cm (default 600)")
+    p.add_argument("--lateral-cm", type=float, default=50.0, help="put down this far left of the feeder")
+    p.add_argument("--compass", choices=("sky", "ideal"), default="sky")
+    p.add_argument("--scene", default="habitat")
+    p.add_argument("--out", required=True)
+
+
+def _trips(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seeds", type=int, default=20, help="outbound routes, seeds 0..N-1 (default 20)")
+    p.add_argument("--steps", type=int, default=1500, help="outbound decisions of 1 cm (default 1500)")
+    p.add_argument("--inbound", type=int, default=None, help="homeward decisions (default: as many as outbound)")
+    p.add_argument("--compass", choices=("sky", "ideal", "both"), default="both",
+                   help="sky: read from the dome's polarised UV pixels; ideal: the true heading (default both)")
+    p.add_argument("--param", action="append", metavar="KEY=VALUE", help="model parameter, e.g. noise=0.05")
+    p.add_argument("--out", required=True, help="folder for the pictures and the summary")
+
+
+def _run_trips(args: argparse.Namespace) -> int:
+    import json
+
+    from antarium.ant.homing import cluttered_arena, pi_homing
+
+    if args.seeds < 1 or args.steps < 2 or (args.inbound is not None and args.inbound < 1):
+        raise ValueError("--seeds must be >= 1, --steps >= 2 and --inbound >= 1")
+    compasses = ("sky", "ideal") if args.compass == "both" else (args.compass,)
+    for compass in compasses:
+        if args.action == "homing":
+            summary = pi_homing(args.out, range(args.seeds), args.steps, args.inbound, compass, _params(args.param),
+                                echo=print)
+        else:
+            summary = cluttered_arena(args.out, range(args.seeds), args.steps, args.inbound, compass, args.model,
+                                      _params(args.param), echo=print)
+        print(json.dumps(summary, indent=2))
+    return 0
 
 
 def _bar(desc: str, total=None):
@@ -92,6 +137,18 @@ def run(args: argparse.Namespace) -> int:
         return _learn(args)
     if args.action == "run":
         return _run(args)
+    if args.action in ("homing", "arena"):
+        return _run_trips(args)
+    if args.action == "displace":
+        import json
+
+        from antarium.ant.homing import displacement
+
+        if args.steps < 2:
+            raise ValueError(f"--steps must be >= 2, got {args.steps}")
+        print(json.dumps(displacement(args.out, args.seed, args.steps, None, args.lateral_cm / 100.0,
+                                      compass=args.compass, scene=args.scene, echo=print), indent=2))
+        return 0
     if args.action == "serve":
         from antarium.ant.served import run_served
 

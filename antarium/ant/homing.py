@@ -1,0 +1,398 @@
+"""Path-integration experiments of the virtual ant in the emulated dome (Stone et al. 2017's foraging task; Zhang's
+vector-memory and CXMB trips, Mitchell 2019 section 2.5).
+
+Foraging task: from the nest at the origin the ant walks a random outbound route (a correlated random walk of
+`n_outbound` decisions driven from outside, its CX integrating what the ball and the compass tell it), then homes
+by its CX for `n_inbound` decisions. Metrics (Stone 2017): closest approach to the nest as a share of the outbound
+path length; tortuosity of the homeward path (path length until the closest approach / the straight
+feeder-to-nest distance); the search around the nest (median distance from the nest after the closest approach,
+as a share of the outbound path).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from antarium.ant.eye import EyeParams
+from antarium.ant.metrics import median_mad
+
+#: turning of the outbound random walk: turn_k = 0.9 turn_(k-1) + N(0, sd) rad per decision
+OUTBOUND_TURN_SD = 0.02
+OUTBOUND_TURN_MEMORY = 0.9
+#: the foraging task's scene: the dome's sky (the sun, the polarised UV pixels) and nothing else
+PI_SCENE = "sky"
+FACE_SIZE = 64
+
+
+def outbound_turns(seed: int, n: int) -> np.ndarray:
+    """(n,) turns (rad) of a seeded correlated random walk, the first turn a random initial heading."""
+    rng = np.random.default_rng(seed)
+    turns = np.empty(n)
+    turn = 0.0
+    for k in range(n):
+        turn = OUTBOUND_TURN_MEMORY * turn + rng.normal(0.0, OUTBOUND_TURN_SD)
+        turns[k] = turn
+    turns[0] = rng.uniform(-math.pi, math.pi)
+    return turns
+
+
+@dataclass
+class Trip:
+    """Positions (world, m) and model traces of one trip."""
+
+    xy: np.ndarray
+    heading: np.ndarray
+    traces: list[dict[str, float]]
+
+
+@dataclass
+class HomingOutcome:
+    seed: int
+    compass: str
+    model: str
+    outbound_length_m: float
+    feeder_distance_m: float
+    closest_approach_m: float
+    closest_approach_share: float
+    tortuosity: float
+    search_median_share: float
+    decisions_per_s: float
+
+
+def _record(ant, xy: list, heading: list) -> None:
+    xy.append(ant.position)
+    heading.append(ant.heading)
+
+
+def walk_outbound(ant, turns: np.ndarray, step: float) -> Trip:
+    """Walk the outbound route from the nest (origin) while the model only integrates (`observe`)."""
+    ant.place(0.0, 0.0, float(turns[0]))
+    xy, heading, traces = [], [], []
+    ant.frame()
+    ant.sense()  # the baseline of the distance walked
+    for turn in turns[1:]:
+        ant.act(step, float(turn))
+        ant.frame()
+        traces.append(ant.model.observe(ant.sense()))
+        _record(ant, xy, heading)
+    return Trip(np.asarray(xy), np.asarray(heading), traces)
+
+
+def walk_home(ant, n: int) -> Trip:
+    """Let the model steer for `n` decisions."""
+    xy, heading, traces = [], [], []
+    for _ in range(n):
+        cmd = ant.decide()
+        traces.append(cmd.trace)
+        _record(ant, xy, heading)
+    return Trip(np.asarray(xy), np.asarray(heading), traces)
+
+
+def homing_metrics(outbound: Trip, inbound: Trip, nest=(0.0, 0.0)) -> dict[str, float]:
+    """Closest approach (m, share of the outbound length), tortuosity and search spread of a homeward trip."""
+    length = float(np.linalg.norm(np.diff(np.vstack([nest, outbound.xy]), axis=0), axis=1).sum())
+    start = outbound.xy[-1]
+    feeder = float(np.hypot(*(start - nest)))
+    dist = np.hypot(*(inbound.xy - nest).T)
+    k = int(np.argmin(dist))
+    path = np.vstack([start, inbound.xy[:k + 1]])
+    homeward = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+    return {"outbound_length_m": length, "feeder_distance_m": feeder, "closest_approach_m": float(dist[k]),
+            "closest_approach_share": float(dist[k] / length), "tortuosity": homeward / max(feeder - dist[k], 1e-9),
+            "search_median_share": float(np.median(dist[k:]) / length)}
+
+
+def pi_trial(ant, seed: int, n_outbound: int, n_inbound: int) -> tuple[dict[str, float], Trip, Trip]:
+    """One foraging trip: fresh CX memory, outbound, homing; (metrics, outbound, inbound)."""
+    ant.model.cx.reset()
+    outbound = walk_outbound(ant, outbound_turns(seed, n_outbound), ant.model.params.step)
+    inbound = walk_home(ant, n_inbound)
+    return homing_metrics(outbound, inbound), outbound, inbound
+
+
+def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str) -> Path:
+    """Outbound (thin grey) and homeward paths (colour) of several trips from the nest at the origin; PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 7))
+    for i, (label, (out, home)) in enumerate(trips.items()):
+        ax.plot(*out.xy.T, color="0.6", lw=0.8, label="outbound" if i == 0 else None)
+        ax.plot(*home.xy.T, color=f"C{i % 10}", lw=1.0, label=label)
+        ax.plot(*out.xy[-1], "s", color=f"C{i % 10}", ms=4)
+    ax.plot(0, 0, "*", color="k", ms=14, label="nest")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title)
+    ax.legend(fontsize=7, loc="best")
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_distance(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str) -> Path:
+    """Distance from the nest over the homeward trip, as a share of the outbound path length; PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for i, (label, (out, home)) in enumerate(trips.items()):
+        length = float(np.linalg.norm(np.diff(np.vstack([(0, 0), out.xy]), axis=0), axis=1).sum())
+        ax.plot(np.hypot(*home.xy.T) / length, color=f"C{i % 10}", lw=0.8, label=label)
+    ax.axhline(0.05, color="k", ls="--", lw=0.8, label="goal: 5 % of the outbound path")
+    ax.set_xlabel("homeward decision")
+    ax.set_ylabel("distance to nest / outbound length")
+    ax.set_title(title)
+    ax.legend(fontsize=7, loc="best")
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 1500, n_inbound: int | None = None,
+              compass: str = "sky", model_params: dict | None = None, scene: Any = PI_SCENE,
+              echo=None) -> dict[str, Any]:
+    """Stone 2017's foraging task for each seed, in the emulated dome; returns (and writes to `out_dir`:
+    `pi_homing_<compass>.json`, `_paths.png`, `_distance.png`) the outcomes and their medians."""
+    from antarium.ant.models import make_model
+    from antarium.ant.world import virtual_rig
+
+    n_inbound = n_inbound or n_outbound
+    model = make_model("cx", EyeParams().n_pn, **{"compass": compass, **(model_params or {})})
+    outcomes: list[HomingOutcome] = []
+    trips: dict[str, tuple[Trip, Trip]] = {}
+    with virtual_rig(model, scene=scene, eye_params=None, renderer_kwargs={"face_size": FACE_SIZE},
+                     compass=compass) as ant:
+        for _ in range(40):  # the polarisers turn to the sky's e-vectors
+            ant.frame()
+        for seed in seeds:
+            t0 = time.perf_counter()
+            metrics, out, home = pi_trial(ant, seed, n_outbound, n_inbound)
+            rate = (n_outbound + n_inbound) / (time.perf_counter() - t0)
+            outcomes.append(HomingOutcome(seed, compass, "cx", decisions_per_s=rate, **metrics))
+            trips[f"seed {seed}"] = (out, home)
+            if echo is not None:
+                echo(f"seed {seed} ({compass} compass): closest approach {100 * metrics['closest_approach_share']:.2f}"
+                     f" % of {metrics['outbound_length_m']:.1f} m, tortuosity {metrics['tortuosity']:.2f}")
+    summary = summarise(outcomes)
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / f"pi_homing_{compass}.json").write_text(json.dumps(
+            {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
+             "n_inbound": n_inbound, "scene": str(scene)}, indent=2, default=float))
+        title = f"CX path integration, {compass} compass ({len(outcomes)} routes of {n_outbound} steps)"
+        summary["paths_png"] = str(plot_trips(out / f"pi_homing_{compass}_paths.png", trips, title))
+        summary["distance_png"] = str(plot_distance(out / f"pi_homing_{compass}_distance.png", trips, title))
+    return summary
+
+
+def summarise(outcomes: list[HomingOutcome]) -> dict[str, Any]:
+    share = median_mad([o.closest_approach_share for o in outcomes])
+    return {"runs": len(outcomes), "compass": outcomes[0].compass if outcomes else None,
+            "closest_approach_share_median": share[0], "closest_approach_share_mad": share[1],
+            "within_5_percent": sum(o.closest_approach_share <= 0.05 for o in outcomes),
+            "tortuosity_median": float(np.median([o.tortuosity for o in outcomes])),
+            "search_median_share": float(np.median([o.search_median_share for o in outcomes])),
+            "decisions_per_s_closed_loop": float(np.median([o.decisions_per_s for o in outcomes]))}
+
+
+def walk_outbound_avoiding(ant, turns: np.ndarray, step: float) -> Trip:
+    """Like `walk_outbound`, with the model's optic-flow avoidance turn added to each turn of the random walk."""
+    ant.place(0.0, 0.0, float(turns[0]))
+    xy, heading, traces = [], [], []
+    ant.frame()
+    ant.sense()
+    for turn in turns[1:]:
+        ant.frame()
+        senses = ant.sense()
+        trace = ant.model.observe(senses)
+        flow_turn, flow_trace = ant.model.avoidance(senses)
+        traces.append({**trace, **flow_trace})
+        _record(ant, xy, heading)
+        ant.act(step, float(np.clip(turn + flow_turn, -ant.model.params.max_turn, ant.model.params.max_turn)))
+    return Trip(np.asarray(xy), np.asarray(heading), traces)
+
+
+@dataclass
+class ArenaOutcome:
+    seed: int
+    compass: str
+    outbound_length_m: float
+    collisions_outbound: int
+    collisions_cx: int
+    collisions_cxmb: int
+    collisions_cx_again: int
+    closest_cx_share: float
+    closest_cxmb_share: float
+    closest_cx_again_share: float
+    learned_views: int
+
+
+def arena_trial(ant, clutter, seed: int, n_outbound: int, n_inbound: int):
+    """Mitchell 2019's seed task with a CXMB ant (avoiding by optic flow throughout): outbound through the clutter;
+    home by the CX while the MBONs learn (trip 1); back at the feeder with the outbound memory restored, home by
+    CXMB (trip 2); and again by the CX alone (trip 2, comparison). Returns (ArenaOutcome, trips)."""
+    model = ant.model
+    model.cx.reset()
+    out = walk_outbound_avoiding(ant, outbound_turns(seed, n_outbound), model.params.step)
+    memory = model.home_memory()
+    feeder, feeder_heading = out.xy[-1], float(out.heading[-1])
+    trips = {"outbound": out}
+    for name, learning, use_mbons in (("cx", True, False), ("cxmb", False, True), ("cx_again", False, False)):
+        if name != "cx":
+            ant.place(float(feeder[0]), float(feeder[1]), feeder_heading)
+            ant.frame()
+            ant.sense()
+            model.restore(memory)
+        model.learning, model.use_mbons = learning, use_mbons
+        trips[name] = walk_home(ant, n_inbound)
+    model.learning = False
+    length = homing_metrics(out, trips["cx"])["outbound_length_m"]
+    close = {k: homing_metrics(out, trips[k])["closest_approach_share"] for k in ("cx", "cxmb", "cx_again")}
+    outcome = ArenaOutcome(seed, model.params.compass, length, clutter.collisions(out.xy),
+                           clutter.collisions(trips["cx"].xy), clutter.collisions(trips["cxmb"].xy),
+                           clutter.collisions(trips["cx_again"].xy), close["cx"], close["cxmb"], close["cx_again"],
+                           model.learned_views)
+    return outcome, trips
+
+
+def plot_arena(path, clutter, trips: dict[str, Trip], title: str) -> Path:
+    """Cylinders (grey discs) and the four trips of one arena run; PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 7))
+    for (x, y), r in zip(clutter.centres, clutter.radii, strict=True):
+        ax.add_patch(plt.Circle((x, y), r, color="0.4"))
+    styles = {"outbound": ("0.6", "outbound (random walk + optic flow)"), "cx": ("C0", "home 1: CX (MBONs learn)"),
+              "cxmb": ("C3", "home 2: CXMB (memory restored)"), "cx_again": ("C2", "home 2: CX alone (restored)")}
+    for name, trip in trips.items():
+        colour, label = styles[name]
+        ax.plot(*trip.xy.T, color=colour, lw=0.9, label=label)
+    ax.plot(0, 0, "*", color="k", ms=14, label="nest")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title)
+    ax.legend(fontsize=7, loc="best")
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound: int | None = None,
+                    compass: str = "sky", kind: str = "cxmb", model_params: dict | None = None, echo=None,
+                    arena: dict | None = None) -> dict[str, Any]:
+    """The seed's cluttered-arena task for each seed (a fresh arena and a fresh model per seed); writes
+    `arena_<compass>.json` and one picture per seed into `out_dir` (when given); returns the summary."""
+    from antarium.ant.clutter import clutter_scene, make_clutter
+    from antarium.ant.models import make_model
+    from antarium.ant.world import virtual_rig
+
+    n_inbound = n_inbound or n_outbound
+    outcomes: list[ArenaOutcome] = []
+    out = Path(out_dir) if out_dir is not None else None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    for seed in seeds:
+        clutter = make_clutter(seed, **(arena or {}))
+        model = make_model(kind, EyeParams().n_pn, **{"compass": compass, "avoid": True, "seed": seed,
+                                                      **(model_params or {})})
+        with virtual_rig(model, scene=clutter_scene(clutter), renderer_kwargs={"face_size": FACE_SIZE},
+                         compass=compass) as ant:
+            for _ in range(40):
+                ant.frame()
+            outcome, trips = arena_trial(ant, clutter, seed, n_outbound, n_inbound)
+        outcomes.append(outcome)
+        if out is not None:
+            plot_arena(out / f"arena_{compass}_seed{seed:02d}.png", clutter, trips,
+                       f"cluttered arena, seed {seed} ({compass} compass)")
+        if echo is not None:
+            echo(f"arena seed {seed}: closest CX {100 * outcome.closest_cx_share:.2f} %, CXMB "
+                 f"{100 * outcome.closest_cxmb_share:.2f} %, CX again {100 * outcome.closest_cx_again_share:.2f} %; "
+                 f"collisions out {outcome.collisions_outbound}, CX {outcome.collisions_cx}, CXMB "
+                 f"{outcome.collisions_cxmb}")
+    summary = {
+        "runs": len(outcomes), "compass": compass,
+        "closest_cx_share_median": float(np.median([o.closest_cx_share for o in outcomes])),
+        "closest_cxmb_share_median": float(np.median([o.closest_cxmb_share for o in outcomes])),
+        "closest_cx_again_share_median": float(np.median([o.closest_cx_again_share for o in outcomes])),
+        "runs_without_collision": sum(o.collisions_outbound + o.collisions_cx + o.collisions_cxmb
+                                      + o.collisions_cx_again == 0 for o in outcomes),
+    }
+    if out is not None:
+        (out / f"arena_{compass}.json").write_text(json.dumps(
+            {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
+             "n_inbound": n_inbound}, indent=2, default=float))
+    return summary
+
+
+def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int | None = None,
+                 lateral: float = 0.5, ks=(1.0, 0.8, 0.5, 0.0), compass: str = "sky", scene: Any = "habitat",
+                 echo=None) -> dict[str, Any]:
+    """PI against visual memory: a CXMB ant walks out (random walk), homes once by its CX while its MBONs learn the
+    homeward views, and is then put down `lateral` m to the left of the feeder with its outbound memory restored.
+    PI points to a fictive nest displaced as far; the views point back to the learned route. For each k (CPU4's
+    weight; 1 = PI alone, 0 = the MBONs alone) the ant homes again; reports its closest approach to the real and
+    to the fictive nest. Writes `displacement_<compass>.json` and `.png` into `out_dir` (when given)."""
+    from antarium.ant.models import make_model
+    from antarium.ant.world import virtual_rig
+
+    n_inbound = n_inbound or n_outbound
+    model = make_model("cxmb", EyeParams().n_pn, compass=compass, seed=seed)
+    trips: dict[str, Trip] = {}
+    result: dict[str, Any] = {"seed": seed, "lateral_m": lateral, "compass": compass, "runs": {}}
+    with virtual_rig(model, scene=scene, renderer_kwargs={"face_size": FACE_SIZE}, compass=compass) as ant:
+        for _ in range(40):
+            ant.frame()
+        model.cx.reset()
+        out = walk_outbound(ant, outbound_turns(seed, n_outbound), model.params.step)
+        memory = model.home_memory()
+        model.learning = True
+        trips["home 1: CX, MBONs learn"] = walk_home(ant, n_inbound)
+        model.learning = False
+        fx, fy = out.xy[-1]
+        h = float(out.heading[-1])
+        left = np.array([-math.sin(h), math.cos(h)])
+        start = np.array([fx, fy]) + lateral * left
+        fictive = lateral * left
+        for k in ks:
+            ant.place(float(start[0]), float(start[1]), h)
+            ant.frame()
+            ant.sense()
+            model.restore(memory)
+            model.params = type(model.params)(**{**asdict(model.params), "k": k})
+            trip = walk_home(ant, n_inbound)
+            trips[f"displaced, k = {k}"] = trip
+            result["runs"][str(k)] = {
+                "closest_to_nest_m": float(np.hypot(*trip.xy.T).min()),
+                "closest_to_fictive_nest_m": float(np.hypot(*(trip.xy - fictive).T).min())}
+            if echo is not None:
+                echo(f"k = {k}: closest to nest {result['runs'][str(k)]['closest_to_nest_m']:.2f} m, to the fictive "
+                     f"nest {result['runs'][str(k)]['closest_to_fictive_nest_m']:.2f} m")
+    if out_dir is not None:
+        path = Path(out_dir)
+        path.mkdir(parents=True, exist_ok=True)
+        (path / f"displacement_{compass}.json").write_text(json.dumps(result, indent=2, default=float))
+        pictures = {name: (out, trip) for name, trip in trips.items()}
+        result["png"] = str(plot_trips(path / f"displacement_{compass}.png", pictures,
+                                       f"displaced {lateral} m left of the feeder: PI vs visual memory"))
+    return result

@@ -1,0 +1,150 @@
+"""Optic-flow collision avoidance (OFCA) on the dome's own pixel lattice (Mitchell 2019 section 2.2).
+
+Dense flow: for every green/blue pixel in a band about the horizon (|elevation| <= `max_elevation_deg`), the
+brightness change between two consecutive LED frames and the spatial gradient on the sphere's tangent plane
+(east, north; least squares over its `neighbours` nearest pixels, precomputed) give a Lucas-Kanade flow (rad per
+frame) over the same neighbourhood. Free-yaw: the dome does not turn when the ant turns on its pin, so the flow
+between frames is the translation's alone; the pixels' azimuths are taken relative to the ant's body.
+
+Two ways to turn (both return a turn in rad, > 0 = left, and their trace):
+- "filter" (the earlier filtering method): the expected flow of a forward translation (unit nearness,
+  -(f - (f.d) d) for forward f) is matched with the observed flow; the nearness per pixel is the projection on
+  it (1/m once divided by the distance walked; only pixels nearer than `react_distance` count); the ant turns
+  away from the side (left: body azimuth 0..90 deg, right: -90..0) with more nearness,
+  turn = -gain * (L - R) / (L + R + half_nearness).
+- "foe" (the seed's focus-of-expansion method): the FOE is fitted by least squares (eq. 1: A = [u v],
+  b = x v - y u) in body azimuth / elevation coordinates over the frontal field, and the obstacle is located by
+  it: the flow magnitude (relative to a unit-nearness translation's) left and right of the FOE's azimuth is
+  summed, and the ant turns away from the side with more, by the same formula.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+METHODS = ("filter", "foe")
+
+
+@dataclass(frozen=True)
+class FlowParams:
+    max_elevation_deg: float = 30.0
+    neighbours: int = 8
+    method: str = "filter"
+    gain: float = 0.5                 # rad of turn at full imbalance
+    max_turn: float = 0.4             # rad per decision
+    react_distance: float = 0.2       # m: pixels whose flow puts them nearer than this count
+    half_nearness: float = 500.0      # summed nearness (1/m, both sides) at which the turn reaches half its gain
+    frontal_deg: float = 90.0         # the sides span body azimuth 0..frontal (left) and -frontal..0 (right)
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"optic-flow method {self.method!r} not known; allowed: {', '.join(METHODS)}")
+        if self.neighbours < 3 or not 0 < self.max_elevation_deg <= 90:
+            raise ValueError("optic flow needs neighbours >= 3 and max_elevation_deg in (0, 90]")
+
+
+class OpticFlow:
+    """Dense optic flow on the dome's green/blue pixels. directions (N, 3); is_uv (N,) bool; gain (N,)."""
+
+    def __init__(self, directions, is_uv, gain=None, params: FlowParams | None = None):
+        self.params = p = params or FlowParams()
+        directions = np.asarray(directions, np.float64)
+        self.n_leds = directions.shape[0]
+        d_all = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+        gb = np.flatnonzero(~np.asarray(is_uv, bool))
+        band = gb[np.abs(d_all[gb, 2]) <= math.sin(math.radians(p.max_elevation_deg))]
+        self.pixels = band
+        d = d_all[band]
+        self.directions = d
+        self.azimuth = np.arctan2(d[:, 1], d[:, 0])
+        self.elevation = np.arcsin(np.clip(d[:, 2], -1, 1))
+        east = np.stack([-np.sin(self.azimuth), np.cos(self.azimuth), np.zeros(len(d))], axis=1)
+        north = np.cross(d, east)
+        self.east, self.north = east, north
+        _, nb = cKDTree(d).query(d, k=p.neighbours + 1)
+        self._nb = nb[:, 1:]
+        off = d[self._nb] - d[:, None, :]                                   # (M, k, 3)
+        a = np.stack([np.einsum("mkj,mj->mk", off, east), np.einsum("mkj,mj->mk", off, north)], axis=2)
+        self._pinv = np.linalg.pinv(a)                                      # (M, 2, k): gradient from differences
+        gain = np.ones(self.n_leds) if gain is None else np.asarray(gain, np.float64)
+        self._scale = 1.0 / (65535.0 * gain[band])
+
+    @classmethod
+    def from_dome(cls, dome, params: FlowParams | None = None) -> OpticFlow:
+        return cls(dome.directions, dome.is_uv, dome.gain, params)
+
+    def intensity(self, leds: np.ndarray) -> np.ndarray:
+        leds = np.asarray(leds)
+        if leds.shape != (self.n_leds, 2):
+            raise ValueError(f"LED values must have shape ({self.n_leds}, 2), got {leds.shape}")
+        return leds[self.pixels].sum(axis=1, dtype=np.float64) * self._scale
+
+    def flow(self, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+        """(M, 2) flow (east, north; rad per frame) of the band's pixels between two (N, 2) LED frames."""
+        i0, i1 = self.intensity(before), self.intensity(after)
+        mean = 0.5 * (i0 + i1)
+        grad = np.einsum("mjk,mk->mj", self._pinv, mean[self._nb] - mean[:, None])   # (M, 2)
+        dt = i1 - i0
+        # Lucas-Kanade over each pixel and its neighbours
+        g = np.concatenate([grad[:, None, :], grad[self._nb]], axis=1)              # (M, k + 1, 2)
+        t = np.concatenate([dt[:, None], dt[self._nb]], axis=1)                     # (M, k + 1)
+        gtg = np.einsum("mki,mkj->mij", g, g) + 1e-9 * np.eye(2)
+        gtt = np.einsum("mki,mk->mi", g, t)
+        return -np.linalg.solve(gtg, gtt[..., None])[..., 0]
+
+    def avoid(self, before: np.ndarray, after: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict]:
+        """The turn (rad, > 0 left) away from the nearer side for an ant facing dome azimuth `yaw` that walked
+        `travelled` m between the frames, and a trace. A pixel's nearness (1/m) is its flow over the flow of a
+        unit-distance translation, divided by the distance walked."""
+        p = self.params
+        flow = self.flow(before, after)
+        rel = np.remainder(self.azimuth - yaw + math.pi, math.tau) - math.pi
+        front = np.abs(rel) <= math.radians(p.frontal_deg)
+        forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        expected3 = -(forward - (self.directions @ forward)[:, None] * self.directions)
+        expected = np.stack([np.einsum("mj,mj->m", expected3, self.east),
+                             np.einsum("mj,mj->m", expected3, self.north)], axis=1)
+        norm2 = (expected ** 2).sum(1)
+        ok = front & (norm2 > 0.05)
+        trace: dict[str, float] = {}
+        if p.method == "filter":
+            nearness = np.maximum((flow * expected).sum(1) / np.maximum(norm2, 1e-12), 0.0)
+            centre = 0.0
+        else:
+            x, y = rel[ok], self.elevation[ok]
+            u, v = flow[ok, 0], flow[ok, 1]  # east: azimuth grows to the left
+            foe, *_ = np.linalg.lstsq(np.stack([u, v], axis=1), x * v - y * u, rcond=None)
+            centre = float(np.clip(foe[0], -math.radians(p.frontal_deg), math.radians(p.frontal_deg)))
+            trace["foe_azimuth"] = centre
+            nearness = np.sqrt((flow ** 2).sum(1) / np.maximum(norm2, 1e-12))
+        nearness = nearness / max(travelled, 1e-6)
+        nearness = np.where(nearness > 1.0 / p.react_distance, nearness, 0.0)
+        left = float(nearness[ok & (rel > centre)].sum())
+        right = float(nearness[ok & (rel < centre)].sum())
+        trace.update(flow_left=left, flow_right=right)
+        turn = -p.gain * (left - right) / (left + right + p.half_nearness)
+        turn = float(np.clip(turn, -p.max_turn, p.max_turn))
+        return turn, {**trace, "flow_turn": turn}
+
+
+class CollisionAvoidance:
+    """OFCA over consecutive decisions: `turn(leds, yaw)` compares with the frame of the previous call; `forget()`
+    after the ant was carried (the next call then sees no flow)."""
+
+    def __init__(self, flow: OpticFlow) -> None:
+        self.flow = flow
+        self._last: np.ndarray | None = None
+
+    def forget(self) -> None:
+        self._last = None
+
+    def turn(self, leds: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict[str, float]]:
+        leds = np.array(leds, copy=True)
+        last, self._last = self._last, leds
+        if last is None or travelled <= 0:
+            return 0.0, {"flow_turn": 0.0}
+        return self.flow.avoid(last, leds, yaw, travelled)
