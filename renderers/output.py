@@ -74,13 +74,13 @@ class FrameConverter:
         c = np.float32(self.contrast)
         p = pairs.reshape(N_PANELS, PIXELS_PER_PANEL, 2)
         gb, uv = p[:, :GB_PER_PANEL], p[:, GB_PER_PANEL:]
-        m = gb.mean(axis=(0, 1))
+        m = gb.mean(axis=(0, 1), dtype=np.float64).astype(np.float32)  # float32 sums drift by ~1e-4 here
         gb -= m
         gb *= c
         gb += m
         np.maximum(gb, 0.0, out=gb)
         np.copyto(self._uv_before, uv[..., 0])
-        m_uv = uv[..., 0].mean()
+        m_uv = np.float32(uv[..., 0].mean(dtype=np.float64))
         uv[..., 0] = np.maximum(m_uv + c * (uv[..., 0] - m_uv), 0.0)
         uv[..., 1] *= np.divide(uv[..., 0], self._uv_before, out=np.zeros_like(self._uv_before),
                                 where=self._uv_before > 0)

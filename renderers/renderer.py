@@ -195,6 +195,10 @@ class Renderer:
 
         ctx, n = self.ctx, self.face_size
         self._atlas = ctx.texture((n, 6 * n), 4, dtype="nu2")
+        # Its whole mipmap chain exists before the framebuffer takes level 0: a first glGenerateMipmap on a texture
+        # without one re-allocates its storage (Mesa), after which the framebuffer drew into the old level 0 and
+        # every low-passed frame but the first showed the first one's content.
+        self._atlas.build_mipmaps()
         self._depth = ctx.depth_renderbuffer((n, 6 * n))
         self._fbo = ctx.framebuffer([self._atlas], self._depth)
         self._bg_prog = ctx.program(vertex_shader=shaders.FULLSCREEN_VS, fragment_shader=shaders.BACKGROUND_FS)
