@@ -46,7 +46,9 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     "render": {
         "scene": "habitat",  # a scene name, a file path, or a table {scene = name, ...parameters} (renderers)
         "face_size": 0,  # cube face side in texels; 0: the renderer's default (96 with a far layer, else 192)
-        "far_layer": "async",  # "off", "sync" or "async": meshes beyond near_radius_m from a recent eye position
+        "far_layer": "auto",  # "off", "sync", "async" (meshes beyond near_radius_m from a recent eye position) or
+        # "auto": off on the GPU path, async on the CPU path
+        "path": "auto",  # per-LED sampling, conversion and packing on "gpu" or "cpu"; "auto": cpu on llvmpipe etc.
         "near_radius_m": 2.0,  # meshes within this distance are drawn every frame
         "far_layer_error_deg": 0.5,  # largest parallax error of the far layer before a frame is drawn in full
     },
@@ -75,7 +77,8 @@ _CHOICES = {
     ("loop", "tether"): ("free_yaw", "fixed"),
     ("link", "interface"): ("udp", "virtual"),
     ("bus", "mode"): ("peer", "client", "router"),
-    ("render", "far_layer"): ("off", "sync", "async"),
+    ("render", "far_layer"): ("off", "sync", "async", "auto"),
+    ("render", "path"): ("auto", "gpu", "cpu"),
 }
 _RANGES = {
     ("loop", "rate_hz"): (1.0, 2000.0),

@@ -22,7 +22,7 @@ from antarium.pose import Pose
 
 from . import cubemap, footprint, shaders
 from .farfield import FarFieldTable
-from .gl import create_context, describe
+from .gl import create_context, describe, gl_renderer_string
 from .gpu_path import ATLAS, FAR_ONLY, OVER_FAR, GpuFramePath, check_path, default_path
 from .meshbuffers import MeshBuffers
 from .output import FrameConverter, polariser_angles
@@ -97,7 +97,8 @@ class Renderer:
     parallax error stays under `far_layer_error_deg` (`far_layer`; face_size then defaults to
     NEAR_FACE_SIZE and the layer is rendered at `layer_face_size`, default DEFAULT_FACE_SIZE); path: "gpu"
     (sampling, conversion and VIDEO packing in compute shaders, `gpu_path`), "cpu" (numba loops) or None
-    (chosen from the GL renderer string: "cpu" on a software driver such as llvmpipe).
+    (chosen from the GL renderer string: "cpu" on a software driver such as llvmpipe); far_layer "auto": "off" on
+    the GPU path, "async" on the CPU path.
     """
 
     def __init__(self, dome=None, face_size: int | None = None, footprint_deg: float = LED_PITCH_DEG,
@@ -112,8 +113,12 @@ class Renderer:
         from .far_layer import MODES
 
         path = check_path(path)
-        if far_layer not in MODES:
-            raise ValueError(f"far_layer must be one of {', '.join(MODES)}, got {far_layer!r}")
+        if far_layer not in (*MODES, "auto"):
+            raise ValueError(f"far_layer must be one of {', '.join(MODES)} or auto, got {far_layer!r}")
+        if path is None or far_layer == "auto":
+            path = path or default_path(gl_renderer_string())
+            if far_layer == "auto":  # a GPU draws every mesh every frame; a CPU needs the far layer
+                far_layer = "off" if path == "gpu" else "async"
         if not (np.isfinite(near_radius) and near_radius > 0):
             raise ValueError(f"near_radius must be a positive number of metres, got {near_radius!r}")
         if not (np.isfinite(far_layer_error_deg) and 0 < far_layer_error_deg <= 5):
@@ -159,7 +164,7 @@ class Renderer:
         self._setup_gl()
         #: GL renderer and version, and the per-frame path taken after the cube map ("gpu" or "cpu")
         self.gl_renderer = describe(self.ctx)
-        self.path = path or default_path(self.gl_renderer)
+        self.path = path
         self._gpu = None
         if self.path == "gpu":
             with self.ctx:
