@@ -393,8 +393,12 @@ class FrameLoop:
             t0 = clock.now()
             if self.renderer is not None and hasattr(self.renderer, "polariser_angles"):
                 self._send_polarisers(pose)
+            packed = getattr(self.renderer, "datagrams", None)  # packed on the GPU path: no encoding here
             try:
-                self.link.send_frame(self._frame_buf)
+                if packed is not None:
+                    self.link.send_packed(packed)
+                else:
+                    self.link.send_frame(self._frame_buf)
             except ValueError as exc:  # a frame breaking the LED-frame contract is not sent; the loop goes on
                 self._frame_rejected(t0, str(exc))
             t1 = clock.now()

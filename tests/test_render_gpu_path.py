@@ -168,3 +168,22 @@ def test_path_choice_and_bad_input():
         check_path("cuda")
     with pytest.raises(ValueError, match="render path must be one of gpu, cpu"):
         Renderer(path="fast")
+
+
+def test_the_frame_loop_sends_the_gpu_paths_packed_datagrams(pair):
+    from antarium.clock import SimulatedClock
+    from antarium.firmware_proto.link import open_link
+    from antarium.firmware_proto.video import decode_frame
+    from antarium.frame_loop import FrameLoop
+
+    gpu = pair[1]
+    gpu.set_scene("sky")
+    with open_link("virtual") as link:
+        loop = FrameLoop(clock=SimulatedClock(), source=None, renderer=gpu, link=link, closed_loop=False)
+        for _ in range(3):
+            loop.step()
+        assert link.counters["frames_sent"] == 3
+        expected = gpu.datagrams.copy()
+        expected[:, 1] = 2  # the third frame's sequence
+        assert np.array_equal(link.emulator.led_values(), decode_frame(expected))
+        assert np.array_equal(loop.last_frame, gpu.render(loop.pose, t=gpu.clock.now() - gpu._t0))
