@@ -167,8 +167,13 @@ class Renderer:
         self.path = path
         self._gpu = None
         if self.path == "gpu":
-            with self.ctx:
-                self._gpu = GpuFramePath(self.ctx)
+            try:
+                with self.ctx:
+                    self._gpu = GpuFramePath(self.ctx)
+            except Exception as exc:
+                self.ctx.release()
+                raise RuntimeError(f"the gpu render path needs OpenGL 4.3 compute shaders, which {self.gl_renderer} "
+                                   f"does not give ({exc}); use path 'cpu'") from exc
             self._gain_version = None
         from .kernels import warm_up
 
