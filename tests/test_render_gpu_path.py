@@ -168,6 +168,11 @@ def test_path_choice_and_bad_input():
         check_path("cuda")
     with pytest.raises(ValueError, match="render path must be one of gpu, cpu"):
         Renderer(path="fast")
+    from antarium.config import ConfigError, check_value
+
+    assert check_value("render", "path", "gpu") == "gpu" and check_value("render", "far_layer", "auto") == "auto"
+    with pytest.raises(ConfigError, match=r"\[render\] path"):
+        check_value("render", "path", "cuda")
 
 
 def test_the_frame_loop_sends_the_gpu_paths_packed_datagrams(pair):
