@@ -22,7 +22,7 @@ from antarium.pose import Pose
 
 from . import cubemap, footprint, shaders
 from .farfield import FarFieldTable
-from .gl import create_context, describe, gl_renderer_string
+from .gl import create_context, describe
 from .gpu_path import ATLAS, FAR_ONLY, OVER_FAR, GpuFramePath, check_path, default_path
 from .meshbuffers import MeshBuffers
 from .output import FrameConverter, polariser_angles
@@ -115,8 +115,10 @@ class Renderer:
         path = check_path(path)
         if far_layer not in (*MODES, "auto"):
             raise ValueError(f"far_layer must be one of {', '.join(MODES)} or auto, got {far_layer!r}")
-        if path is None or far_layer == "auto":
-            path = path or default_path(gl_renderer_string())
+        ctx = None
+        if path is None or far_layer == "auto":  # the renderer's own context tells (a probe context of its own
+            ctx = create_context()               # made the first frame's helper thread start late)
+            path = path or default_path(ctx.info["GL_RENDERER"])  # current: no `with`, set-up follows in it
             if far_layer == "auto":  # a GPU draws every mesh every frame; a CPU needs the far layer
                 far_layer = "off" if path == "gpu" else "async"
         if not (np.isfinite(near_radius) and near_radius > 0):
@@ -160,7 +162,7 @@ class Renderer:
         self._convert = FrameConverter(np.asarray(dome.gain), brightness)
         self._channel = np.where(self._convert.is_uv, 2, 0).astype(np.int64)
 
-        self.ctx = create_context()
+        self.ctx = ctx or create_context()
         self._setup_gl()
         #: GL renderer and version, and the per-frame path taken after the cube map ("gpu" or "cpu")
         self.gl_renderer = describe(self.ctx)
