@@ -128,7 +128,10 @@ class RenderSection(Section):
     RENAMED: ClassVar[dict[str, str]] = {"face_size": "face_size_px"}
     scene: str | dict[str, Any] = "habitat"
     face_size_px: int = Field(0, ge=0, le=2048, description="cube face side; 0: the renderer's default")
-    far_layer: Literal["off", "sync", "async"] = "async"
+    far_layer: Literal["off", "sync", "async", "auto"] = Field(
+        "auto", description='"auto": off on the GPU path (every mesh every frame), async on the CPU path')
+    path: Literal["auto", "gpu", "cpu"] = Field(
+        "auto", description="per-LED sampling, conversion and packing; auto: cpu on a software GL driver, else gpu")
     near_radius_m: float = _finite(0.01, 1000.0, 2.0)
     far_layer_error_deg: float = _finite(0.01, 5.0, 0.5)
     ALLOWED: ClassVar[dict[str, str]] = {"scene": "a scene name, a file path or a table with 'scene'"}

@@ -20,7 +20,7 @@ from .errors import ProtocolError
 from .header import PROTOCOL_VERSION, SEQ_MODULO
 from .polariser import angles_to_codes, encode_polarisers
 from .replies import OP_ACTUATORS, OP_COUNTERS, OP_FAULTS, OP_TEMPERATURES, OP_VERSION, STATUS_OPCODES, decode_reply
-from .video import VIDEO_PAYLOAD_SIZE, encode_frame
+from .video import VIDEO_PAYLOAD_SIZE, encode_frame, video_info
 
 #: interface name -> "module:Class"
 BACKENDS: dict[str, str] = {
@@ -63,6 +63,7 @@ class Link(ABC):
     def __init__(self) -> None:
         self._seq = 0
         self._frame_buf = np.empty((N_PANELS, VIDEO_PAYLOAD_SIZE), np.uint8)
+        self._panel_td = np.arange(N_PANELS, dtype=np.uint8)  # VIDEO class 0, panel k
         self._last_polariser_codes: np.ndarray | None = None
         self._tag = 0
         self._status: dict = {}
@@ -105,15 +106,40 @@ class Link(ABC):
             raise IncompatibleDistributor(self.incompatible)
         seq = self._seq
         t0 = time.perf_counter()
-        rows = encode_frame(frame, seq, out=self._frame_buf)
+        encode_frame(frame, seq, out=self._frame_buf)
         t1 = time.perf_counter()
-        for row in rows:
-            self.send(row.data)
-        self.send(encode_latch(seq))
+        self._send_frame_datagrams(encode_latch(seq))
         self.last_timings = {"encode": t1 - t0, "send": time.perf_counter() - t1}
         self._seq = (seq + 1) % SEQ_MODULO
         self.counters["frames_sent"] += 1
         return seq
+
+    def send_packed(self, datagrams: np.ndarray) -> int:
+        """Send a frame packed elsewhere (the renderer's GPU path): its 55 VIDEO datagrams, (55, 1112) uint8 with
+        TD and pixels set; the sequence goes into every INFO byte here, then the LATCH. Returns the sequence, like
+        `send_frame`. Raises ValueError on a wrong shape or a TD that is not VIDEO panel 0..54 in order."""
+        d = datagrams
+        if not isinstance(d, np.ndarray) or d.shape != self._frame_buf.shape or d.dtype != np.uint8:
+            got = f"{d.shape} {d.dtype}" if isinstance(d, np.ndarray) else type(d).__name__
+            raise ValueError(f"packed frame must be a ({N_PANELS}, {VIDEO_PAYLOAD_SIZE}) uint8 array, got {got}")
+        if not np.array_equal(d[:, 0], self._panel_td):
+            raise ValueError("packed frame: byte 0 of row k must be the VIDEO TD of panel k (0..54)")
+        seq = self._seq
+        t0 = time.perf_counter()
+        np.copyto(self._frame_buf, d)
+        self._frame_buf[:, 1] = video_info(seq)
+        t1 = time.perf_counter()
+        self._send_frame_datagrams(encode_latch(seq))
+        self.last_timings = {"encode": t1 - t0, "send": time.perf_counter() - t1}
+        self._seq = (seq + 1) % SEQ_MODULO
+        self.counters["frames_sent"] += 1
+        return seq
+
+    def _send_frame_datagrams(self, latch: bytes) -> None:
+        """The frame in `_frame_buf`, then its LATCH, one datagram at a time (a back-end may batch them)."""
+        for row in self._frame_buf:
+            self.send(row.data)
+        self.send(latch)
 
     def send_polarisers(self, angles, force: bool = False) -> bool:
         """Send (55, 9) polariser e-vector angles (rad, [0, pi)) in one datagram; returns whether it went out.

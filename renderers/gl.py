@@ -6,6 +6,8 @@ unchanged on a GPU driver.
 
 from __future__ import annotations
 
+import functools
+
 #: What a Debian/Ubuntu machine needs for headless EGL rendering with Mesa.
 SYSTEM_PACKAGES = "libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri"
 
@@ -29,6 +31,16 @@ def create_context():
             f"({exc}). Install the system packages: sudo apt-get install -y {SYSTEM_PACKAGES}"
         ) from exc
     return ctx
+
+
+@functools.cache
+def gl_renderer_string() -> str:
+    """`describe` of this process's GL driver (probed once, with a context made and released for it)."""
+    ctx = create_context()
+    try:
+        return describe(ctx)
+    finally:
+        ctx.release()
 
 
 def describe(ctx) -> str:

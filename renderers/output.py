@@ -31,6 +31,8 @@ class FrameConverter:
         self.channel_gain = (1.0, 1.0, 1.0)
         self.swap_green_blue = False
         self.contrast = 1.0
+        #: counts configure() calls, so that a copy of `gain` elsewhere (the GPU path's) knows when it is stale
+        self.version = 0
         self._gain = np.empty((n, 2), dtype=np.float32)
         self._uv_before = np.empty((N_PANELS, PIXELS_PER_PANEL - GB_PER_PANEL), dtype=np.float32)
         self.configure(brightness=brightness)
@@ -46,10 +48,16 @@ class FrameConverter:
             self.swap_green_blue = bool(swap_green_blue)
         if contrast is not None:
             self.contrast = float(contrast)
+        self.version += 1
         g = FULL * self._led_gain * self.brightness
         cg = self.channel_gain
         self._gain[:, 0] = np.where(self.is_uv, g * cg[2], g * cg[0])
         self._gain[:, 1] = np.where(self.is_uv, g * cg[2], g * cg[1])
+
+    @property
+    def gain(self) -> np.ndarray:
+        """(20350, 2) float32: 65535 * LED gain * brightness * channel gain of each output column."""
+        return self._gain
 
     def __call__(self, pairs: np.ndarray, out: np.ndarray) -> np.ndarray:
         """pairs: (20350, 2) float32 (modified in place when contrast != 1); out: (20350, 2) uint16."""
@@ -66,13 +74,13 @@ class FrameConverter:
         c = np.float32(self.contrast)
         p = pairs.reshape(N_PANELS, PIXELS_PER_PANEL, 2)
         gb, uv = p[:, :GB_PER_PANEL], p[:, GB_PER_PANEL:]
-        m = gb.mean(axis=(0, 1))
+        m = gb.mean(axis=(0, 1), dtype=np.float64).astype(np.float32)  # float32 sums drift by ~1e-4 here
         gb -= m
         gb *= c
         gb += m
         np.maximum(gb, 0.0, out=gb)
         np.copyto(self._uv_before, uv[..., 0])
-        m_uv = uv[..., 0].mean()
+        m_uv = np.float32(uv[..., 0].mean(dtype=np.float64))
         uv[..., 0] = np.maximum(m_uv + c * (uv[..., 0] - m_uv), 0.0)
         uv[..., 1] *= np.divide(uv[..., 0], self._uv_before, out=np.zeros_like(self._uv_before),
                                 where=self._uv_before > 0)

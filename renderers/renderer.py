@@ -22,7 +22,8 @@ from antarium.geometry.constants import N_PANELS, N_PIXELS, UV_PER_PANEL
 
 from . import cubemap, footprint, shaders
 from .farfield import FarFieldTable
-from .gl import create_context
+from .gl import create_context, describe
+from .gpu_path import ATLAS, FAR_ONLY, OVER_FAR, GpuFramePath, check_path, default_path
 from .meshbuffers import MeshBuffers
 from .output import FrameConverter, polariser_angles
 from .scene import Scene, check_channel_gain, check_contrast, check_lowpass
@@ -94,22 +95,32 @@ class Renderer:
     them into the cube map every frame; far_layer: "off", "sync" or "async": draw only the meshes within
     `near_radius` (m) every frame, the rest from a layer rendered from a recent eye position while its
     parallax error stays under `far_layer_error_deg` (`far_layer`; face_size then defaults to
-    NEAR_FACE_SIZE and the layer is rendered at `layer_face_size`, default DEFAULT_FACE_SIZE).
+    NEAR_FACE_SIZE and the layer is rendered at `layer_face_size`, default DEFAULT_FACE_SIZE); path: "gpu"
+    (sampling, conversion and VIDEO packing in compute shaders, `gpu_path`), "cpu" (numba loops) or None
+    (chosen from the GL renderer string: "cpu" on a software driver such as llvmpipe); far_layer "auto": "off" on
+    the GPU path, "async" on the CPU path.
     """
 
     def __init__(self, dome=None, face_size: int | None = None, footprint_deg: float = LED_PITCH_DEG,
                  brightness: float = 1.0, near: float = 1e-3, far: float = 1e3, far_face_size: int | None = None,
                  chunk_size: float = 1.0, lod_texels: float = 1.0, clock=None, fast_far_field: bool = True,
                  far_layer: str = "off", near_radius: float = 2.0, far_layer_error_deg: float = 0.5,
-                 layer_face_size: int | None = None):
+                 layer_face_size: int | None = None, path: str | None = None):
         if dome is None:
             from antarium.geometry import load_dome
 
             dome = load_dome()
         from .far_layer import MODES
 
-        if far_layer not in MODES:
-            raise ValueError(f"far_layer must be one of {', '.join(MODES)}, got {far_layer!r}")
+        path = check_path(path)
+        if far_layer not in (*MODES, "auto"):
+            raise ValueError(f"far_layer must be one of {', '.join(MODES)} or auto, got {far_layer!r}")
+        ctx = None
+        if path is None or far_layer == "auto":  # the renderer's own context tells (a probe context of its own
+            ctx = create_context()               # made the first frame's helper thread start late)
+            path = path or default_path(ctx.info["GL_RENDERER"])  # current: no `with`, set-up follows in it
+            if far_layer == "auto":  # a GPU draws every mesh every frame; a CPU needs the far layer
+                far_layer = "off" if path == "gpu" else "async"
         if not (np.isfinite(near_radius) and near_radius > 0):
             raise ValueError(f"near_radius must be a positive number of metres, got {near_radius!r}")
         if not (np.isfinite(far_layer_error_deg) and 0 < far_layer_error_deg <= 5):
@@ -151,8 +162,21 @@ class Renderer:
         self._convert = FrameConverter(np.asarray(dome.gain), brightness)
         self._channel = np.where(self._convert.is_uv, 2, 0).astype(np.int64)
 
-        self.ctx = create_context()
+        self.ctx = ctx or create_context()
         self._setup_gl()
+        #: GL renderer and version, and the per-frame path taken after the cube map ("gpu" or "cpu")
+        self.gl_renderer = describe(self.ctx)
+        self.path = path
+        self._gpu = None
+        if self.path == "gpu":
+            try:
+                with self.ctx:
+                    self._gpu = GpuFramePath(self.ctx)
+            except Exception as exc:
+                self.ctx.release()
+                raise RuntimeError(f"the gpu render path needs OpenGL 4.3 compute shaders, which {self.gl_renderer} "
+                                   f"does not give ({exc}); use path 'cpu'") from exc
+            self._gain_version = None
         from .kernels import warm_up
 
         warm_up()
@@ -183,6 +207,10 @@ class Renderer:
 
         ctx, n = self.ctx, self.face_size
         self._atlas = ctx.texture((n, 6 * n), 4, dtype="nu2")
+        # Its whole mipmap chain exists before the framebuffer takes level 0: a first glGenerateMipmap on a texture
+        # without one re-allocates its storage (Mesa), after which the framebuffer drew into the old level 0 and
+        # every low-passed frame but the first showed the first one's content.
+        self._atlas.build_mipmaps()
         self._depth = ctx.depth_renderbuffer((n, 6 * n))
         self._fbo = ctx.framebuffer([self._atlas], self._depth)
         self._bg_prog = ctx.program(vertex_shader=shaders.FULLSCREEN_VS, fragment_shader=shaders.BACKGROUND_FS)
@@ -470,9 +498,12 @@ class Renderer:
         psi = pose.heading - scene.rotation - scene.yaw_rate * t
         meshes = self._meshes is not None and self._meshes.drawable
         self.last_full_render = False
+        gpu = self._gpu is not None
         if self._table is not None and not meshes:
             t1 = time.perf_counter()
             self._table.lookup(psi, pairs)
+            if gpu:
+                self._run_gpu(FAR_ONLY, far_pairs=pairs)
         else:
             from .kernels import sample_over_far, sample_pairs
 
@@ -490,9 +521,14 @@ class Renderer:
                 far = self._table if layer is None else layer[0]
                 looked_up = helper.submit(far.lookup, psi, self._far_pairs)
             self._render_cube(scene, pose, q, t, level, texels, background=not over_table,
-                              chunks=None if layer is None else layer[1])
+                              chunks=None if layer is None else layer[1], read_back=not gpu)
             t1 = time.perf_counter()
-            if over_table:  # then each thread samples half of the LEDs
+            if gpu:
+                if over_table:
+                    self._finish(looked_up, far.lookup, psi, self._far_pairs)
+                mode, far_in = (OVER_FAR, self._far_pairs) if over_table else (ATLAS, None)
+                self._run_gpu(mode, level, far_in)
+            elif over_table:  # then each thread samples half of the LEDs
                 self._finish(looked_up, far.lookup, psi, self._far_pairs)
                 n = len(indptr) - 1
                 args = (indptr, indices, weights, texels, self._channel, self._far_pairs, pairs)
@@ -502,10 +538,32 @@ class Renderer:
             else:
                 sample_pairs(indptr, indices, weights, texels, self._channel, pairs)
         t2 = time.perf_counter()
-        self._convert(pairs, out)
+        if gpu:
+            np.copyto(out, self._gpu.frame)
+        else:
+            self._convert(pairs, out)
         t3 = time.perf_counter()
         self.last_timings = {"render": t1 - t0, "sample": t2 - t1, "convert": t3 - t2}
         return out
+
+    def _run_gpu(self, mode: int, level: int = 0, far_pairs: np.ndarray | None = None) -> None:
+        """The GPU path's passes for this frame: gains re-uploaded after a change, the footprint matrix after a new
+        footprint; the frame and its datagrams land in `self._gpu`."""
+        conv = self._convert
+        if self._gain_version != conv.version:
+            self._gpu.set_gain(conv.gain)
+            self._gain_version = conv.version
+        if mode != FAR_ONLY:
+            _, _, indptr, indices, weights = self._sampling()
+            self._gpu.set_matrix((self._fwhm, level), indptr, indices, weights)
+        self._gpu.run(mode, self._atlas, level, self.face_size >> level, far_pairs, conv.contrast,
+                      conv.swap_green_blue)
+
+    @property
+    def datagrams(self) -> np.ndarray | None:
+        """The last frame's 55 VIDEO datagrams, (55, 1112) uint8 with INFO 0 (set the sequence before sending), as
+        packed on the GPU path; None on the CPU path (encode with `firmware_proto.video.encode_frame`)."""
+        return None if self._gpu is None else self._gpu.datagrams
 
     def _finish(self, future, fn, *args) -> None:
         """Wait for work handed to the helper thread; if it has not even started (the helper held off its CPU or
@@ -535,12 +593,14 @@ class Renderer:
         return c + _rot_z(-scene.rotation) @ (np.array([pose.x, pose.y, pose.z]) - c)
 
     def _render_cube(self, scene: Scene, pose: Pose, q: np.ndarray, t: float, level: int = 0,
-                     texels: np.ndarray | None = None, background: bool = True, chunks=None) -> None:
+                     texels: np.ndarray | None = None, background: bool = True, chunks=None,
+                     read_back: bool = True) -> None:
         """Draw the six faces for `pose` and read the atlas (mipmap `level`) back into `texels`.
 
         background: draw the far field behind the meshes (channel 3 = polarised UV); otherwise leave it
         black and write the meshes' coverage into channel 3, for `kernels.sample_over_far`. chunks: (n_chunks,)
-        bool, the mesh chunks to draw (default: all).
+        bool, the mesh chunks to draw (default: all). read_back: False leaves the atlas (and its mipmaps up to
+        `level`) on the GL device, for the GPU path.
         """
         if background:
             self._ensure_far_texture()
@@ -551,7 +611,10 @@ class Renderer:
             old.release()
         q_far = _rot_z(-scene.yaw_rate * t) @ q
         self._draw(q, q_far, eye, background, chunks)
-        if level == 0:
+        if not read_back:
+            if level:
+                self._atlas.build_mipmaps(0, level)
+        elif level == 0:
             self._fbo.read_into(self._texels if texels is None else texels, components=4, dtype="nu2")
         else:
             self._atlas.build_mipmaps(0, level)
@@ -615,7 +678,7 @@ class Renderer:
             if self._layer is not None:
                 self._layer.release()
                 self._layer = None
-            for res in (self._far_tex, self._meshes):
+            for res in (self._far_tex, self._meshes, self._gpu):
                 if res is not None:
                     res.release()
         self.ctx.release()

@@ -17,7 +17,10 @@ import argparse
 import json
 import os
 import tempfile
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from antarium.config import RigConfig
 
 import numpy as np
 
@@ -83,13 +86,29 @@ def _machine_stalls(f: dict[str, np.ndarray], stalls: dict[int, tuple[bool, np.n
 
 
 def run(args: argparse.Namespace) -> int:
-    from antarium.bus import free_tcp_endpoint
     from antarium.config import load_config
+    from antarium.renderers.gl import gl_renderer_string
+    from antarium.renderers.gpu_path import default_path
+
+    seconds = 30.0 if args.seconds is None and args.frames is None else args.seconds
+    paths = getattr(args, "path", None) or [None]
+    for path in paths:
+        config = load_config(os.environ.get("ANTARIUM_RIG_CONFIG") or None)
+        if path is not None:
+            config.render.path = path
+        gl = gl_renderer_string()
+        chosen = config.render.path
+        print(f"GL renderer: {gl}; per-LED path: {default_path(gl) if chosen == 'auto' else chosen}"
+              f"{' (auto)' if chosen == 'auto' else ''}")
+        _run_one(args, config, seconds)
+    return 0
+
+
+def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None) -> None:
+    from antarium.bus import free_tcp_endpoint
     from antarium.server import Server
     from antarium.trial_log import read_table
 
-    seconds = 30.0 if args.seconds is None and args.frames is None else args.seconds
-    config = load_config(os.environ.get("ANTARIUM_RIG_CONFIG") or None)
     with tempfile.TemporaryDirectory(prefix="antarium-bench-loop-") as tmp:
         config.log.dir = tmp
         if config.bus.enabled and config.bus.listen == ["tcp/127.0.0.1:7447"]:
@@ -106,13 +125,12 @@ def run(args: argparse.Namespace) -> int:
         result["rejected_frames"] = server.final_stats.get("rejected_frames", 0)
         result["link_outages"] = server.final_stats.get("link_outages", 0)
         result["far_layer"] = server.final_stats.get("far_layer")
-        result["config"] = {"render": config.render, "loop_rate_hz": config.loop.rate_hz,
+        result["config"] = {"render": config.render.model_dump(), "loop_rate_hz": config.loop.rate_hz,
                             "link": config.link.interface, "locomotion": config.locomotion.source}
     _print(result)
     if args.json_out:
         with open(args.json_out, "w") as fh:
             json.dump(result, fh, indent=2)
-    return 0
 
 
 def _start_probes(loop_priority: int):

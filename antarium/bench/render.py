@@ -113,7 +113,8 @@ def _progress(text: str) -> None:
 
 def run(args) -> int:
     from antarium.geometry import load_dome
-    from antarium.renderers.gl import describe
+    from antarium.renderers.gl import gl_renderer_string
+    from antarium.renderers.gpu_path import default_path
     from antarium.renderers.renderer import Renderer
 
     frames = args.frames or 300
@@ -121,16 +122,20 @@ def run(args) -> int:
         raise ValueError(f"--frames must be positive, got {frames}")
     dome = load_dome()
     results = []
+    gl = gl_renderer_string()
+    paths = getattr(args, "path", None) or [default_path(gl)]
+    print(f"GL renderer: {gl}; per-LED path{'s' if len(paths) > 1 else ''}: {', '.join(paths)}")
     _progress("building the scenes (the habitat takes a while)")
     loads = workloads()
-    print(f"{'workload':<14}{'triangles':>10}{'frames/s':>10}{'x190 Hz':>9}{'goal':>7}{'render ms':>11}"
+    print(f"{'path':<5}{'workload':<14}{'triangles':>10}{'frames/s':>10}{'x190 Hz':>9}{'goal':>7}{'render ms':>11}"
           f"{'sample ms':>11}{'convert ms':>12}{'CPU ms':>8}")
-    for i, (name, (make, kwargs)) in enumerate(loads.items()):
-        _progress(f"workload {i + 1}/{len(loads)} {name!r}: {frames} frames")
-        renderer = Renderer(dome, **kwargs)
+    runs = [(path, name, workload) for path in paths for name, workload in loads.items()]
+    for i, (path, name, (make, kwargs)) in enumerate(runs):
+        _progress(f"workload {i + 1}/{len(runs)} {name!r} on the {path} path: {frames} frames")
+        renderer = Renderer(dome, path=path, **kwargs)
         try:
             r = measure(renderer, make(), frames)
-            r["renderer"] = {"face_size": renderer.face_size, "gl": describe(renderer.ctx), **kwargs}
+            r["renderer"] = {"face_size": renderer.face_size, "gl": renderer.gl_renderer, "path": path, **kwargs}
             r["far_layer"] = renderer.far_layer_status()
         finally:
             renderer.release()
@@ -140,11 +145,12 @@ def run(args) -> int:
         r["goal_fps"] = goal
         results.append(r)
         goal_txt = f"{r['fps'] / goal:6.2f}x" if goal else "     -"
-        print(f"{name:<14}{r['triangles']:>10}{r['fps']:>10.1f}{r['x_dome_rate']:>9.2f}{goal_txt:>7}"
+        print(f"{path:<5}{name:<14}{r['triangles']:>10}{r['fps']:>10.1f}{r['x_dome_rate']:>9.2f}{goal_txt:>7}"
               f"{r['render_ms']:>11.2f}{r['sample_ms']:>11.2f}{r['convert_ms']:>12.2f}"
               f"{r['cpu_ms_per_frame']:>8.2f}", flush=True)
     device = results[0]["renderer"]["gl"]
     layered = next(r for r in results if r["workload"] == "habitat-layer")
+    print("sample ms on the gpu path: the compute passes, their wait and the read-back; convert ms: the copy out")
     print(f"GL: {device}. Face size {results[0]['renderer']['face_size']}; habitat-layer: near meshes at "
           f"{layered['renderer']['face_size']}, far layer at 192 in its own process "
           f"({layered['far_layer']['builds']} layers built, {layered['builder_cpu_ms_per_frame']:.2f} CPU ms per "

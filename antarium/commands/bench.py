@@ -18,6 +18,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="jitter: busy time standing for one frame's work (ms; default 2.5)")
     parser.add_argument("--machine-probe", action="store_true",
                         help="loop: also run a stall probe on every CPU and tell the machine's late frames from ours")
+    parser.add_argument("--path", action="append", choices=("gpu", "cpu"), default=None,
+                        help="render, loop: per-LED sampling on the GL device or the CPU (repeat to compare both in "
+                             "one run; default: chosen from the GL renderer)")
     parser.add_argument("--json", dest="json_out", default=None, help="also write the results to this JSON file")
 
 

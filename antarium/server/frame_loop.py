@@ -409,8 +409,12 @@ class FrameLoop:
                 self.fault("render", t_start, exc)
         if self.link is not None and self._frame_buf is not None:
             t0 = clock.now()
+            packed = getattr(self.renderer, "datagrams", None)  # packed on the GPU path: no encoding here
             try:
-                self.link.send_frame(self._frame_buf)
+                if packed is not None:
+                    self.link.send_packed(packed)
+                else:
+                    self.link.send_frame(self._frame_buf)
             except ValueError as exc:  # a frame breaking the LED-frame contract is not sent; the loop goes on
                 self._frame_rejected(t0, str(exc))
             update_sent = False

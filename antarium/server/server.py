@@ -45,7 +45,8 @@ def default_renderer_factory(render_cfg: dict[str, Any], clock: Clock | None = N
 
     return Renderer(load_dome(), face_size=render_cfg.face_size_px or None, clock=clock,
                     far_layer=render_cfg.far_layer, near_radius=render_cfg.near_radius_m,
-                    far_layer_error_deg=render_cfg.far_layer_error_deg)
+                    far_layer_error_deg=render_cfg.far_layer_error_deg,
+                    path=None if render_cfg.path == "auto" else render_cfg.path)
 
 
 class Server:

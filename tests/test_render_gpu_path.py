@@ -1,0 +1,195 @@
+"""The GPU frame path (compute shaders, run here on llvmpipe) against the CPU path, the reference: every kind of
+scene and every scene edit gives the same LED frame within 1 LSB, and the packed datagrams are the VIDEO encoding
+of that frame and show it on the emulated dome."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from antarium.core.pose import Pose
+from antarium.firmware_proto.video import VIDEO_PAYLOAD_SIZE, encode_frame, video_info
+from antarium.geometry import load_dome
+from antarium.renderers.gpu_path import check_path, default_path
+from antarium.renderers.library import build_scene
+from antarium.renderers.renderer import Renderer
+from antarium.renderers.scene import MeshData, SceneObject
+
+FACE = 96
+POSES = [Pose(0.0, 0.0, 0.25, 0.0), Pose(0.3, -0.2, 0.1, 1.2)]
+
+
+@pytest.fixture(scope="module")
+def pair():
+    dome = load_dome()
+    cpu, gpu = Renderer(dome, face_size=FACE, path="cpu"), Renderer(dome, face_size=FACE, path="gpu")
+    yield cpu, gpu
+    cpu.release()
+    gpu.release()
+
+
+def box(size=0.5, colour=(0.8, 0.1, 0.3)) -> MeshData:
+    import trimesh
+
+    m = trimesh.creation.box(extents=(size, size, size))
+    v = np.asarray(m.vertices) + [0, 0, size / 2]
+    return MeshData(v.astype(np.float32), np.asarray(m.faces), np.tile(colour, (len(v), 1)), double_sided=False)
+
+
+def with_box(spec: dict, position=(1.0, 0.5, 0.0)):
+    scene = build_scene(spec)
+    scene.objects["box"] = SceneObject(box(), position=position)
+    scene.__post_init__()
+    return scene
+
+
+def assert_same(pair, t: float = 0.5, poses=POSES, what: str = "") -> None:
+    """Both paths render every pose to frames within 1 LSB; the frames are not blank."""
+    cpu, gpu = pair
+    for pose in poses:
+        a = cpu.render(pose, t=t).astype(np.int64)
+        b = gpu.render(pose, t=t).astype(np.int64)
+        assert a.max() > 1000, "a blank frame proves nothing"
+        diff = np.abs(a - b)
+        bad = int((diff > 1).sum())
+        assert bad == 0, f"{bad} LED values differ by more than 1 LSB (max {diff.max()}) {what}"
+        assert (b[:, 0] + b[:, 1]).max() <= 65535
+
+
+def both(pair, method: str, *args, **kwargs) -> None:
+    for r in pair:
+        getattr(r, method)(*args, **kwargs)
+
+
+SCENES = {
+    "uniform": lambda tmp: {"scene": "uniform", "colour": [0.4, 0.2, 0.3]},
+    "bars": lambda tmp: {"scene": "bars", "azimuth_deg": 30, "width_deg": 10, "colour": [1, 0.5, 0.2]},
+    "drifting grating": lambda tmp: {"scene": "grating", "period_deg": 20, "speed_deg_s": 30, "colour": [1, 0.3, 0.6]},
+    "sky (polarised)": lambda tmp: {"scene": "sky"},
+    "panorama": lambda tmp: {"scene": "panorama", "path": _stripes(tmp)},
+    "mesh over the far-field table": lambda tmp: with_box({"scene": "horizon", "sky": 0.6, "ground": 0.2}),
+    "mesh over a drifting far field": lambda tmp: with_box({"scene": "grating", "period_deg": 30, "speed_deg_s": 40}),
+    "habitat": lambda tmp: "habitat",
+}
+
+
+def _stripes(tmp) -> str:
+    import cv2
+
+    img = np.zeros((90, 180, 3), np.uint8)
+    img[:, ::12] = [40, 255, 120]
+    img[:45, :, 0] = 200
+    path = tmp / "stripes.png"
+    cv2.imwrite(str(path), img)
+    return str(path)
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_every_kind_of_scene_matches_the_cpu_path(pair, name, tmp_path):
+    scene = SCENES[name](tmp_path)
+    for r in pair:
+        r.set_scene(scene if not hasattr(scene, "objects") else _copy(scene))
+    assert_same(pair)
+
+
+def _copy(scene):
+    from antarium.renderers.scene import Scene
+
+    return Scene(far=scene.far, objects=dict(scene.objects), name=scene.name)
+
+
+def test_every_scene_edit_matches_the_cpu_path(pair, tmp_path):
+    scene = with_box({"scene": "sky"})
+    for r in pair:
+        r.set_scene(_copy(scene))
+    assert_same(pair)
+    for method, args in [("rotate_scene", (math.radians(70),)), ("move_object", ("box",)),
+                         ("add_object", ("tree", SceneObject(box(colour=(0.1, 0.9, 0.2)), position=(-1.0, 0, 0)))),
+                         ("remove_object", ("box",)), ("scale_channel", ("blue", 0.4)), ("scale_channel", ("uv", 0.7)),
+                         ("swap_green_blue", (True,)), ("set_contrast", (0.4,)), ("set_contrast", (1.6,)),
+                         ("set_brightness", (0.5,)), ("set_lowpass", (12.0,)), ("set_lowpass", (None,)),
+                         ("set_brightness", (1.0,))]:
+        kwargs = {"position": (0.0, -1.0, 0.0), "yaw": 0.5} if method == "move_object" else {}
+        both(pair, method, *args, **kwargs)
+        assert_same(pair, poses=POSES[:1], what=f"after {method}{args}")
+
+
+def test_low_pass_on_meshes_samples_a_mipmap_level_on_both_paths(pair):
+    scene = with_box({"scene": "grating", "period_deg": 10, "speed_deg_s": 20})
+    for r in pair:
+        r.set_scene(_copy(scene))
+        r.set_lowpass(25.0)
+    assert_same(pair)
+    assert pair[1]._gpu.matrix_key[1] > 0  # the wide footprint came from a coarser mipmap level
+    # every low-passed frame shows its own pose (the atlas's mipmaps were once built from a stale level 0)
+    fresh = Renderer(load_dome(), face_size=FACE, path="cpu")
+    try:
+        fresh.set_scene(_copy(scene))
+        fresh.set_lowpass(25.0)
+        expected = fresh.render(POSES[0], t=0.5).astype(np.int64)
+    finally:
+        fresh.release()
+    for r in pair:
+        assert np.abs(r.render(POSES[0], t=0.5).astype(np.int64) - expected).max() <= 1
+
+
+def test_packed_datagrams_are_the_video_encoding_and_show_the_frame_on_the_emulator(pair):
+    from antarium.core.clock import SimulatedClock
+    from antarium.firmware_proto.emulator import Emulator
+    from antarium.firmware_proto.video import decode_frame
+
+    cpu, gpu = pair
+    for r in pair:
+        r.set_scene(_copy(with_box({"scene": "sky"})))
+    frame = gpu.render(POSES[1], t=0.0)
+    reference = cpu.render(POSES[1], t=0.0)
+    packed = gpu.datagrams.copy()
+    assert packed.shape == (55, VIDEO_PAYLOAD_SIZE)
+    assert np.array_equal(packed, encode_frame(frame, seq=0))
+    packed[:, 1] = video_info(5, immediate=True)
+    emu = Emulator(clock=SimulatedClock())
+    for row in packed:
+        emu.handle_datagram(row.tobytes())
+    shown = emu.led_values().astype(np.int64)
+    assert np.array_equal(shown, decode_frame(packed).astype(np.int64))
+    # the wire's 8-bit share costs at most L / 510 + 1/2 LSB per LED; the paths differ by at most 1 more
+    lum = reference.astype(np.int64).sum(axis=1, keepdims=True)
+    assert np.all(np.abs(shown - reference) <= lum / 510 + 1.5)
+
+
+def test_path_choice_and_bad_input():
+    assert default_path("llvmpipe (LLVM 15.0.6, 256 bits), 4.5 (Core Profile) Mesa 22.3.6") == "cpu"
+    assert default_path("softpipe") == "cpu" and default_path("Mesa swrast") == "cpu"
+    assert default_path("NVIDIA H100 80GB HBM3/PCIe/SSE2, 4.6.0 NVIDIA 550.54") == "gpu"
+    assert check_path(None) is None and check_path("gpu") == "gpu"
+    with pytest.raises(ValueError, match="render path must be one of gpu, cpu"):
+        check_path("cuda")
+    with pytest.raises(ValueError, match="render path must be one of gpu, cpu"):
+        Renderer(path="fast")
+    from antarium.config import ConfigError, resolve
+
+    render = resolve({"render": {"path": "gpu", "far_layer": "auto"}}).render
+    assert render.path == "gpu" and render.far_layer == "auto"
+    with pytest.raises(ConfigError, match=r"\[render\] path must be one of 'auto', 'gpu', 'cpu'"):
+        resolve({"render": {"path": "cuda"}})
+
+
+def test_the_frame_loop_sends_the_gpu_paths_packed_datagrams(pair):
+    from antarium.core.clock import SimulatedClock
+    from antarium.firmware_proto.link import open_link
+    from antarium.firmware_proto.video import decode_frame
+    from antarium.server.frame_loop import FrameLoop
+
+    gpu = pair[1]
+    gpu.set_scene("sky")
+    with open_link("virtual") as link:
+        loop = FrameLoop(clock=SimulatedClock(), source=None, renderer=gpu, link=link, closed_loop=False)
+        for _ in range(3):
+            loop.step()
+        assert link.counters["frames_sent"] == 3
+        expected = gpu.datagrams.copy()
+        expected[:, 1] = 2  # the third frame's sequence
+        assert np.array_equal(link.emulator.led_values(), decode_frame(expected))
+        assert np.array_equal(loop.last_frame, gpu.render(loop.pose, t=gpu.clock.now() - gpu._t0))
