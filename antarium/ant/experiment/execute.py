@@ -10,6 +10,7 @@ import dataclasses
 import math
 import os
 import socket
+import threading
 import time
 import traceback
 from functools import lru_cache
@@ -25,6 +26,19 @@ def _route(source: str) -> Route:
         _, seed, length = source.split(":")
         return curved_route(int(seed), length=float(length))
     return load_route(source).route
+
+
+_RENDERERS: dict = {}
+
+
+def _renderer(face_size: int):
+    """This thread's renderer of `face_size` (one GL context per worker thread, reused across its runs)."""
+    from antarium.renderers import Renderer
+
+    key = (threading.get_ident(), face_size)
+    if key not in _RENDERERS:
+        _RENDERERS[key] = Renderer(face_size=face_size)
+    return _RENDERERS[key]
 
 
 def _model_args(run: Run):
@@ -59,7 +73,8 @@ def run_row(run: Run) -> dict:
             run.model, route, None, run.run_id, scene=cached_world(run.world), model_params=overrides,
             learn_spacing=spacing, max_decisions=run.max_decisions or None,
             start_offset=(run.lateral_cm / 100.0, math.radians(run.heading_deg)), eye_params=eye_params,
-            save=False, face_size=run.face_size, put_back=PROTOCOLS[run.protocol], eye_height=run.eye_z_m)
+            save=False, face_size=run.face_size, put_back=PROTOCOLS[run.protocol], eye_height=run.eye_z_m,
+            renderer=_renderer(run.face_size))
     except Exception as exc:  # a failed run is recorded, not raised: the others go on
         row.update(status="failed", error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(),
                    run_s=time.perf_counter() - t0)
