@@ -20,6 +20,7 @@ pytest.importorskip("distributed")
 pd = pytest.importorskip("pandas")
 
 from antarium.ant.experiment.inputs import WorldSpec, eye_z, load_route, world_geometry  # noqa: E402
+from antarium.ant.experiment.results import bootstrap_ci, load_results, report  # noqa: E402
 from antarium.ant.experiment.runner import RUNS_DIR, run_experiment  # noqa: E402
 from antarium.ant.experiment.spec import SpecError, load_spec  # noqa: E402
 from antarium.ant.routes import Route, RouteError  # noqa: E402
@@ -59,10 +60,10 @@ def field(tmp_path_factory):
     return d, world
 
 
-def _spec(d: Path, models: str, extra: str = "") -> Path:
+def _spec(d: Path, models: str, extra: str = "", face_size: int = 64) -> Path:
     text = textwrap.dedent(f"""
         [experiment]
-        face_size = 16
+        face_size = {face_size}
         max_decisions = 12
         eye = {{cols = 10, rows = 4}}
         {extra}
@@ -109,7 +110,7 @@ def test_route_file_heading_column_sets_the_release_heading(field):
     assert ri.release_heading == pytest.approx(2.0, abs=1e-3)
     exp = load_spec(_spec(d, MODELS))
     r1 = [r for r in exp.runs if r.route == "r1"]
-    assert r1 and all(abs(r.heading_deg) < 0.1 for r in r1)   # the file's heading is the route's own
+    assert r1 and all(abs(r.route_heading_deg) < 0.1 for r in r1)   # the file's heading is the route's own
 
 
 def test_bad_spec_gets_one_clear_line(field):
@@ -120,25 +121,60 @@ def test_bad_spec_gets_one_clear_line(field):
         load_spec(_spec(d, MODELS, 'protocols = ["sometimes"]'))
 
 
-def test_two_workers_equal_a_serial_run_and_a_rerun_skips_what_is_done(field, tmp_path):
-    d, _ = field
-    exp = load_spec(_spec(d, MODELS, 'seeds = [0, 1]'))
-    assert len(exp.runs) == 2 * 2 * 2   # routes x models x seeds
-    serial = tmp_path / "serial"
-    p = run_experiment(exp.runs, serial, serial=True, progress_bar=False)
-    assert (p.done, p.failed) == (8, 0)
-    cluster = tmp_path / "cluster"
-    p = run_experiment(exp.runs, cluster, workers=2, progress_bar=False)
-    assert (p.done, p.failed) == (8, 0)
-    from antarium.ant.experiment.results import load_results
+GRID = """
+[models.ardin]
+n_kc = [100, 200]
+[models.perfect_memory]
+"""
 
-    a = load_results(serial).set_index("run_id").sort_index()
-    b = load_results(cluster).set_index("run_id").sort_index()
-    assert b["worker"].nunique() == 2
+
+@pytest.fixture(scope="module")
+def serial(field, tmp_path_factory):
+    d, _ = field
+    exp = load_spec(_spec(d, GRID, 'seeds = [0, 1]'))
+    assert len(exp.runs) == 2 * (2 + 1) * 2   # routes x (ardin's grid + perfect memory) x seeds
+    out = tmp_path_factory.mktemp("serial")
+    p = run_experiment(exp.runs, out, serial=True, progress_bar=False)
+    assert (p.done, p.failed) == (12, 0)
+    return exp, out
+
+
+def test_two_workers_equal_a_serial_run_and_a_rerun_skips_what_is_done(serial, tmp_path):
+    exp, serial_out = serial
+    p = run_experiment(exp.runs, tmp_path, workers=2, progress_bar=False)
+    assert (p.done, p.failed) == (12, 0)
+    a = load_results(serial_out).set_index("run_id").sort_index()
+    b = load_results(tmp_path).set_index("run_id").sort_index()
+    assert list(a.index) == list(b.index) and b["worker"].nunique() == 2
     for col in SAME:
         np.testing.assert_allclose(a[col].astype(float), b[col].astype(float), rtol=1e-9, atol=1e-9, err_msg=col)
-    again = run_experiment(exp.runs, cluster, workers=2, progress_bar=False)
-    assert (again.skipped, again.done) == (8, 0)
+    again = run_experiment(exp.runs, tmp_path, workers=2, progress_bar=False)
+    assert (again.skipped, again.done) == (12, 0)
+
+
+def test_summary_per_condition_and_pictures(serial):
+    exp, out = serial
+    text = report(out, exp.routes, exp.metrics)
+    table = pd.read_csv(out / "summary.csv")
+    assert len(table) == 3 and set(table["runs"]) == {4}          # ardin x 2 n_kc, perfect memory; 2 routes x 2 seeds
+    df = load_results(out)
+    pm = df[df.model == "perfect_memory"]
+    row = table[table.model == "perfect_memory"].iloc[0]
+    assert row["errors"] == pytest.approx(pm["errors"].mean())
+    assert row["errors_lo"] <= row["errors"] <= row["errors_hi"] or not np.isfinite(row["errors_lo"])
+    assert "perfect_memory" in text
+    for name in ("results.parquet", "worst_and_best_paths.png", "errors_vs_n_kc.png", "lateral_median_m_vs_n_kc.png"):
+        assert (out / name).stat().st_size > 0, name
+
+
+def test_bootstrap_interval_covers_the_mean_and_narrows_with_more_data():
+    rng = np.random.default_rng(1)
+    small, large = rng.normal(3.0, 1.0, 10), rng.normal(3.0, 1.0, 1000)
+    lo_s, hi_s = bootstrap_ci(small)
+    lo_l, hi_l = bootstrap_ci(large)
+    assert lo_s < small.mean() < hi_s and lo_l < large.mean() < hi_l
+    assert hi_l - lo_l < (hi_s - lo_s) / 5
+    assert all(math.isnan(v) for v in bootstrap_ci([1.0]))
 
 
 def test_a_failed_run_is_recorded_and_the_others_go_on(field, tmp_path):
@@ -146,16 +182,22 @@ def test_a_failed_run_is_recorded_and_the_others_go_on(field, tmp_path):
     exp = load_spec(_spec(d, "[models.perfect_memory]\n\"eye.neighbours\" = [4, 0]\n"))
     p = run_experiment(exp.runs, tmp_path, serial=True, progress_bar=False)
     assert (p.done, p.failed) == (2, 2)
-    from antarium.ant.experiment.results import load_results
-
     df = load_results(tmp_path)
-    assert set(df.loc[df.status == "failed", "error"].str.contains("neighbours"))  == {True}
+    assert set(df.loc[df.status == "failed", "error"].str.contains("neighbours")) == {True}
+
+
+def test_a_run_the_renderer_cannot_draw_fails_instead_of_running_blind(field, tmp_path):
+    d, _ = field
+    exp = load_spec(_spec(d, "[models.perfect_memory]\n", face_size=16))
+    p = run_experiment(exp.runs, tmp_path, serial=True, progress_bar=False)
+    assert (p.done, p.failed) == (0, 2)
+    assert load_results(tmp_path)["error"].str.contains("raise face_size").all()
 
 
 def test_kill_then_rerun_runs_each_run_once(field, tmp_path):
     """A sweep killed half way restarts and completes; no run is done twice (each run's worker pid is kept)."""
     d, _ = field
-    spec = _spec(d, MODELS)
+    spec = _spec(d, MODELS, "seeds = [0, 1, 2, 3]")   # 16 runs
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "antarium.cli", "ant", "experiment", str(spec), "--out", str(out), "--serial"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
@@ -166,8 +208,8 @@ def test_kill_then_rerun_runs_each_run_once(field, tmp_path):
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     first = {p.name: p.stat().st_mtime_ns for p in runs.glob("*.parquet")}
-    assert 1 <= len(first) < 4, "the kill came after every run finished: nothing to resume"
+    assert 1 <= len(first) < 16, "the kill came after every run finished: nothing to resume"
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     after = {p.name: p.stat().st_mtime_ns for p in runs.glob("*.parquet")}
-    assert len(after) == 4 and all(after[k] == v for k, v in first.items())
+    assert len(after) == 16 and all(after[k] == v for k, v in first.items())
     assert not list(runs.glob("*.tmp*"))

@@ -31,14 +31,21 @@ def _route(source: str) -> Route:
 _RENDERERS: dict = {}
 
 
-def _renderer(face_size: int):
-    """This thread's renderer of `face_size` (one GL context per worker thread, reused across its runs)."""
+def _renderer(face_size: int, scene, x: float, y: float, z: float):
+    """This thread's renderer of `face_size` (one GL context per worker thread, reused across its runs), showing
+    `scene`. It renders one frame at (x, y, z) m first: the frame loop keeps the dome's last frame when a render
+    fails (as a rig must), so a run would otherwise go on blind; here the run fails with the renderer's error."""
+    from antarium.pose import Pose
     from antarium.renderers import Renderer
 
     key = (threading.get_ident(), face_size)
     if key not in _RENDERERS:
         _RENDERERS[key] = Renderer(face_size=face_size)
-    return _RENDERERS[key]
+    renderer = _RENDERERS[key]
+    if renderer.scene is not scene:
+        renderer.set_scene(scene)
+    renderer.render(Pose(x, y, z, 0.0))
+    return renderer
 
 
 def _model_args(run: Run):
@@ -69,12 +76,14 @@ def run_row(run: Run) -> dict:
     try:
         route = _route(run.route_source)
         eye_params, overrides, spacing = _model_args(run)
+        scene = cached_world(run.world)
+        renderer = _renderer(run.face_size, scene, *route.start, run.eye_z_m)
         outcome, track = train_and_follow(
-            run.model, route, None, run.run_id, scene=cached_world(run.world), model_params=overrides,
+            run.model, route, None, run.run_id, scene=scene, model_params=overrides,
             learn_spacing=spacing, max_decisions=run.max_decisions or None,
-            start_offset=(run.lateral_cm / 100.0, math.radians(run.heading_deg)), eye_params=eye_params,
-            save=False, face_size=run.face_size, put_back=PROTOCOLS[run.protocol], eye_height=run.eye_z_m,
-            renderer=_renderer(run.face_size))
+            start_offset=(run.lateral_cm / 100.0, math.radians(run.heading_deg + run.route_heading_deg)),
+            eye_params=eye_params, save=False, face_size=run.face_size, put_back=PROTOCOLS[run.protocol],
+            eye_height=run.eye_z_m, renderer=renderer)
     except Exception as exc:  # a failed run is recorded, not raised: the others go on
         row.update(status="failed", error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(),
                    run_s=time.perf_counter() - t0)

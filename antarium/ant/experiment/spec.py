@@ -73,6 +73,7 @@ class Run:
     face_size: int
     max_decisions: int
     eye_z_m: float
+    route_heading_deg: float = 0.0   # the route file's release heading minus the route's own (deg, CCW)
 
     @property
     def run_id(self) -> str:
@@ -214,8 +215,8 @@ def expand(data: dict, base: Path = Path(".")) -> Experiment:
                                                         math.tau))
                 for kind, grid in grids.items():
                     for params, (lat, hdg), seed, protocol in itertools.product(grid, releases, seeds, protocols):
-                        runs.append(Run(world, set_name, ri.name, ri.source, kind, params, lat, hdg + extra, seed,
-                                        protocol, face_size, max_decisions, z))
+                        runs.append(Run(world, set_name, ri.name, ri.source, kind, params, lat, hdg, seed,
+                                        protocol, face_size, max_decisions, z, extra))
     ids = [r.run_id for r in runs]
     if len(set(ids)) != len(ids):
         raise SpecError("the spec names the same run twice (a repeated route, seed or parameter value)")
