@@ -31,18 +31,25 @@ SAME = ["lateral_median_m", "lateral_mad_m", "angular_median_deg", "angular_mad_
 
 
 def _world_obj(path: Path) -> Path:
-    """A 3 m x 3 m field in centimetres, +y up (as many modelling tools write OBJ): ground, three boxes, a step."""
+    """A 3 m x 3 m field in centimetres, +y up (as many modelling tools write OBJ): a terrain with a hill 8 cm high
+    around (1.2, -1.2) m, six 40 cm boxes, a tree's canopy 3 m above the routes."""
     import trimesh
 
-    parts = [trimesh.creation.box((300.0, 2.0, 300.0), trimesh.transformations.translation_matrix((0, -1.0, 0)))]
+    g = np.linspace(-150.0, 150.0, 61)
+    gx, gz = np.meshgrid(g, g, indexing="ij")          # file x, z (z is -y of the world)
+    hill = 8.0 * np.exp(-((gx - 120.0) ** 2 + (gz - 120.0) ** 2) / (2 * 15.0 ** 2))
+    verts = np.stack([gx.ravel(), hill.ravel(), gz.ravel()], 1)
+    i = np.arange(60)[:, None] * 61 + np.arange(60)[None, :]
+    faces = np.concatenate([np.stack([i, i + 1, i + 62], -1).reshape(-1, 3),
+                            np.stack([i, i + 62, i + 61], -1).reshape(-1, 3)])
+    parts = [trimesh.Trimesh(verts, faces, process=False)]
     rng = np.random.default_rng(3)
-    for x, z in rng.uniform(-120, 120, (6, 2)):
+    for x, z in rng.uniform(-120, 60, (6, 2)):
         parts.append(trimesh.creation.box((20.0, 40.0, 20.0),
                                           trimesh.transformations.translation_matrix((x, 20.0, z))))
-    # a 5 cm high block at x = 1.2..1.4 m, y = -1.4..-1.2 m (file z = +120..+140): a route through it is underground
-    parts.append(trimesh.creation.box((20.0, 5.0, 20.0), trimesh.transformations.translation_matrix((130, 2.5, 130))))
-    mesh = trimesh.util.concatenate(parts)
-    mesh.export(path)
+    parts.append(trimesh.creation.box((100.0, 10.0, 100.0),
+                                      trimesh.transformations.translation_matrix((20.0, 300.0, 20.0))))
+    trimesh.util.concatenate(parts).export(path)
     return path
 
 
@@ -98,7 +105,7 @@ def test_world_scale_and_up_axis_and_route_checks(field):
     with pytest.raises(RouteError, match="outside world"):
         eye_z(world, Route([(0.0, 0.0), (2.0, 0.0)]), geometry)
     with pytest.raises(RouteError, match="under the ground"):
-        eye_z(world, Route([(1.0, -1.3), (1.35, -1.3)]), geometry)
+        eye_z(world, Route([(0.9, -1.2), (1.35, -1.2)]), geometry)
     # stated in the wrong unit, the same route leaves the world
     with pytest.raises(RouteError, match="outside world"):
         eye_z(WorldSpec(str(obj), scale=0.001, up="y"), Route([(0.0, 0.0), (0.2, 0.0)]))

@@ -15,6 +15,8 @@ TARGETS: dict[str, str] = {
     "protocol": "antarium.firmware_proto.bench:run",
     "render": "antarium.renderers.bench:run",
     "jitter": "antarium.jitter_bench:run",
+    "experiment": "antarium.bench.experiment:run",  # runs/hour of `antarium ant experiment`: --frames runs,
+                                                    # --seconds m routes
 }
 
 DOME_RATE_HZ = 190.0

@@ -23,6 +23,8 @@ UP_AXES = ("z", "y")
 GROUND_NORMAL_Z = 0.5
 #: route points are checked against the ground every this many metres
 CHECK_SPACING_M = 0.05
+#: the ground at a route's start has at least this much free space above it (m; or twice the eye height)
+GROUND_CLEARANCE_M = 0.05
 
 
 class WorldError(ValueError):
@@ -98,10 +100,10 @@ def _triangles(scene) -> np.ndarray:
     return np.concatenate(tris).astype(np.float64) if tris else np.zeros((0, 3, 3))
 
 
-def ground_heights(triangles: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """Height (m) of the highest near-horizontal triangle (|normal z| >= GROUND_NORMAL_Z) over each point.
+def ground_candidates(triangles: np.ndarray, xy: np.ndarray) -> list[np.ndarray]:
+    """Heights (m) of every near-horizontal triangle (|normal z| >= GROUND_NORMAL_Z) over each point, ascending.
 
-    triangles: (T, 3, 3) float64 m; xy: (P, 2) float64 m. Returns (P,) float64, NaN where no ground is under a point.
+    triangles: (T, 3, 3) float64 m; xy: (P, 2) float64 m. Returns P float64 arrays (empty where nothing is under).
     """
     a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
     n = np.cross(b - a, c - a)
@@ -110,11 +112,9 @@ def ground_heights(triangles: np.ndarray, xy: np.ndarray) -> np.ndarray:
     a, b, c = a[flat], b[flat], c[flat]
     lo = np.minimum(np.minimum(a, b), c)[:, :2]
     hi = np.maximum(np.maximum(a, b), c)[:, :2]
-    out = np.full(len(xy), np.nan)
-    for i, p in enumerate(np.asarray(xy, np.float64)):
+    out = []
+    for p in np.asarray(xy, np.float64):
         k = np.flatnonzero(np.all((lo <= p) & (p <= hi), axis=1))
-        if k.size == 0:
-            continue
         # barycentric coordinates of p in each candidate triangle's xy projection
         v0, v1, v2 = b[k, :2] - a[k, :2], c[k, :2] - a[k, :2], p - a[k, :2]
         den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
@@ -123,9 +123,33 @@ def ground_heights(triangles: np.ndarray, xy: np.ndarray) -> np.ndarray:
         u = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
         w = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
         inside = ok & (u >= -1e-9) & (w >= -1e-9) & (u + w <= 1 + 1e-9)
-        if inside.any():
-            z = a[k, 2] + u * (b[k, 2] - a[k, 2]) + w * (c[k, 2] - a[k, 2])
-            out[i] = float(np.max(z[inside]))
+        z = a[k, 2] + u * (b[k, 2] - a[k, 2]) + w * (c[k, 2] - a[k, 2])
+        out.append(np.sort(z[inside]))
+    return out
+
+
+def ground_along(candidates: list[np.ndarray], spacing: float, clearance: float) -> np.ndarray:
+    """The ground's height (m) along a route, from its surfaces over each sample (`ground_candidates`).
+
+    At the start: the lowest surface with at least `clearance` m of free space above it (the top of a slab, not
+    its underside; the ground under a tree, not its canopy). Then the surface nearest the last ground height,
+    if it is no steeper than 45 degrees over `spacing` m (a stone or a canopy beside the path is not the ground);
+    where none is, the last height is kept. Returns (P,) float64; NaN before the first sample with a surface.
+    """
+    out = np.full(len(candidates), np.nan)
+    g = math.nan
+    for i, z in enumerate(candidates):
+        if z.size == 0:
+            out[i] = g
+            continue
+        if not math.isfinite(g):
+            gaps = np.append(np.diff(z), np.inf)
+            g = float(z[np.flatnonzero(gaps >= clearance)[0]])
+        else:
+            j = int(np.argmin(np.abs(z - g)))
+            if abs(z[j] - g) <= max(spacing, 1e-3):
+                g = float(z[j])
+        out[i] = g
     return out
 
 
@@ -161,7 +185,8 @@ def eye_z(world: WorldSpec, route: Route, geometry: WorldGeometry | None = None)
         raise RouteError(f"route point {i} ({pts[i, 0]:.3f}, {pts[i, 1]:.3f}) m is outside world {world.name!r}, "
                          f"which spans x {x0:.2f}..{x1:.2f} m, y {y0:.2f}..{y1:.2f} m (check its scale and up axis)")
     xy, _ = route.sample(CHECK_SPACING_M)
-    ground = ground_heights(geometry.triangles, xy)
+    clearance = max(GROUND_CLEARANCE_M, 2 * world.eye_height_m)
+    ground = ground_along(ground_candidates(geometry.triangles, xy), CHECK_SPACING_M, clearance)
     g0 = ground[0] if np.isfinite(ground[0]) else 0.0
     z = g0 + world.eye_height_m
     under = np.isfinite(ground) & (ground >= z)

@@ -1,0 +1,1 @@
+"""Benchmarks run by `antarium bench TARGET` (registered in `antarium.commands.bench.TARGETS`)."""
