@@ -220,3 +220,14 @@ def test_kill_then_rerun_runs_each_run_once(field, tmp_path):
     after = {p.name: p.stat().st_mtime_ns for p in runs.glob("*.parquet")}
     assert len(after) == 16 and all(after[k] == v for k, v in first.items())
     assert not list(runs.glob("*.tmp*"))
+
+
+def test_a_panorama_world_has_no_extent_and_any_route_fits(tmp_path):
+    import cv2
+
+    img = np.zeros((32, 64, 3), np.uint8)
+    img[:16] = 200
+    cv2.imwrite(str(tmp_path / "pano.png"), img)
+    world = WorldSpec(str(tmp_path / "pano.png"), eye_height_m=0.02)
+    assert world_geometry(world).extent is None
+    assert eye_z(world, Route([(100.0, 0.0), (101.0, 0.0)])) == pytest.approx(0.02)

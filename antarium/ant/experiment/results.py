@@ -110,7 +110,10 @@ def plot_worst_and_best(df, routes: dict, path: str | Path, metric: str = "later
         ax.set_aspect("equal")
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
-        ax.set_title(f"{label}: {r.model} on {r.route}\n{metric} = {r[metric]:.3g}, errors {r.errors}", fontsize=8)
+        params = ", ".join(f"{k.removeprefix('param.')}={r[k]}" for k in r.index
+                           if k.startswith("param.") and r[k] == r[k])
+        ax.set_title(f"{label}: {r.model} on {r.route} {params}\n{metric} = {r[metric]:.3g}, errors {r.errors}, "
+                     f"seed {r.seed}", fontsize=8)
         ax.legend(fontsize=7)
     fig.suptitle(f"best and worst runs by {metric}")
     fig.tight_layout()

@@ -71,8 +71,8 @@ def _record(out: Path, row: dict, progress: Progress, bar) -> None:
     else:
         progress.failed += 1
     if bar is not None:
+        bar.set_postfix(done=progress.done + progress.skipped, failed=progress.failed, refresh=False)
         bar.update(1)
-        bar.set_postfix(done=progress.done + progress.skipped, failed=progress.failed)
 
 
 def _failed_row(run: Run, exc: BaseException) -> dict:
