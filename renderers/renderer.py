@@ -304,6 +304,11 @@ class Renderer:
         self._restart_layer()
         return new
 
+    def use_clock(self, clock) -> None:
+        """Render on `clock` from now on, its current time the scene's start (a renderer reused for a new run)."""
+        self.clock = clock
+        self._t0 = clock.now()
+
     def _restart_layer(self) -> None:
         """A new far layer for the current scene and footprint (none when off, or nothing to split)."""
         from .far_layer import FarLayer

@@ -26,9 +26,17 @@ def _pins() -> dict[str, list[tuple[str, str | None]]]:
 
 
 def _requirements() -> list[Requirement]:
+    """What `make test` installs: the dependencies, the test extra and the extras it names (`antarium[...]`)."""
     project = PYPROJECT["project"]
-    names = project["dependencies"] + project["optional-dependencies"]["test"]
-    return [Requirement(r) for r in names]
+    extras = project["optional-dependencies"]
+    out, todo = [], project["dependencies"] + extras["test"]
+    while todo:
+        req = Requirement(todo.pop(0))
+        if canonicalize_name(req.name) == "antarium":
+            todo += [r for extra in req.extras for r in extras[extra]]
+        else:
+            out.append(req)
+    return out
 
 
 @pytest.mark.parametrize("req", _requirements(), ids=str)

@@ -54,7 +54,8 @@ def test_import_antarium_pulls_in_no_gl_usb_or_zenoh():
     code = (
         "import sys, time; t = time.perf_counter(); import antarium, antarium.cli; "
         "dt = time.perf_counter() - t; "
-        "print(dt); print(sorted(m for m in ('moderngl', 'usb', 'zenoh', 'h5py', 'matplotlib', 'scipy') "
+        "print(dt); print(sorted(m for m in ('moderngl', 'usb', 'zenoh', 'h5py', 'matplotlib', 'scipy', "
+        "'dask', 'distributed', 'pandas', 'pyarrow') "
         "if m in sys.modules))"
     )
     dt, loaded = _run_python(code).splitlines()

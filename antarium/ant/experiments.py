@@ -21,7 +21,7 @@ from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M, median_mad, memory_pi_e
 from antarium.ant.models import make_model
 from antarium.ant.routes import Route, RouteError, curved_route
 from antarium.ant.storage import mbon_bytes, save_model
-from antarium.ant.world import virtual_rig
+from antarium.ant.world import EYE_HEIGHT_M, virtual_rig
 from antarium.plots.ant import plot_paths, plot_traces, scene_top_view
 
 #: metres between learned views: Antcar learns continuously (every frame of a 1 cm/frame walk), Ardin and
@@ -142,10 +142,11 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
                      model_params: dict | None = None, tether: str = "free_yaw", learn_spacing: float | None = None,
                      max_decisions: int | None = None, start_offset: tuple[float, float] = (0.0, 0.0),
                      eye_params: EyeParams | None = None, progress=None, save: bool = True,
-                     face_size: int = FACE_SIZE,
-                     put_back: float = ARDIN_ERROR_DISTANCE_M) -> tuple[TrialOutcome, Track]:
+                     face_size: int = FACE_SIZE, put_back: float = ARDIN_ERROR_DISTANCE_M,
+                     eye_height: float = EYE_HEIGHT_M, renderer: Any = None) -> tuple[TrialOutcome, Track]:
     """Learn `route` with a fresh `kind` model by a learning walk, then follow it in closed loop.
 
+    eye_height: the eye's z in the world (m); renderer: one to reuse (see `virtual_rig`).
     Writes `<name>.h5` (trial log of the whole session), `<name>_paths.png`, `<name>_traces.png` and
     `<name>_model.npz` into `out_dir` (nothing when it is None).
     """
@@ -156,7 +157,7 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
     spacing = learn_spacing or LEARN_SPACING_M[kind]
     with virtual_rig(model, scene=scene, eye_params=eye_params, tether=tether, log_path=log_path,
                      log_metadata={"route": route.points.tolist(), "model": kind},
-                     renderer_kwargs={"face_size": face_size}) as ant:
+                     renderer_kwargs={"face_size": face_size}, eye_height=eye_height, renderer=renderer) as ant:
         ant.loop.event("ant_learning_walk", spacing=spacing, route_length=route.length)
         kept: list = []
         learning_walk(ant, route, spacing, place_length=PLACE_LENGTH_M, progress=progress, keep=kept)

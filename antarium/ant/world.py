@@ -34,7 +34,8 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
                 clock: Clock | None = None, log_path: str | Path | None = None, log_metadata: dict | None = None,
                 frames_per_decision: int = 1, eye_height: float = EYE_HEIGHT_M,
                 renderer_kwargs: dict | None = None, bus: dict | None = None,
-                rig: str = "rig1", trackball: Any = None, compass: str | None = None) -> Iterator[VirtualAnt]:
+                rig: str = "rig1", trackball: Any = None, compass: str | None = None,
+                renderer: Any = None) -> Iterator[VirtualAnt]:
     """A `VirtualAnt` with `model` in a frame loop on an emulated dome showing `scene`.
 
     log_path: write an HDF5 trial log there (like a real trial's), or None.
@@ -45,6 +46,8 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
     trackball: True, or a `[trackball]` section (dict, file, `TrackballConfig`): the ant's steps move the ball of
     an emulated USB trackball on the loop's clock, and the real driver reading it is the loop's source
     (`TrackballLegs`); its default reports at 950 Hz, five per frame.
+    renderer: a `Renderer` to reuse (its GL context, and its scene when that is `scene` already); it is left
+    open for the next run. None: a new one, released at the end.
     """
     from antarium.config import LoopSection
     from antarium.firmware_proto.link import open_link
@@ -59,9 +62,13 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
     if eye.params.n_pn != model.n_pn:
         raise ValueError(f"the model expects {model.n_pn} PNs but the eye gives {eye.params.n_pn}")
     with contextlib.ExitStack() as stack:
-        renderer = Renderer(dome, clock=clock, **(renderer_kwargs or {}))
-        stack.callback(renderer.release)
-        renderer.set_scene(scene)
+        if renderer is None:
+            renderer = Renderer(dome, clock=clock, **(renderer_kwargs or {}))
+            stack.callback(renderer.release)
+        else:
+            renderer.use_clock(clock)
+        if renderer.scene is not scene:
+            renderer.set_scene(scene)
         link = open_link("virtual", clock=clock)
         stack.callback(link.close)
         log = None

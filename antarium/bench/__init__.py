@@ -13,4 +13,5 @@ TARGETS: dict[str, str] = {
     "jitter": "antarium.bench.jitter:run",
     "servosphere": "antarium.bench.servosphere:run",
     "monitor": "antarium.bench.monitor:run",
+    "experiment": "antarium.bench.experiment:run",
 }

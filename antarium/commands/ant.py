@@ -1,5 +1,5 @@
-"""`antarium ant learn | run | evaluate | demo | serve | homing | arena | displace`: the virtual ant on an emulated
-rig (no hardware needed)."""
+"""`antarium ant learn | run | evaluate | experiment | demo | serve | homing | arena | displace`: the virtual ant on
+an emulated rig (no hardware needed)."""
 
 from __future__ import annotations
 
@@ -67,6 +67,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--put-back-cm", type=float, default=20.0,
                    help="Ardin's protocol: farther than this off the route counts an error and the ant is put "
                         "back (default 20; 0: never, Antcar's own protocol)")
+    from antarium.ant.experiment import command as experiment
+
+    experiment.add_arguments(sub.add_parser("experiment", help="expand an experiment spec (TOML) into runs and run "
+                                                               "them on Dask, resumably; results table and summary"))
     p = sub.add_parser("demo", help="train on a short route, follow it; log and picture of both paths")
     p.add_argument("--out", required=True)
     p.add_argument("--scene", default="habitat")
@@ -137,6 +141,10 @@ def run(args: argparse.Namespace) -> int:
         return _learn(args)
     if args.action == "run":
         return _run(args)
+    if args.action == "experiment":
+        from antarium.ant.experiment import command
+
+        return command.run(args)
     if args.action in ("homing", "arena"):
         return _run_trips(args)
     if args.action == "displace":

@@ -1,0 +1,1 @@
+"""Model experiments at scale: real routes and worlds, a TOML spec expanded into runs, run on Dask, resumable."""

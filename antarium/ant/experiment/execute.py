@@ -1,0 +1,102 @@
+"""One run of an experiment, in whatever process runs it (a Dask worker or this one): a row of results.
+
+A run never raises: a failure is a row with status "failed" and the error, so that it does not stop the others.
+Worlds and routes are built once per process and reused across its runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import socket
+import threading
+import time
+import traceback
+from functools import lru_cache
+
+from antarium.ant.experiment.inputs import cached_world, load_route
+from antarium.ant.experiment.spec import PROTOCOLS, Run
+from antarium.ant.routes import Route, curved_route
+
+
+@lru_cache(maxsize=256)
+def _route(source: str) -> Route:
+    if source.startswith("curved:"):
+        _, seed, length = source.split(":")
+        return curved_route(int(seed), length=float(length))
+    return load_route(source).route
+
+
+_RENDERERS: dict = {}
+
+
+def _renderer(face_size: int, scene, x: float, y: float, z: float):
+    """This thread's renderer of `face_size` (one GL context per worker thread, reused across its runs), showing
+    `scene`. It renders one frame at (x, y, z) m first: the frame loop keeps the dome's last frame when a render
+    fails (as a rig must), so a run would otherwise go on blind; here the run fails with the renderer's error."""
+    from antarium.core.pose import Pose
+    from antarium.renderers import Renderer
+
+    key = (threading.get_ident(), face_size)
+    if key not in _RENDERERS:
+        _RENDERERS[key] = Renderer(face_size=face_size)
+    renderer = _RENDERERS[key]
+    if renderer.scene is not scene:
+        renderer.set_scene(scene)
+    renderer.render(Pose(x, y, z, 0.0))
+    return renderer
+
+
+def _model_args(run: Run):
+    """(eye parameters, model overrides, learning spacing) of a run: each model's own eye and parameters, then
+    the run's eye.* keys, model parameters and seed (where the model has one)."""
+    from antarium.ant.experiments import MODEL_EYES, MODEL_PARAMS
+    from antarium.ant.models import MODELS
+
+    params = dict(run.params)
+    eye = {k[4:]: params.pop(k) for k in list(params) if k.startswith("eye.")}
+    spacing = params.pop("learn_spacing_m", None)
+    eye_params = dataclasses.replace(MODEL_EYES[run.model], **eye)
+    overrides = {**MODEL_PARAMS[run.model], **params}
+    if "seed" in MODELS[run.model][1].__dataclass_fields__:
+        overrides["seed"] = run.seed
+    return eye_params, overrides, spacing
+
+
+def run_row(run: Run) -> dict:
+    """Learn and follow the run's route; the row of the results table (see `spec.METRICS`)."""
+    from antarium.ant.experiments import train_and_follow
+
+    row = {"run_id": run.run_id, "condition": run.condition, "world": run.world.name, "route_set": run.route_set,
+           "route": run.route, "model": run.model, "lateral_cm": run.lateral_cm, "heading_deg": run.heading_deg,
+           "seed": run.seed, "protocol": run.protocol, "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    row.update({f"param.{k}": v for k, v in run.params})
+    t0 = time.perf_counter()
+    try:
+        route = _route(run.route_source)
+        eye_params, overrides, spacing = _model_args(run)
+        scene = cached_world(run.world)
+        renderer = _renderer(run.face_size, scene, *route.start, run.eye_z_m)
+        outcome, track = train_and_follow(
+            run.model, route, None, run.run_id, scene=scene, model_params=overrides,
+            learn_spacing=spacing, max_decisions=run.max_decisions or None,
+            start_offset=(run.lateral_cm / 100.0, math.radians(run.heading_deg + run.route_heading_deg)),
+            eye_params=eye_params, save=False, face_size=run.face_size, put_back=PROTOCOLS[run.protocol],
+            eye_height=run.eye_z_m, renderer=renderer)
+    except Exception as exc:  # a failed run is recorded, not raised: the others go on
+        row.update(status="failed", error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(),
+                   run_s=time.perf_counter() - t0)
+        return row
+    s = outcome.summary
+    xy, _ = track.arrays()
+    row.update(status="done", error="", traceback="", lateral_median_m=s["lateral_median"],
+               lateral_mad_m=s["lateral_mad"], angular_median_deg=s["angular_median_deg"],
+               angular_mad_deg=s["angular_mad_deg"], arrived=bool(s["arrived"]), errors=int(s["errors"]),
+               decisions=int(s["decisions"]), distance_m=s["distance"], stop_distance_m=s["stop_distance"],
+               ms_per_decision_model=outcome.model_ms_per_decision,
+               ms_per_decision_loop=1e3 * outcome.seconds_per_decision,
+               memory_bytes=int(sum(outcome.memory_bytes.values())), learned_views=int(outcome.learned_views),
+               route_length_m=route.length, track_x=xy[:, 0].tolist(), track_y=xy[:, 1].tolist(),
+               put_back=list(track.put_back), run_s=time.perf_counter() - t0)
+    return row

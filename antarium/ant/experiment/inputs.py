@@ -1,0 +1,276 @@
+"""Real inputs of an experiment: worlds (a named scene, any mesh or panorama, at a stated scale, up axis and eye
+height) and route sets (a folder or glob of route files), each route checked against the world it is run in.
+
+Route files: CSV (or whitespace) with `x_m, y_m` and an optional `heading_deg` column (a header row allowed; the
+columns are found by name when there is one), or a trial log (.h5: the pose's x, y of every frame). `heading_deg`
+of the first row is the heading the ant is released with (degrees CCW from +x); otherwise the route's own.
+"""
+
+from __future__ import annotations
+
+import glob
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from antarium.ant.routes import Route, RouteError
+
+ROUTE_SUFFIXES = (".csv", ".txt", ".tsv", ".h5", ".hdf5")
+UP_AXES = ("z", "y")
+#: a triangle is ground (something the eye cannot be under) when its normal is this close to vertical
+GROUND_NORMAL_Z = 0.5
+#: route points are checked against the ground every this many metres
+CHECK_SPACING_M = 0.05
+#: the ground at a route's start has at least this much free space above it (m; or twice the eye height)
+GROUND_CLEARANCE_M = 0.05
+
+
+class WorldError(ValueError):
+    """A world that cannot be loaded as stated (scale, up axis, eye height, file)."""
+
+
+@dataclass(frozen=True)
+class WorldSpec:
+    """A world as an experiment names it: a scene name or file, its scale (world metres per file unit), which
+    file axis is up (GLB/GLTF are +y up by their standard and converted on loading: give "y" or leave the
+    default), and the eye's height above the ground under the route's start (m)."""
+
+    scene: str
+    name: str = ""
+    scale: float = 1.0
+    up: str = "z"
+    eye_height_m: float = 0.01
+    params: tuple = ()          # extra scene parameters (key, value) pairs, e.g. (("seed", 3),) for the habitat
+
+    def __post_init__(self) -> None:
+        if self.up not in UP_AXES:
+            raise WorldError(f"world {self.scene!r}: up must be one of {', '.join(UP_AXES)}, got {self.up!r}")
+        if not (math.isfinite(self.scale) and self.scale > 0):
+            raise WorldError(f"world {self.scene!r}: scale must be a positive number (m per unit), got {self.scale!r}")
+        if not (math.isfinite(self.eye_height_m) and self.eye_height_m > 0):
+            raise WorldError(f"world {self.scene!r}: eye_height_m must be > 0 m, got {self.eye_height_m!r}")
+        if not self.name:
+            object.__setattr__(self, "name", Path(self.scene).stem)
+
+
+def _is_gltf(scene: str) -> bool:
+    return Path(scene).suffix.lower() in (".glb", ".gltf")
+
+
+def build_world(world: WorldSpec):
+    """The `Scene` of `world`: its meshes scaled to metres and turned +z up. Raises WorldError / FileNotFoundError."""
+    from antarium.renderers import build_scene
+    from antarium.renderers.scene import MeshData, SceneObject
+
+    if _is_gltf(world.scene) and world.up != "y":
+        raise WorldError(f"world {world.scene}: GLB/GLTF files are +y up by their standard; give up = \"y\"")
+    try:
+        scene = build_scene({"scene": world.scene, **dict(world.params)})
+    except (ValueError, FileNotFoundError) as exc:
+        raise WorldError(f"world {world.scene!r}: {exc}") from None
+    turn = world.up == "y" and not _is_gltf(world.scene)
+    if world.scale == 1.0 and not turn:
+        return scene
+    # (X, Y, Z) with +y up -> (X, -Z, Y) with +z up, as glTF's loader does; then the scale
+    rot = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]) if turn else np.eye(3)
+    for name, obj in list(scene.objects.items()):
+        m = obj.mesh
+        v = (np.asarray(m.vertices, np.float64) @ rot.T * world.scale).astype(np.float32)
+        mesh = MeshData(v, m.faces, m.colours, m.uv, m.texture, m.double_sided)
+        pos = rot @ np.asarray(obj.position, np.float64) * world.scale
+        scene.objects[name] = SceneObject(mesh, tuple(pos), obj.yaw, obj.scale)
+    return scene
+
+
+_WORLDS: dict = {}
+
+
+def cached_world(world: WorldSpec):
+    """`build_world`, once per process (a Dask worker builds each world once and reuses it across runs)."""
+    if world not in _WORLDS:
+        _WORLDS[world] = build_world(world)
+    return _WORLDS[world]
+
+
+def _triangles(scene) -> np.ndarray:
+    """(T, 3, 3) float64 world-frame triangles of every object of `scene` (empty for a panorama world)."""
+    tris = [obj.world_vertices()[np.asarray(obj.mesh.faces, np.int64)] for obj in scene.objects.values()]
+    return np.concatenate(tris).astype(np.float64) if tris else np.zeros((0, 3, 3))
+
+
+def ground_candidates(triangles: np.ndarray, xy: np.ndarray) -> list[np.ndarray]:
+    """Heights (m) of every near-horizontal triangle (|normal z| >= GROUND_NORMAL_Z) over each point, ascending.
+
+    triangles: (T, 3, 3) float64 m; xy: (P, 2) float64 m. Returns P float64 arrays (empty where nothing is under).
+    """
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    n = np.cross(b - a, c - a)
+    norm = np.linalg.norm(n, axis=1)
+    flat = (norm > 0) & (np.abs(n[:, 2]) >= GROUND_NORMAL_Z * np.where(norm > 0, norm, 1.0))
+    a, b, c = a[flat], b[flat], c[flat]
+    lo = np.minimum(np.minimum(a, b), c)[:, :2]
+    hi = np.maximum(np.maximum(a, b), c)[:, :2]
+    out = []
+    for p in np.asarray(xy, np.float64):
+        k = np.flatnonzero(np.all((lo <= p) & (p <= hi), axis=1))
+        # barycentric coordinates of p in each candidate triangle's xy projection
+        v0, v1, v2 = b[k, :2] - a[k, :2], c[k, :2] - a[k, :2], p - a[k, :2]
+        den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
+        ok = np.abs(den) > 1e-15
+        den = np.where(ok, den, 1.0)
+        u = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
+        w = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
+        inside = ok & (u >= -1e-9) & (w >= -1e-9) & (u + w <= 1 + 1e-9)
+        z = a[k, 2] + u * (b[k, 2] - a[k, 2]) + w * (c[k, 2] - a[k, 2])
+        out.append(np.sort(z[inside]))
+    return out
+
+
+def ground_along(candidates: list[np.ndarray], spacing: float, clearance: float) -> np.ndarray:
+    """The ground's height (m) along a route, from its surfaces over each sample (`ground_candidates`).
+
+    At the start: the lowest surface with at least `clearance` m of free space above it (the top of a slab, not
+    its underside; the ground under a tree, not its canopy). Then the surface nearest the last ground height,
+    if it is no steeper than 45 degrees over `spacing` m (a stone or a canopy beside the path is not the ground);
+    where none is, the last height is kept. Returns (P,) float64; NaN before the first sample with a surface.
+    """
+    out = np.full(len(candidates), np.nan)
+    g = math.nan
+    for i, z in enumerate(candidates):
+        if z.size == 0:
+            out[i] = g
+            continue
+        if not math.isfinite(g):
+            gaps = np.append(np.diff(z), np.inf)
+            g = float(z[np.flatnonzero(gaps >= clearance)[0]])
+        else:
+            j = int(np.argmin(np.abs(z - g)))
+            if abs(z[j] - g) <= max(spacing, 1e-3):
+                g = float(z[j])
+        out[i] = g
+    return out
+
+
+@dataclass(frozen=True)
+class WorldGeometry:
+    """Where routes may go in a world: the xy extent of its meshes (m; None for a panorama world, unbounded) and
+    the eye's z (m): `eye_height_m` above the ground under the route's start."""
+
+    extent: tuple[float, float, float, float] | None   # x_min, y_min, x_max, y_max
+    triangles: np.ndarray
+
+
+def world_geometry(world: WorldSpec) -> WorldGeometry:
+    tris = _triangles(cached_world(world))
+    if len(tris) == 0:
+        return WorldGeometry(None, tris)
+    lo, hi = tris.reshape(-1, 3).min(0), tris.reshape(-1, 3).max(0)
+    return WorldGeometry((float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])), tris)
+
+
+def eye_z(world: WorldSpec, route: Route, geometry: WorldGeometry | None = None) -> float:
+    """The eye's height in the world frame (m) for `route`, after checking the route against the world:
+    every point inside the world's extent and the ground under every point below the eye.
+    Raises RouteError naming the first point that is outside the world or under the ground."""
+    geometry = geometry or world_geometry(world)
+    if geometry.extent is None:
+        return world.eye_height_m
+    x0, y0, x1, y1 = geometry.extent
+    pts = route.points
+    outside = (pts[:, 0] < x0) | (pts[:, 0] > x1) | (pts[:, 1] < y0) | (pts[:, 1] > y1)
+    if outside.any():
+        i = int(np.flatnonzero(outside)[0])
+        raise RouteError(f"route point {i} ({pts[i, 0]:.3f}, {pts[i, 1]:.3f}) m is outside world {world.name!r}, "
+                         f"which spans x {x0:.2f}..{x1:.2f} m, y {y0:.2f}..{y1:.2f} m (check its scale and up axis)")
+    xy, _ = route.sample(CHECK_SPACING_M)
+    clearance = max(GROUND_CLEARANCE_M, 2 * world.eye_height_m)
+    ground = ground_along(ground_candidates(geometry.triangles, xy), CHECK_SPACING_M, clearance)
+    g0 = ground[0] if np.isfinite(ground[0]) else 0.0
+    z = g0 + world.eye_height_m
+    under = np.isfinite(ground) & (ground >= z)
+    if under.any():
+        i = int(np.flatnonzero(under)[0])
+        raise RouteError(f"route at ({xy[i, 0]:.3f}, {xy[i, 1]:.3f}) m, {i * CHECK_SPACING_M:.2f} m along it, is "
+                         f"under the ground of world {world.name!r}: ground at z = {ground[i]:.3f} m, the eye at "
+                         f"{z:.3f} m ({world.eye_height_m} m above the ground at the start)")
+    return float(z)
+
+
+@dataclass(frozen=True)
+class RouteInput:
+    """A route of a route set: its name (file stem), where it came from, and its release heading (rad) or None."""
+
+    name: str
+    source: str
+    route: Route
+    release_heading: float | None = None
+
+
+def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
+    text = path.read_text()
+    delimiter = "," if "," in text else None
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    if not lines:
+        raise RouteError(f"{path}: empty route file; expected columns x_m, y_m (and optionally heading_deg)")
+    first = lines[0]
+    has_header = any(c.isalpha() and c not in "eE" for c in first)
+    columns = [0, 1]
+    heading_col = None
+    if has_header:
+        names = [h.strip().lower() for h in (first.split(",") if delimiter else first.split())]
+        if "x_m" in names and "y_m" in names:
+            columns = [names.index("x_m"), names.index("y_m")]
+            heading_col = names.index("heading_deg") if "heading_deg" in names else None
+        elif len(names) >= 3 and names[2] == "heading_deg":
+            heading_col = 2
+    try:
+        data = np.loadtxt(path, delimiter=delimiter, skiprows=int(has_header), ndmin=2)
+    except ValueError as exc:
+        raise RouteError(f"{path}: not a route file of x_m, y_m[, heading_deg] numbers ({exc})") from None
+    if data.shape[1] < 2:
+        raise RouteError(f"{path}: a route file needs columns x_m, y_m (metres), got {data.shape[1]} column(s)")
+    heading = None
+    if heading_col is not None:
+        h = data[:, heading_col]
+        if not np.all(np.isfinite(h)):
+            raise RouteError(f"{path}: heading_deg must be finite degrees")
+        heading = math.radians(float(h[0]))
+    return data[:, columns], heading
+
+
+def load_route(path: str | Path) -> RouteInput:
+    """One route file (CSV/whitespace x_m, y_m[, heading_deg] or a trial log .h5). Raises RouteError naming it."""
+    from antarium.ant.experiments import route_from_log
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"route file {str(path)!r} not found")
+    if path.suffix.lower() in (".h5", ".hdf5"):
+        try:
+            return RouteInput(path.stem, str(path), route_from_log(path))
+        except (KeyError, ValueError, OSError) as exc:
+            raise RouteError(f"{path}: not a trial log with a frames table of poses ({exc})") from None
+    xy, heading = _read_csv(path)
+    try:
+        route = Route(xy)
+    except RouteError as exc:
+        raise RouteError(f"{path}: {exc}") from None
+    return RouteInput(path.stem, str(path), route, heading)
+
+
+def route_files(pattern: str | Path, base: Path | None = None) -> list[Path]:
+    """Route files named by a folder (its files with a route suffix) or a glob, relative to `base`; sorted.
+    Raises FileNotFoundError when it names none."""
+    p = Path(pattern)
+    if not p.is_absolute() and base is not None:
+        p = base / p
+    if p.is_dir():
+        files = sorted(f for f in p.iterdir() if f.suffix.lower() in ROUTE_SUFFIXES)
+    else:
+        files = sorted(Path(f) for f in glob.glob(str(p)) if Path(f).suffix.lower() in ROUTE_SUFFIXES)
+    if not files:
+        raise FileNotFoundError(f"route set {str(pattern)!r} names no route files ({', '.join(ROUTE_SUFFIXES)}); "
+                                f"give a folder or a glob such as routes/*.csv")
+    return files

@@ -1,0 +1,148 @@
+"""Run an experiment's runs on Dask (a LocalCluster on every core, or a lab cluster's scheduler) or in this
+process, writing each run's row as it finishes: `<out>/runs/<run_id>.parquet`.
+
+Nothing finished is lost to a crash or Ctrl-C (each file is written whole, then renamed into place), and a rerun
+of the same spec skips the runs whose file says "done" (failed runs are tried again).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+from antarium.ant.experiment.spec import Run
+
+RUNS_DIR = "runs"
+
+
+def run_path(out: Path, run_id: str) -> Path:
+    return Path(out) / RUNS_DIR / f"{run_id}.parquet"
+
+
+def write_row(out: Path, row: dict) -> Path:
+    """Write one run's row as a Parquet file, atomically (a reader never sees half a file)."""
+    import pandas as pd
+
+    path = run_path(out, row["run_id"])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".tmp{os.getpid()}")
+    pd.DataFrame([row]).to_parquet(tmp, engine="pyarrow", index=False)
+    os.replace(tmp, path)
+    return path
+
+
+def finished(out: Path, runs: Iterable[Run]) -> set[str]:
+    """run_ids of `runs` already done in `out` (their file holds status "done")."""
+    import pyarrow.parquet as pq
+
+    done = set()
+    for run in runs:
+        path = run_path(out, run.run_id)
+        if path.is_file():
+            try:
+                status = pq.read_table(path, columns=["status"]).column("status")[0].as_py()
+            except Exception:  # an unreadable file is not a finished run: run it again
+                continue
+            if status == "done":
+                done.add(run.run_id)
+    return done
+
+
+@dataclass
+class Progress:
+    total: int
+    skipped: int = 0
+    done: int = 0
+    failed: int = 0
+
+
+def _bar(total: int, skipped: int):
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=skipped, desc="runs", unit="run", dynamic_ncols=True)
+
+
+def _record(out: Path, row: dict, progress: Progress, bar) -> None:
+    write_row(out, row)
+    if row["status"] == "done":
+        progress.done += 1
+    else:
+        progress.failed += 1
+    if bar is not None:
+        bar.set_postfix(done=progress.done + progress.skipped, failed=progress.failed, refresh=False)
+        bar.update(1)
+
+
+def _failed_row(run: Run, exc: BaseException) -> dict:
+    """The row of a run whose worker died or could not return it (the run itself never raises)."""
+    return {"run_id": run.run_id, "condition": run.condition, "world": run.world.name, "route_set": run.route_set,
+            "route": run.route, "model": run.model, "lateral_cm": run.lateral_cm, "heading_deg": run.heading_deg,
+            "seed": run.seed, "protocol": run.protocol, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
+            **{f"param.{k}": v for k, v in run.params}}
+
+
+def run_experiment(runs: list[Run], out: str | Path, scheduler: str | None = None, workers: int | None = None,
+                   serial: bool = False, progress_bar: bool = True,
+                   on_row: Callable[[dict], None] | None = None) -> Progress:
+    """Run what is not yet done of `runs`, writing a Parquet row per run into `out/runs/` as each finishes.
+
+    scheduler: a Dask scheduler address (tcp://host:8786) of a lab cluster; otherwise a LocalCluster of `workers`
+    processes (default: every core), one thread each; serial: in this process, no Dask.
+    on_row: called with each finished row (in this process). Returns the counts.
+    """
+    out = Path(out)
+    (out / RUNS_DIR).mkdir(parents=True, exist_ok=True)
+    done = finished(out, runs)
+    pending = [r for r in runs if r.run_id not in done]
+    progress = Progress(len(runs), skipped=len(runs) - len(pending))
+    bar = _bar(len(runs), progress.skipped) if progress_bar else None
+    try:
+        if serial:
+            from antarium.ant.experiment.execute import run_row
+
+            for run in pending:
+                row = run_row(run)
+                _record(out, row, progress, bar)
+                if on_row is not None:
+                    on_row(row)
+        elif pending:
+            _run_dask(pending, out, scheduler, workers, progress, bar, on_row)
+    finally:
+        if bar is not None:
+            bar.close()
+    return progress
+
+
+def _run_dask(pending: list[Run], out: Path, scheduler, workers, progress: Progress, bar, on_row) -> None:
+    from distributed import Client, LocalCluster, as_completed
+
+    from antarium.ant.experiment.execute import run_row
+
+    if scheduler:
+        cluster = None
+        client = Client(scheduler, timeout="30s")
+    else:
+        n = workers or os.cpu_count() or 1
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=40)
+        client = Client(cluster)
+    try:
+        by_key = {f"run-{r.run_id}": r for r in pending}
+        futures = client.map(run_row, pending, key=list(by_key), pure=False, retries=0)
+        for fut in as_completed(futures):
+            try:
+                row = fut.result()
+            except Exception as exc:  # the worker died (e.g. out of memory): record it, go on
+                row = _failed_row(by_key[fut.key], exc)
+            _record(out, row, progress, bar)
+            if on_row is not None:
+                on_row(row)
+            fut.release()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+

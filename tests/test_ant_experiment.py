@@ -1,0 +1,233 @@
+"""Model experiments at scale: real route files and a mesh world at a stated scale and up axis, a TOML spec
+expanded into runs, a LocalCluster of two workers on loopback giving the same rows as a serial run, seed for
+seed, and a rerun after a kill that runs only what was not finished."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed")
+pd = pytest.importorskip("pandas")
+
+from antarium.ant.experiment.inputs import WorldSpec, eye_z, load_route, world_geometry  # noqa: E402
+from antarium.ant.experiment.results import bootstrap_ci, load_results, report  # noqa: E402
+from antarium.ant.experiment.runner import RUNS_DIR, run_experiment  # noqa: E402
+from antarium.ant.experiment.spec import SpecError, load_spec  # noqa: E402
+from antarium.ant.routes import Route, RouteError  # noqa: E402
+
+#: the run metrics that must not depend on which process ran it
+SAME = ["lateral_median_m", "lateral_mad_m", "angular_median_deg", "angular_mad_deg", "arrived", "errors",
+        "decisions", "distance_m", "learned_views", "memory_bytes"]
+
+
+def _world_obj(path: Path) -> Path:
+    """A 3 m x 3 m field in centimetres, +y up (as many modelling tools write OBJ): a terrain with a hill 8 cm high
+    around (1.2, -1.2) m, six 40 cm boxes, a tree's canopy 3 m above the routes."""
+    import trimesh
+
+    g = np.linspace(-150.0, 150.0, 61)
+    gx, gz = np.meshgrid(g, g, indexing="ij")          # file x, z (z is -y of the world)
+    hill = 8.0 * np.exp(-((gx - 120.0) ** 2 + (gz - 120.0) ** 2) / (2 * 15.0 ** 2))
+    verts = np.stack([gx.ravel(), hill.ravel(), gz.ravel()], 1)
+    i = np.arange(60)[:, None] * 61 + np.arange(60)[None, :]
+    faces = np.concatenate([np.stack([i, i + 1, i + 62], -1).reshape(-1, 3),
+                            np.stack([i, i + 62, i + 61], -1).reshape(-1, 3)])
+    parts = [trimesh.Trimesh(verts, faces, process=False)]
+    rng = np.random.default_rng(3)
+    for x, z in rng.uniform(-120, 60, (6, 2)):
+        parts.append(trimesh.creation.box((20.0, 40.0, 20.0),
+                                          trimesh.transformations.translation_matrix((x, 20.0, z))))
+    parts.append(trimesh.creation.box((100.0, 10.0, 100.0),
+                                      trimesh.transformations.translation_matrix((20.0, 300.0, 20.0))))
+    trimesh.util.concatenate(parts).export(path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def field(tmp_path_factory):
+    d = tmp_path_factory.mktemp("field")
+    world = _world_obj(d / "field.obj")
+    routes = d / "routes"
+    routes.mkdir()
+    for i, heading in enumerate((0.0, 2.0)):
+        s = np.linspace(0, 0.25, 6)
+        xy = np.stack([0.3 * i + s * math.cos(heading), -0.2 + s * math.sin(heading)], 1)
+        text = "x_m,y_m,heading_deg\n" + "".join(f"{x:.4f},{y:.4f},{math.degrees(heading):.1f}\n" for x, y in xy)
+        (routes / f"r{i}.csv").write_text(text)
+    return d, world
+
+
+def _spec(d: Path, models: str, extra: str = "", face_size: int = 64) -> Path:
+    text = textwrap.dedent(f"""
+        [experiment]
+        face_size = {face_size}
+        max_decisions = 12
+        eye = {{cols = 10, rows = 4}}
+        {extra}
+
+        [[worlds]]
+        scene = "field.obj"
+        scale = 0.01
+        up = "y"
+        eye_height_m = 0.01
+
+        [[route_sets]]
+        paths = "routes"
+    """) + models
+    path = d / "spec.toml"
+    path.write_text(text)
+    return path
+
+
+MODELS = """
+[models.ardin]
+n_kc = 200
+[models.perfect_memory]
+"""
+
+
+def test_world_scale_and_up_axis_and_route_checks(field):
+    d, obj = field
+    world = WorldSpec(str(obj), scale=0.01, up="y", eye_height_m=0.01)
+    geometry = world_geometry(world)
+    assert geometry.extent == pytest.approx((-1.5, -1.5, 1.5, 1.5), abs=1e-6)   # cm, +y up -> m, +z up
+    assert eye_z(world, load_route(d / "routes" / "r0.csv").route, geometry) == pytest.approx(0.01, abs=1e-6)
+    with pytest.raises(RouteError, match="outside world"):
+        eye_z(world, Route([(0.0, 0.0), (2.0, 0.0)]), geometry)
+    with pytest.raises(RouteError, match="under the ground"):
+        eye_z(world, Route([(0.9, -1.2), (1.35, -1.2)]), geometry)
+    # stated in the wrong unit, the same route leaves the world
+    with pytest.raises(RouteError, match="outside world"):
+        eye_z(WorldSpec(str(obj), scale=0.001, up="y"), Route([(0.0, 0.0), (0.2, 0.0)]))
+
+
+def test_route_file_heading_column_sets_the_release_heading(field):
+    d, _ = field
+    ri = load_route(d / "routes" / "r1.csv")
+    assert ri.release_heading == pytest.approx(2.0, abs=1e-3)
+    exp = load_spec(_spec(d, MODELS))
+    r1 = [r for r in exp.runs if r.route == "r1"]
+    assert r1 and all(abs(r.route_heading_deg) < 0.1 for r in r1)   # the file's heading is the route's own
+
+
+def test_bad_spec_gets_one_clear_line(field):
+    d, _ = field
+    with pytest.raises(SpecError, match="unknown parameter 'bogus'"):
+        load_spec(_spec(d, "[models.ardin]\nbogus = 1\n"))
+    with pytest.raises(SpecError, match="allowed: ardin, antcar"):
+        load_spec(_spec(d, MODELS, 'protocols = ["sometimes"]'))
+
+
+GRID = """
+[models.ardin]
+n_kc = [100, 200]
+[models.perfect_memory]
+"""
+
+
+@pytest.fixture(scope="module")
+def serial(field, tmp_path_factory):
+    d, _ = field
+    exp = load_spec(_spec(d, GRID, 'seeds = [0, 1]'))
+    assert len(exp.runs) == 2 * (2 + 1) * 2   # routes x (ardin's grid + perfect memory) x seeds
+    out = tmp_path_factory.mktemp("serial")
+    p = run_experiment(exp.runs, out, serial=True, progress_bar=False)
+    assert (p.done, p.failed) == (12, 0)
+    return exp, out
+
+
+def test_two_workers_equal_a_serial_run_and_a_rerun_skips_what_is_done(serial, tmp_path):
+    exp, serial_out = serial
+    p = run_experiment(exp.runs, tmp_path, workers=2, progress_bar=False)
+    assert (p.done, p.failed) == (12, 0)
+    a = load_results(serial_out).set_index("run_id").sort_index()
+    b = load_results(tmp_path).set_index("run_id").sort_index()
+    assert list(a.index) == list(b.index) and b["worker"].nunique() == 2
+    for col in SAME:
+        np.testing.assert_allclose(a[col].astype(float), b[col].astype(float), rtol=1e-9, atol=1e-9, err_msg=col)
+    again = run_experiment(exp.runs, tmp_path, workers=2, progress_bar=False)
+    assert (again.skipped, again.done) == (12, 0)
+
+
+def test_summary_per_condition_and_pictures(serial):
+    exp, out = serial
+    text = report(out, exp.routes, exp.metrics)
+    table = pd.read_csv(out / "summary.csv")
+    assert len(table) == 3 and set(table["runs"]) == {4}          # ardin x 2 n_kc, perfect memory; 2 routes x 2 seeds
+    df = load_results(out)
+    pm = df[df.model == "perfect_memory"]
+    row = table[table.model == "perfect_memory"].iloc[0]
+    assert row["errors"] == pytest.approx(pm["errors"].mean())
+    assert row["errors_lo"] <= row["errors"] <= row["errors_hi"] or not np.isfinite(row["errors_lo"])
+    assert "perfect_memory" in text
+    for name in ("results.parquet", "worst_and_best_paths.png", "errors_vs_n_kc.png", "lateral_median_m_vs_n_kc.png"):
+        assert (out / name).stat().st_size > 0, name
+
+
+def test_bootstrap_interval_covers_the_mean_and_narrows_with_more_data():
+    rng = np.random.default_rng(1)
+    small, large = rng.normal(3.0, 1.0, 10), rng.normal(3.0, 1.0, 1000)
+    lo_s, hi_s = bootstrap_ci(small)
+    lo_l, hi_l = bootstrap_ci(large)
+    assert lo_s < small.mean() < hi_s and lo_l < large.mean() < hi_l
+    assert hi_l - lo_l < (hi_s - lo_s) / 5
+    assert all(math.isnan(v) for v in bootstrap_ci([1.0]))
+
+
+def test_a_failed_run_is_recorded_and_the_others_go_on(field, tmp_path):
+    d, _ = field
+    exp = load_spec(_spec(d, "[models.perfect_memory]\n\"eye.neighbours\" = [4, 0]\n"))
+    p = run_experiment(exp.runs, tmp_path, serial=True, progress_bar=False)
+    assert (p.done, p.failed) == (2, 2)
+    df = load_results(tmp_path)
+    assert set(df.loc[df.status == "failed", "error"].str.contains("neighbours")) == {True}
+
+
+def test_a_run_the_renderer_cannot_draw_fails_instead_of_running_blind(field, tmp_path):
+    d, _ = field
+    exp = load_spec(_spec(d, "[models.perfect_memory]\n", face_size=16))
+    p = run_experiment(exp.runs, tmp_path, serial=True, progress_bar=False)
+    assert (p.done, p.failed) == (0, 2)
+    assert load_results(tmp_path)["error"].str.contains("raise face_size").all()
+
+
+def test_kill_then_rerun_runs_each_run_once(field, tmp_path):
+    """A sweep killed half way restarts and completes; no run is done twice (each run's worker pid is kept)."""
+    d, _ = field
+    spec = _spec(d, MODELS, "seeds = [0, 1, 2, 3]")   # 16 runs
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "antarium.cli", "ant", "experiment", str(spec), "--out", str(out), "--serial"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    runs = out / RUNS_DIR
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and len(list(runs.glob("*.parquet")) if runs.is_dir() else []) < 1:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    first = {p.name: p.stat().st_mtime_ns for p in runs.glob("*.parquet")}
+    assert 1 <= len(first) < 16, "the kill came after every run finished: nothing to resume"
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    after = {p.name: p.stat().st_mtime_ns for p in runs.glob("*.parquet")}
+    assert len(after) == 16 and all(after[k] == v for k, v in first.items())
+    assert not list(runs.glob("*.tmp*"))
+
+
+def test_a_panorama_world_has_no_extent_and_any_route_fits(tmp_path):
+    import cv2
+
+    img = np.zeros((32, 64, 3), np.uint8)
+    img[:16] = 200
+    cv2.imwrite(str(tmp_path / "pano.png"), img)
+    world = WorldSpec(str(tmp_path / "pano.png"), eye_height_m=0.02)
+    assert world_geometry(world).extent is None
+    assert eye_z(world, Route([(100.0, 0.0), (101.0, 0.0)])) == pytest.approx(0.02)
