@@ -149,6 +149,11 @@ class Panorama:
             gbua = cv2.resize(gbua, (self.max_width, max(2, self.max_width * h // w)), interpolation=cv2.INTER_AREA)
         self._gbua = gbua
 
+    @property
+    def gbua(self) -> np.ndarray:
+        """(H, W, 4) float32: the linear green, blue and UV radiance (0..1) and the alpha the renderer samples."""
+        return self._gbua
+
     def supersample(self, step: float) -> int:
         """Sub-samples per axis: about one per image pixel inside a cell of `step` (rad)."""
         pixel = 2 * np.pi / self._gbua.shape[1]

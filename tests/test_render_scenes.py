@@ -242,7 +242,7 @@ def test_panorama_keeps_16_bit_and_float_range(tmp_path, dome):
     img16 = np.tile((ramp * 65535).astype(np.uint16)[None, :, None], (256, 1, 3))
     cv2.imwrite(str(tmp_path / "p16.png"), img16)
     p16 = Panorama(str(tmp_path / "p16.png"))
-    levels = np.unique(p16._gbua[..., 0])
+    levels = np.unique(p16.gbua[..., 0])
     assert len(levels) > 400  # 8 bits would give at most 256 levels
     import OpenEXR
 
@@ -251,11 +251,11 @@ def test_panorama_keeps_16_bit_and_float_range(tmp_path, dome):
     with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, {"RGB": hdr}) as f:
         f.write(str(path))
     p = Panorama(str(path), exposure=0.25)  # linear radiance kept, scaled: 4 -> 1
-    assert p._gbua[..., 1].max() == pytest.approx(1.0, abs=1e-3)
-    assert p._gbua[..., 1][0, 256] == pytest.approx(0.25 * hdr[0, 256, 0], abs=0.01)
+    assert p.gbua[..., 1].max() == pytest.approx(1.0, abs=1e-3)
+    assert p.gbua[..., 1][0, 256] == pytest.approx(0.25 * hdr[0, 256, 0], abs=0.01)
     hdr_tiff = tmp_path / "hdr.tiff"
     cv2.imwrite(str(hdr_tiff), hdr)
-    assert Panorama(str(hdr_tiff), exposure=0.5)._gbua[..., 1][0, 128] == pytest.approx(0.5 * hdr[0, 128, 0], abs=0.01)
+    assert Panorama(str(hdr_tiff), exposure=0.5).gbua[..., 1][0, 128] == pytest.approx(0.5 * hdr[0, 128, 0], abs=0.01)
     bad = tmp_path / "bad.exr"
     bad.write_bytes(b"v/1\x01 not an exr")
     with pytest.raises(ValueError, match="bad.exr"):
