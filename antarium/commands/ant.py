@@ -39,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION")
     sub.required = True
     p = sub.add_parser("learn", help="walk the ant along a route while its model learns; save the model")
-    p.add_argument("--model", choices=KINDS, default="antcar")
+    p.add_argument("--model", choices=KINDS, default="antcar", help="mushroom-body model to train (default antcar)")
     p.add_argument("--route", required=True, help="curved:SEED, a path file (x_m,y_m) or a trial log (.h5)")
     p.add_argument("--length", type=float, default=10.0, help="length of a curved:SEED route (m, default 10)")
     p.add_argument("--spacing", type=float, default=None, help="metres between learned views (model default)")
@@ -51,24 +51,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("model_file", help="model file written by 'antarium ant learn'")
     p.add_argument("--route", default=None, help="route to judge against (default: the one it learned)")
     p.add_argument("--length", type=float, default=10.0, help="length of a curved:SEED route (m)")
-    p.add_argument("--max-decisions", type=int, default=None)
+    p.add_argument("--max-decisions", type=int, default=None,
+                   help="stop after this many steering decisions (default: the route's own limit)")
     p.add_argument("--lateral-cm", type=float, default=0.0, help="release this far left of the route start (cm)")
     p.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
     p.add_argument("--out", required=True, help="folder for run.h5, run_paths.png, run_traces.png, run.json")
     _common(p)
     p = sub.add_parser("evaluate", help="each model learns and follows seeded curved routes; writes a table")
-    p.add_argument("--routes", type=int, default=10)
+    p.add_argument("--routes", type=int, default=10, help="number of seeded curved routes per model (default 10)")
     p.add_argument("--length", type=float, default=10.0, help="route length (m, default 10)")
     p.add_argument("--models", default=",".join(KINDS), help=f"comma-separated, from {', '.join(KINDS)}")
     p.add_argument("--seed", type=int, default=0, help="seed of the first route")
     p.add_argument("--out", required=True, help="folder for logs, pictures, evaluation.md/.json")
-    p.add_argument("--scene", default="habitat")
+    p.add_argument("--scene", default="habitat", help="scene shown by the dome (name or file; default: habitat)")
     p.add_argument("--put-back-cm", type=float, default=20.0,
                    help="Ardin's protocol: farther than this off the route counts an error and the ant is put "
                         "back (default 20; 0: never, Antcar's own protocol)")
     p = sub.add_parser("demo", help="train on a short route, follow it; log and picture of both paths")
-    p.add_argument("--out", required=True)
-    p.add_argument("--scene", default="habitat")
+    p.add_argument("--out", default="ant-demo-output",
+                   help="folder for the log, the paths picture and the traces (default: ant-demo-output)")
+    p.add_argument("--scene", default="habitat", help="scene shown by the dome (name or file; default: habitat)")
     p = sub.add_parser("serve", help="put a trained ant on a served rig (`antarium serve --config`): it hosts the "
                                      "dome, walks through the emulated USB trackball and follows its route")
     p.add_argument("model_file", help="model file written by 'antarium ant learn' (holds its route)")
@@ -76,7 +78,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="folder for served.json and served_paths.png")
     p.add_argument("--lateral-cm", type=float, default=0.0, help="release this far left of the route start")
     p.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
-    p.add_argument("--max-decisions", type=int, default=None)
+    p.add_argument("--max-decisions", type=int, default=None,
+                   help="stop after this many steering decisions (default: the route's own limit)")
 
 
 def _bar(desc: str, total=None):
