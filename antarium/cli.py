@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "trackball": "antarium.commands.trackball",
     "ant": "antarium.commands.ant",
     "servosphere": "antarium.commands.servosphere",
+    "check": "antarium.commands.check",
 }
 
 
