@@ -126,7 +126,7 @@ def plot(results, window, out: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_script_arguments(parser)
-    parser.add_argument("--out", default="poc-output", help="folder for the plot")
+    parser.add_argument("--out", default="poc-output", help="folder for the plot and the trial logs")
     parser.add_argument("--seed", type=int, default=1, help="seed of the rotation times and directions")
     parser.add_argument("--duration", type=float, default=120.0, help="seconds per condition")
     parser.add_argument("--window", type=float, default=15.0, help="seconds plotted before and after a rotation")
@@ -134,11 +134,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.short:
         args.duration, args.window = 1.2, 0.4
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     rng = random.Random(args.seed)
     results, logs = {}, []
-    with script_rig(args) as rig:
+    with script_rig(args, out) as rig:
         shown = None
         for name, (scene, x, y, heading) in condition_poses().items():
             updates, log = run_condition(rig, name, scene, x, y, heading, rng, args.duration, args.window, args.seed,

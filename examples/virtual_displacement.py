@@ -58,12 +58,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--to-y", type=float, default=-3.0, help="y of the new place (m)")
     parser.add_argument("--before", type=float, default=30.0, help="seconds before the displacement")
     parser.add_argument("--after", type=float, default=30.0, help="seconds after it")
-    parser.add_argument("--out", default="displacement-output", help="folder for the plot")
+    parser.add_argument("--out", default="displacement-output", help="folder for the plot and the trial logs")
     parser.add_argument("--short", action="store_true", help="quick run: 1 s before and after")
     args = parser.parse_args(argv)
     if args.short:
         args.before = args.after = 1.0
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     updates, lock = [], threading.Lock()
 
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         with lock:
             updates.append(update)
 
-    with script_rig(args) as rig:
+    with script_rig(args, out) as rig:
         rig.load_scene("habitat")
         rig.closed_loop(True)
         rig.reset_origin(0.0, 0.0, 0.0)
