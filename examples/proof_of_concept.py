@@ -92,12 +92,9 @@ def run_condition(rig, name, scene, x, y, heading_deg, rng, duration, window, se
 
 
 def plot(results, window, out: Path) -> Path:
-    import matplotlib
+    from antarium.plots import style
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, len(results), figsize=(4 * len(results), 4.2))
+    fig, axes = style.figure((4 * len(results), 4.2), ncols=len(results))
     for ax, (name, updates) in zip(np.atleast_1d(axes), results.items(), strict=True):
         if len(updates) < 2:
             ax.set_title(f"{name}: no poses")
@@ -116,11 +113,7 @@ def plot(results, window, out: Path) -> Path:
         ax.set_ylabel("y on the ball (cm)")
         ax.set_aspect("equal", adjustable="datalim")
     fig.suptitle(f"Paths {window:g} s before (red) and after (blue) each 90° scene rotation (dot)")
-    fig.tight_layout()
-    target = out / "proof_of_concept_paths.png"
-    fig.savefig(target, dpi=110)
-    plt.close(fig)
-    return target
+    return style.save(fig, out / "proof_of_concept_paths.png")
 
 
 def main(argv: list[str] | None = None) -> int:

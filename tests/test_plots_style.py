@@ -111,3 +111,16 @@ def test_a_picture_that_breaks_the_style_is_refused(tmp_path):
     with pytest.raises(ValueError, match="no title.*'x' has no unit.*legend inside the axes"):
         style.save(fig, tmp_path / "bad.png")
     assert not (tmp_path / "bad.png").exists()
+
+
+def test_every_picture_goes_through_the_house_style():
+    """No module outside antarium/plots imports matplotlib or saves a figure itself."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    own = root / "antarium" / "plots"
+    sources = [p for folder in ("antarium", "examples", "geometry", "renderers", "firmware_proto")
+               for p in (root / folder).rglob("*.py") if own not in p.parents]
+    offenders = [str(p.relative_to(root)) for p in sources
+                 if "savefig" in (text := p.read_text()) or "import matplotlib" in text]
+    assert offenders == []
