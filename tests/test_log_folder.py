@@ -40,3 +40,15 @@ def test_trial_paths_are_absolute_and_under_the_folder_the_script_names(served):
         with pytest.raises(RigError, match="folder must be an absolute path, got 'run2'"):
             rig.call("trial_start", name="bad", folder="run2")
     assert not (here / "run2").exists()
+
+
+def test_commands_report_absolute_paths(tmp_path, monkeypatch, capsys):
+    from antarium.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["layout", "--out", "pictures"]) == 0
+    pictures = [line.split(": ", 1)[1] for line in capsys.readouterr().out.splitlines() if line.startswith("picture:")]
+    assert pictures == [str(tmp_path.resolve() / "pictures" / n) for n in ("layout_mollweide.png", "layout_3d.png")]
+    Path("route.csv").write_text("x_m,y_m\n0.5,-0.3\n0.7,-0.28\n")
+    assert main(["ant", "learn", "--route", "route.csv", "--spacing", "0.05", "--out", "ant.npz"]) == 0
+    assert f"wrote {tmp_path.resolve() / 'ant.npz'}" in capsys.readouterr().out

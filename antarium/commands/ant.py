@@ -98,10 +98,10 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "serve":
         from antarium.ant.served import run_served
 
-        run_served(args.model_file, args.config, args.out, (args.lateral_cm / 100.0, math.radians(args.heading_deg)),
+        run_served(args.model_file, args.config, Path(args.out).resolve(), (args.lateral_cm / 100.0, math.radians(args.heading_deg)),
                    args.max_decisions)
         return 0
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     if args.action == "evaluate":
         kinds = tuple(k.strip() for k in args.models.split(",") if k.strip())
@@ -135,7 +135,7 @@ def _learn(args: argparse.Namespace) -> int:
     from antarium.ant.world import virtual_rig
 
     route = parse_route(args.route, args.length)
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     if not out.parent.is_dir():
         raise FileNotFoundError(f"folder {str(out.parent)!r} for the model file does not exist")
     eye_params = MODEL_EYES[args.model]
@@ -163,7 +163,7 @@ def _run(args: argparse.Namespace) -> int:
         route = Route(stored)
     else:
         raise ValueError(f"{args.model_file} holds no route; give --route")
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     bar = _bar("closed loop")
     outcome, _ = follow_saved(model, eye_params, route, out, scene=args.scene, tether=args.tether,

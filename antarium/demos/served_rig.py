@@ -27,7 +27,7 @@ def run_demo_rig(out: str | Path, seconds: float = 8.0, echo=print, render: dict
     from antarium.config import RenderSection, load_config
     from antarium.server import Server
 
-    out = Path(out)
+    out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     config = load_config(None)
     config.log.dir = str(out / "trials")

@@ -40,7 +40,7 @@ def run_ant_demo(out: str | Path, echo: Callable[[str], None] = print, scene: An
     from antarium.plots.dome_map import dome_picture
     from antarium.trial_log import check_log_dir, log_path
 
-    out = Path(out)
+    out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     route = curved_route(ex.DEMO_ROUTE_SEED, length=route_length or ex.DEMO_ROUTE_LENGTH_M)
     model = make_model("antcar", EyeParams().n_pn)

@@ -72,10 +72,10 @@ def atlas_image(cube: np.ndarray) -> np.ndarray:
 
 
 def save_png(image: np.ndarray, path: str | Path) -> Path:
-    """Write an (H, W, 3) uint8 RGB image as PNG."""
+    """Write an (H, W, 3) uint8 RGB image as PNG; returns the absolute path."""
     import cv2
 
-    path = Path(path)
+    path = Path(path).expanduser().resolve()
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), image[:, :, ::-1]):
         raise ValueError(f"cannot write image {path} (is the suffix .png and the folder writable?)")

@@ -122,13 +122,14 @@ def _legend_over_data(ax, name: str) -> list[str]:
 
 
 def save(fig, path: str | Path, dpi: int = 110) -> Path:
-    """Check the house style, write `fig` as PNG (folders made), close it; ValueError names what is wrong."""
+    """Check the house style, write `fig` as PNG (folders made), close it; returns the absolute path.
+    ValueError names what is wrong."""
     plt = pyplot()
     wrong = problems(fig)
     if wrong:
         plt.close(fig)
         raise ValueError(f"picture {Path(path).name} breaks the house style: " + "; ".join(wrong))
-    path = Path(path)
+    path = Path(path).expanduser().resolve()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
