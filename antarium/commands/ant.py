@@ -98,8 +98,8 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "serve":
         from antarium.ant.served import run_served
 
-        run_served(args.model_file, args.config, Path(args.out).resolve(), (args.lateral_cm / 100.0, math.radians(args.heading_deg)),
-                   args.max_decisions)
+        run_served(args.model_file, args.config, Path(args.out).resolve(),
+                   (args.lateral_cm / 100.0, math.radians(args.heading_deg)), args.max_decisions)
         return 0
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
