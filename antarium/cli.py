@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "ant": "antarium.commands.ant",
     "servosphere": "antarium.commands.servosphere",
     "monitor": "antarium.commands.monitor",
+    "check": "antarium.commands.check",
 }
 
 

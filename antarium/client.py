@@ -58,11 +58,14 @@ class Rig:
 
     config: a rig config (TOML path or resolved dict) whose `[bus]` section says where the server listens;
     default: the embedded default (127.0.0.1:7447). connect: endpoints to use instead, e.g.
-    ["tcp/192.168.1.10:7447"]. timeout_s: how long to wait for the server and for each reply.
+    ["tcp/192.168.1.10:7447"]. timeout_s: how long to wait for the server and for each reply. log_dir: a folder
+    for this script's trial logs (made absolute here; a path on the server's computer, so give it when the server
+    runs on this one); default: the server's [log] dir.
     """
 
     def __init__(self, name: str = "rig1", *, config: str | Path | dict | None = None,
-                 connect: list[str] | None = None, timeout_s: float = 10.0, session=None) -> None:
+                 connect: list[str] | None = None, timeout_s: float = 10.0, session=None,
+                 log_dir: str | Path | None = None) -> None:
         from antarium.config import RigConfig, load_config, resolve
 
         self.name = bus.check_rig_name(name)
@@ -72,6 +75,7 @@ class Rig:
             cfg = resolve(config) if isinstance(config, dict) else load_config(config)
         self.bus_section = cfg.bus.model_copy(update=None if connect is None else {"connect": list(connect)})
         self.timeout_s = float(timeout_s)
+        self.log_dir = None if log_dir is None else Path(log_dir).expanduser().resolve()
         self._session = session
         self._own_session = session is None
         self._latest: PoseUpdate | None = None
@@ -210,8 +214,9 @@ class Rig:
         return self.call("polarisers", angles_deg=value)
 
     def start_trial(self, name: str, **metadata: Any) -> str:
-        """Start recording a trial; returns the log file's path (on the server's computer)."""
-        return self.call("trial_start", name=name, metadata=metadata)["path"]
+        """Start recording a trial; returns the log file's absolute path (on the server's computer)."""
+        folder = {} if self.log_dir is None else {"folder": str(self.log_dir)}
+        return self.call("trial_start", name=name, metadata=metadata, **folder)["path"]
 
     def stop_trial(self) -> dict:
         return self.call("trial_stop")
@@ -292,8 +297,9 @@ def add_script_arguments(parser) -> None:
 
 
 @contextlib.contextmanager
-def script_rig(args) -> Iterator[Rig]:
-    """A connected `Rig` for parsed `add_script_arguments` options (starting the server here if asked)."""
+def script_rig(args, out: str | Path | None = None) -> Iterator[Rig]:
+    """A connected `Rig` for parsed `add_script_arguments` options (starting the server here if asked); `out`:
+    the script's output folder, where its trial logs go too (on this computer's server; see `Rig` log_dir)."""
     from antarium.config import load_config
 
     config = load_config(args.config)
@@ -304,7 +310,7 @@ def script_rig(args) -> Iterator[Rig]:
         config.rig.name = args.rig
         server = Server(config).start_thread(timeout_s=args.timeout)
     try:
-        with Rig(args.rig, config=config, timeout_s=args.timeout) as rig:
+        with Rig(args.rig, config=config, timeout_s=args.timeout, log_dir=out) as rig:
             yield rig
     finally:
         if server is not None:

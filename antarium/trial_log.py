@@ -385,8 +385,8 @@ def _send_quietly(conn, message) -> None:
 
 
 def check_log_dir(folder: str | Path) -> Path:
-    """The log folder, created if missing; raises `LogError` at start when it cannot be written."""
-    folder = Path(folder)
+    """The log folder as an absolute path, created if missing; raises `LogError` when it cannot be written."""
+    folder = Path(folder).expanduser().resolve()
     try:
         folder.mkdir(parents=True, exist_ok=True)
         probe = folder / ".antarium-write-test"

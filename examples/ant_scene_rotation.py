@@ -67,12 +67,9 @@ def main() -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
-    import matplotlib
+    from antarium.plots import style
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 5.5))
+    fig, axes = style.figure((11, 5.5), ncols=2)
     for ax, (label, scene) in zip(axes, SCENES.items(), strict=True):
         xy, times, angles, turned = walk_with_rotations(scene, args.decisions, args.seed)
         ax.plot(*xy.T, color="k", lw=1)
@@ -81,14 +78,12 @@ def main() -> int:
             ax.annotate(f"{math.degrees(a):+.0f}°", xy[t], textcoords="offset points", xytext=(6, 6))
         ax.set_aspect("equal")
         ax.set_title(f"{label}")
-        ax.set_xlabel("ball x (m, dome frame)")
+        ax.set_xlabel("ball x, dome frame (m)")
         ax.set_ylabel("ball y (m)")
         for a, d in zip(angles, turned, strict=True):
             print(f"{label}: scene rotated {math.degrees(a):+.0f} deg -> the ant turned {math.degrees(d):+.0f} deg")
     fig.suptitle("virtual ant, scene rotated at the blue dots: fictive paths on the ball")
-    fig.tight_layout()
-    fig.savefig(out / "scene_rotation.png", dpi=110)
-    print(f"wrote {out / 'scene_rotation.png'}")
+    print(f"wrote {style.save(fig, out / 'scene_rotation.png')}")
     return 0
 
 

@@ -54,15 +54,15 @@ def main(argv: list[str] | None = None) -> int:
     add_script_arguments(parser)
     parser.add_argument("--panorama", action="append", default=[], help="panorama image (repeat for a sequence)")
     parser.add_argument("--seconds", type=float, default=20.0, help="seconds each panorama is shown")
-    parser.add_argument("--out", default="panoramas-output", help="folder for generated panoramas")
+    parser.add_argument("--out", default="panoramas-output", help="folder for generated panoramas and the trial log")
     parser.add_argument("--short", action="store_true", help="quick run: 0.6 s per panorama")
     args = parser.parse_args(argv)
     if args.short:
         args.seconds = 0.6
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     panoramas = [Path(p).resolve() for p in args.panorama] or write_panoramas(out.resolve())
-    with script_rig(args) as rig:
+    with script_rig(args, out) as rig:
         rig.closed_loop(False)  # open loop: the ball is recorded, the scene does not follow it
         rig.set_pose(0.0, 0.0, heading_deg=0.0)
         with rig.trial("open-loop-panoramas", panoramas=[p.name for p in panoramas], seconds=args.seconds) as log:

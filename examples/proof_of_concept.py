@@ -92,12 +92,9 @@ def run_condition(rig, name, scene, x, y, heading_deg, rng, duration, window, se
 
 
 def plot(results, window, out: Path) -> Path:
-    import matplotlib
+    from antarium.plots import style
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, len(results), figsize=(4 * len(results), 4.2))
+    fig, axes = style.figure((4 * len(results), 4.2), ncols=len(results))
     for ax, (name, updates) in zip(np.atleast_1d(axes), results.items(), strict=True):
         if len(updates) < 2:
             ax.set_title(f"{name}: no poses")
@@ -116,17 +113,13 @@ def plot(results, window, out: Path) -> Path:
         ax.set_ylabel("y on the ball (cm)")
         ax.set_aspect("equal", adjustable="datalim")
     fig.suptitle(f"Paths {window:g} s before (red) and after (blue) each 90° scene rotation (dot)")
-    fig.tight_layout()
-    target = out / "proof_of_concept_paths.png"
-    fig.savefig(target, dpi=110)
-    plt.close(fig)
-    return target
+    return style.save(fig, out / "proof_of_concept_paths.png")
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_script_arguments(parser)
-    parser.add_argument("--out", default="poc-output", help="folder for the plot")
+    parser.add_argument("--out", default="poc-output", help="folder for the plot and the trial logs")
     parser.add_argument("--seed", type=int, default=1, help="seed of the rotation times and directions")
     parser.add_argument("--duration", type=float, default=120.0, help="seconds per condition")
     parser.add_argument("--window", type=float, default=15.0, help="seconds plotted before and after a rotation")
@@ -134,11 +127,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.short:
         args.duration, args.window = 1.2, 0.4
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     rng = random.Random(args.seed)
     results, logs = {}, []
-    with script_rig(args) as rig:
+    with script_rig(args, out) as rig:
         shown = None
         for name, (scene, x, y, heading) in condition_poses().items():
             updates, log = run_condition(rig, name, scene, x, y, heading, rng, args.duration, args.window, args.seed,

@@ -23,32 +23,24 @@ from antarium.client import add_script_arguments, script_rig
 
 def plot(updates, out: Path) -> Path:
     """The world path; the displacement is the one step far longer than walking allows."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from antarium.plots import style
 
     xy = np.array([(u.pose.x, u.pose.y) for u in updates])
     steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
     jump = int(np.argmax(steps)) + 1 if len(steps) else len(xy)
     index = np.arange(len(xy))
     before, after = index < jump, index >= jump
-    fig, ax = plt.subplots(figsize=(5.5, 5))
+    fig, ax = style.figure((7.5, 5))
     ax.plot(*xy[before].T, color="tab:orange", label="before displacement")
     ax.plot(*xy[after].T, color="tab:green", label="after displacement")
     if before.any() and after.any():
         a, b = xy[before][-1], xy[after][0]
         ax.plot([a[0], b[0]], [a[1], b[1]], "k--", lw=0.8, label="virtual displacement")
-    ax.plot(*xy[0], "ko", ms=4)
-    ax.set_xlabel("world x (m)")
-    ax.set_ylabel("world y (m)")
+    ax.plot(*xy[0], "ko", ms=4, label="start")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.legend(loc="best", fontsize=8)
-    target = out / "virtual_displacement_path.png"
-    fig.tight_layout()
-    fig.savefig(target, dpi=110)
-    plt.close(fig)
-    return target
+    style.label(ax, "Virtual displacement: the ant's path in the world", "world x (m)", "world y (m)")
+    style.legend(ax, "right")
+    return style.save(fig, out / "virtual_displacement_path.png")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,12 +50,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--to-y", type=float, default=-3.0, help="y of the new place (m)")
     parser.add_argument("--before", type=float, default=30.0, help="seconds before the displacement")
     parser.add_argument("--after", type=float, default=30.0, help="seconds after it")
-    parser.add_argument("--out", default="displacement-output", help="folder for the plot")
+    parser.add_argument("--out", default="displacement-output", help="folder for the plot and the trial logs")
     parser.add_argument("--short", action="store_true", help="quick run: 1 s before and after")
     args = parser.parse_args(argv)
     if args.short:
         args.before = args.after = 1.0
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     updates, lock = [], threading.Lock()
 
@@ -71,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
         with lock:
             updates.append(update)
 
-    with script_rig(args) as rig:
+    with script_rig(args, out) as rig:
         rig.load_scene("habitat")
         rig.closed_loop(True)
         rig.reset_origin(0.0, 0.0, 0.0)

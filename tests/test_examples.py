@@ -54,15 +54,16 @@ def test_proof_of_concept(rig_config, tmp_path, capsys):
     assert (tmp_path / "proof_of_concept_paths.png").stat().st_size > 10_000
     for condition in ("familiar", "nest", "unfamiliar", "unstructured"):
         assert f"{condition}: " in text and "1 rotations" in text
-    logs = sorted((rig_config[1] / "logs").glob("*poc-*.h5"))
-    assert len(logs) == 4
+    logs = sorted(tmp_path.glob("*poc-*.h5"))  # everything the run writes lies under its --out
+    assert len(logs) == 4 and not list((rig_config[1] / "logs").glob("*poc-*.h5"))
+    assert f"log {logs[0]}" in text  # reported absolute
     events = list(read_table(logs[0], "events")["kind"])
     assert events.count("scene_rotated") >= 1
 
 
 def test_open_loop_panoramas(rig_config, tmp_path, capsys):
     assert _load("open_loop_panoramas").main(_args(rig_config, tmp_path)) == 0
-    log = next((rig_config[1] / "logs").glob("*open-loop-panoramas.h5"))
+    log = next(tmp_path.glob("*open-loop-panoramas.h5"))
     scenes = read_table(log, "scenes")
     assert [Path(n).name for n in scenes["name"]][-3:] == ["one_landmark.png", "two_landmarks.png", "skyline.png"]
     assert all(len(h) == 64 for h in scenes["sha256"][-3:])
@@ -73,6 +74,6 @@ def test_open_loop_panoramas(rig_config, tmp_path, capsys):
 def test_virtual_displacement(rig_config, tmp_path, capsys):
     assert _load("virtual_displacement").main(_args(rig_config, tmp_path)) == 0
     assert "displaced to (4.00, -3.00) m" in capsys.readouterr().out
-    log = next((rig_config[1] / "logs").glob("*virtual-displacement.h5"))
+    log = next(tmp_path.glob("*virtual-displacement.h5"))
     frames = read_table(log, "frames")
     assert frames["x"][0] < 1.0 and frames["x"][-1] > 3.9

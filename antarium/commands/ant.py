@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION")
     sub.required = True
     p = sub.add_parser("learn", help="walk the ant along a route while its model learns; save the model")
-    p.add_argument("--model", choices=KINDS, default="antcar")
+    p.add_argument("--model", choices=KINDS, default="antcar", help="mushroom-body model to train (default antcar)")
     p.add_argument("--route", required=True, help="curved:SEED, a path file (x_m,y_m) or a trial log (.h5)")
     p.add_argument("--length", type=float, default=10.0, help="length of a curved:SEED route (m, default 10)")
     p.add_argument("--spacing", type=float, default=None, help="metres between learned views (model default)")
@@ -52,18 +52,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("model_file", help="model file written by 'antarium ant learn'")
     p.add_argument("--route", default=None, help="route to judge against (default: the one it learned)")
     p.add_argument("--length", type=float, default=10.0, help="length of a curved:SEED route (m)")
-    p.add_argument("--max-decisions", type=int, default=None)
+    p.add_argument("--max-decisions", type=int, default=None,
+                   help="stop after this many steering decisions (default: the route's own limit)")
     p.add_argument("--lateral-cm", type=float, default=0.0, help="release this far left of the route start (cm)")
     p.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
     p.add_argument("--out", required=True, help="folder for run.h5, run_paths.png, run_traces.png, run.json")
     _common(p)
     p = sub.add_parser("evaluate", help="each model learns and follows seeded curved routes; writes a table")
-    p.add_argument("--routes", type=int, default=10)
+    p.add_argument("--routes", type=int, default=10, help="number of seeded curved routes per model (default 10)")
     p.add_argument("--length", type=float, default=10.0, help="route length (m, default 10)")
     p.add_argument("--models", default=",".join(KINDS), help=f"comma-separated, from {', '.join(KINDS)}")
     p.add_argument("--seed", type=int, default=0, help="seed of the first route")
     p.add_argument("--out", required=True, help="folder for logs, pictures, evaluation.md/.json")
-    p.add_argument("--scene", default="habitat")
+    p.add_argument("--scene", default="habitat", help="scene shown by the dome (name or file; default: habitat)")
     p.add_argument("--put-back-cm", type=float, default=20.0,
                    help="Ardin's protocol: farther than this off the route counts an error and the ant is put "
                         "back (default 20; 0: never, Antcar's own protocol)")
@@ -72,8 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     experiment.add_arguments(sub.add_parser("experiment", help="expand an experiment spec (TOML) into runs and run "
                                                                "them on Dask, resumably; results table and summary"))
     p = sub.add_parser("demo", help="train on a short route, follow it; log and picture of both paths")
-    p.add_argument("--out", required=True)
-    p.add_argument("--scene", default="habitat")
+    p.add_argument("--out", default="ant-demo-output",
+                   help="folder for the log, the paths picture and the traces (default: ant-demo-output)")
+    p.add_argument("--scene", default="habitat", help="scene shown by the dome (name or file; default: habitat)")
     p = sub.add_parser("serve", help="put a trained ant on a served rig (`antarium serve --config`): it hosts the "
                                      "dome, walks through the emulated USB trackball and follows its route")
     p.add_argument("model_file", help="model file written by 'antarium ant learn' (holds its route)")
@@ -81,22 +83,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="folder for served.json and served_paths.png")
     p.add_argument("--lateral-cm", type=float, default=0.0, help="release this far left of the route start")
     p.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
-    p.add_argument("--max-decisions", type=int, default=None)
+    p.add_argument("--max-decisions", type=int, default=None,
+                   help="stop after this many steering decisions (default: the route's own limit)")
     p = sub.add_parser("homing", help="Stone 2017's foraging task: random outbound routes, home by CX path "
                                       "integration; pictures and pi_homing_<compass>.json")
     _trips(p)
     p = sub.add_parser("arena", help="the cluttered arena: outbound with optic-flow avoidance, home by CX, then "
                                      "by CXMB with the vector memory restored; collisions counted")
     _trips(p)
-    p.add_argument("--model", choices=("cxmb", "one_ring"), default="cxmb")
+    p.add_argument("--model", choices=("cxmb", "one_ring"), default="cxmb",
+                   help="homing model of the second trip: cxmb (PI + MBONs) or one_ring (+ optic flow)")
     p = sub.add_parser("displace", help="PI vs visual memory: a CXMB ant homes once (its MBONs learn), is put down "
                                         "beside the feeder with its memory restored, and homes for several k")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="outbound route seed (default 0)")
     p.add_argument("--steps", type=int, default=600, help="outbound decisions of 1 cm (default 600)")
     p.add_argument("--lateral-cm", type=float, default=50.0, help="put down this far left of the feeder")
-    p.add_argument("--compass", choices=("sky", "ideal"), default="sky")
-    p.add_argument("--scene", default="habitat")
-    p.add_argument("--out", required=True)
+    p.add_argument("--compass", choices=("sky", "ideal"), default="sky",
+                   help="sky: read from the dome's polarised UV pixels; ideal: the true heading (default sky)")
+    p.add_argument("--scene", default="habitat", help="the world (default habitat)")
+    p.add_argument("--out", required=True, help="folder for the pictures and the summary")
 
 
 def _trips(p: argparse.ArgumentParser) -> None:
@@ -160,10 +165,10 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "serve":
         from antarium.ant.served import run_served
 
-        run_served(args.model_file, args.config, args.out, (args.lateral_cm / 100.0, math.radians(args.heading_deg)),
-                   args.max_decisions)
+        run_served(args.model_file, args.config, Path(args.out).resolve(),
+                   (args.lateral_cm / 100.0, math.radians(args.heading_deg)), args.max_decisions)
         return 0
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     if args.action == "evaluate":
         kinds = tuple(k.strip() for k in args.models.split(",") if k.strip())
@@ -197,7 +202,7 @@ def _learn(args: argparse.Namespace) -> int:
     from antarium.ant.world import virtual_rig
 
     route = parse_route(args.route, args.length)
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     if not out.parent.is_dir():
         raise FileNotFoundError(f"folder {str(out.parent)!r} for the model file does not exist")
     eye_params = MODEL_EYES[args.model]
@@ -225,7 +230,7 @@ def _run(args: argparse.Namespace) -> int:
         route = Route(stored)
     else:
         raise ValueError(f"{args.model_file} holds no route; give --route")
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     bar = _bar("closed loop")
     outcome, _ = follow_saved(model, eye_params, route, out, scene=args.scene, tether=args.tether,

@@ -41,13 +41,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="view.png", help="equal-area map of the LED colours (PNG)")
     parser.add_argument("--cube", default=None, help="also save the raw cube map (six faces, PNG)")
     parser.add_argument("--face-size", type=int, default=None, help="cube face size in texels")
-    parser.add_argument("--width", type=int, default=1200, help="map width in pixels (default 1200)")
+    parser.add_argument("--width", type=int, default=1200, help="picture width in pixels (default 1200)")
 
 
 def run(args: argparse.Namespace) -> int:
     from antarium.core.pose import Pose
     from antarium.geometry import load_dome
-    from antarium.plots.dome_map import atlas_image, check_png_path, led_map, save_png
+    from antarium.plots.dome_map import atlas_image, check_png_path, dome_picture, save_png
     from antarium.renderers.library import build_scene
     from antarium.renderers.renderer import Renderer
 
@@ -66,7 +66,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         renderer.set_scene(scene)
         frame = renderer.render(pose, t=args.time)
-        path = save_png(led_map(frame, dome, width=args.width), args.out)
+        title = (f"What the dome shows: scene {renderer.scene.name!r} at ({args.pos[0]:g}, {args.pos[1]:g}, "
+                 f"{args.pos[2]:g}) m, heading {args.heading:g}°, t = {args.time:g} s")
+        path = dome_picture(frame, dome, args.out, title, width_px=args.width)
         print(f"LED map written to {path}")
         if args.cube:
             print(f"cube map written to {save_png(atlas_image(renderer.cube_map(pose, t=args.time)), args.cube)}")

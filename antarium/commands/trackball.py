@@ -145,8 +145,8 @@ def _calibrate(args: argparse.Namespace) -> int:
     from antarium.locomotion.trackball import config as tbconfig
     from antarium.locomotion.trackball.driver import UsbTrackball
 
-    if args.config is None:
-        raise ValueError("calibrate needs --config RIG.toml (the file its results are written to)")
+    if args.config is None and not args.dry_run:
+        raise ValueError("calibrate needs --config RIG.toml (the file its results are written to) or --dry-run")
     axes = [a.strip() for a in args.axes.split(",") if a.strip()]
     bad = [a for a in axes if a not in calibration.AXES]
     if bad or not axes:
@@ -155,7 +155,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         raise ValueError(f"--turns must be > 0, got {args.turns}")
     from pathlib import Path
 
-    config = tbconfig.load(args.config) if Path(args.config).exists() else tbconfig.TrackballConfig()
+    known = args.config is not None and Path(args.config).exists()
+    config = tbconfig.load(args.config) if known else tbconfig.TrackballConfig()
     backend = calibration.miscalibrated_emulator(config) if args.emulate else None
     driver = UsbTrackball(trackball=config, backend=backend)
     with driver:

@@ -27,7 +27,7 @@ def run_demo_rig(out: str | Path, seconds: float = 8.0, echo=print, render: dict
     from antarium.config import RenderSection, load_config
     from antarium.server import Server
 
-    out = Path(out)
+    out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     config = load_config(None)
     config.log.dir = str(out / "trials")
@@ -58,39 +58,20 @@ def _ms(p: dict[str, Any] | None, key: str) -> str:
 
 def plot_path(log: Path, target: Path) -> Path:
     """The world path from a trial log's frames table, coloured by time, scene rotations marked."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    from antarium.plots.paths import world_path
     from antarium.trial_log import read_table
 
     f = read_table(log, "frames")
-    t = f["t_start"] - f["t_start"][0]
-    fig, ax = plt.subplots(figsize=(6, 5.2))
-    points = ax.scatter(f["x"] * 100, f["y"] * 100, c=t, s=3, cmap="viridis")
-    fig.colorbar(points, ax=ax, label="time (s)")
     turned = np.flatnonzero(np.abs(np.diff(f["scene_rotation"])) > 1e-9) + 1
-    if len(turned):
-        ax.plot(f["x"][turned] * 100, f["y"][turned] * 100, "o", mfc="none", mec="tab:red", ms=10,
-                label="scene rotated 90°")
-        ax.legend(loc="best", fontsize=8)
-    ax.plot(f["x"][0] * 100, f["y"][0] * 100, "k+", ms=10)
-    ax.set_xlabel("world x (cm)")
-    ax.set_ylabel("world y (cm)")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title(f"Closed-loop path of the scripted walker ({len(t)} frames)")
-    fig.tight_layout()
-    fig.savefig(target, dpi=110)
-    plt.close(fig)
-    return target
+    return world_path(f["x"], f["y"], f["t_start"] - f["t_start"][0], turned, target,
+                      f"Closed-loop path of the scripted walker ({len(f['x'])} frames)", "scene rotated 90°")
 
 
 def dome_picture(frame: np.ndarray, target: Path) -> Path:
     """What the dome shows for `frame`: sent through the emulator's datagram path, its latched LEDs mapped."""
     from antarium.firmware_proto.link import open_link
     from antarium.geometry import load_dome
-    from antarium.plots.dome_map import led_map, save_png
+    from antarium.plots.dome_map import dome_picture as picture
 
     link = open_link("virtual")
     try:
@@ -98,4 +79,5 @@ def dome_picture(frame: np.ndarray, target: Path) -> Path:
         leds = link.emulator.led_values()
     finally:
         link.close()
-    return save_png(led_map(leds, load_dome()), target)
+    return picture(leds, load_dome(), target, "What the dome showed at the end of the demo (latched by the "
+                                              "dome emulator)")

@@ -37,10 +37,10 @@ def run_ant_demo(out: str | Path, echo: Callable[[str], None] = print, scene: An
     from antarium.ant.world import virtual_rig
     from antarium.geometry import load_dome
     from antarium.plots.ant import plot_paths, plot_traces, scene_top_view
-    from antarium.plots.dome_map import led_map, save_png
+    from antarium.plots.dome_map import dome_picture
     from antarium.trial_log import check_log_dir, log_path
 
-    out = Path(out)
+    out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     route = curved_route(ex.DEMO_ROUTE_SEED, length=route_length or ex.DEMO_ROUTE_LENGTH_M)
     model = make_model("antcar", EyeParams().n_pn)
@@ -69,7 +69,12 @@ def run_ant_demo(out: str | Path, echo: Callable[[str], None] = print, scene: An
     return {
         "trial log": log,
         "path plot": plot_paths(out / "virtual_ant_paths.png", route, {"followed (Antcar)": result.track},
-                                title=title, top=top),
+                                title=title, top=top, notes=(
+                                    f"released {100 * START_OFFSET[0]:.0f} cm off the route, turned "
+                                    f"{math.degrees(START_OFFSET[1]):.0f}°; error from the route: lateral median "
+                                    f"{100 * s.lateral_median:.1f} cm, angular median "
+                                    f"{s.angular_median_deg:.1f}°; {s.decisions} decisions")),
         "traces": plot_traces(out / "virtual_ant_traces.png", result.track, title="Antcar: model signals"),
-        "dome picture": save_png(led_map(leds, load_dome()), out / "virtual_ant_dome.png"),
+        "dome picture": dome_picture(leds, load_dome(), out / "virtual_ant_dome.png",
+                                     "What the dome showed the virtual ant at its last decision"),
     }

@@ -7,21 +7,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from antarium.plots import style
+
 if TYPE_CHECKING:  # plots sit below the ant: they draw its records, never import it
     from antarium.ant.agent import Track
     from antarium.ant.routes import Route
 
 _TRACE_KEYS = ("lambda_left", "lambda_right", "lambda_diff", "lambda_max", "lambda_nest", "lambda_feeder",
                "motivation", "novelty", "image_difference")
-
-
-def _figure(size=(7, 7)):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt, plt.figure(figsize=size)
 
 
 def scene_top_view(scene, min_height: float = 0.01) -> np.ndarray:
@@ -43,16 +36,24 @@ def _draw_top_view(ax, top: np.ndarray | None, lo, hi) -> None:
 
 
 def plot_paths(path: str | Path, route: Route, tracks: dict[str, Track], title: str = "",
-               top: np.ndarray | None = None, margin: float = 0.5) -> Path:
+               top: np.ndarray | None = None, margin: float = 0.3, notes: str = "") -> Path:
     """The learned route and the followed paths (world frame, metres) over the world's top view (`top`, from
-    `scene_top_view`); writes a PNG."""
-    plt, fig = _figure()
-    ax = fig.add_subplot(111)
+    `scene_top_view`), each path's release point marked; `notes` (e.g. the error figures) under the title. The
+    figure takes the shape of the area drawn, so that it is not left blank; writes a PNG."""
+    xys = {label: track.arrays()[0] for label, track in tracks.items()}
+    drawn = [route.points] + [xy for xy in xys.values() if len(xy)]
+    lo = np.min([p.min(0) for p in drawn], axis=0) - margin
+    hi = np.max([p.max(0) for p in drawn], axis=0) + margin
+    span = hi - lo
+    aspect = float(np.clip(span[1] / span[0], 0.3, 3.0))
+    width = 6.5 if aspect < 1 else 4.5  # of the axes; the legend goes right of them
+    fig, ax = style.figure((width + 3.2, max(3.5, width * aspect + 1.4)))
+    _draw_top_view(ax, top, lo, hi)
     ax.plot(*route.points.T, color="tab:red", lw=4, alpha=0.5, label="learned route")
-    ax.plot(*route.start, "o", color="tab:red", ms=8, label="start (nest)")
-    ax.plot(*route.end, "*", color="tab:red", ms=12, label="end (feeder)")
+    ax.plot(*route.start, "o", color="tab:red", ms=8, label="route start (nest)")
+    ax.plot(*route.end, "*", color="tab:red", ms=12, label="route end (feeder)")
     for i, (label, track) in enumerate(tracks.items()):
-        xy, _ = track.arrays()
+        xy = xys[label]
         if len(xy) == 0:
             continue
         colour = f"C{i % 10}" if i % 10 != 3 else "C9"
@@ -60,42 +61,43 @@ def plot_paths(path: str | Path, route: Route, tracks: dict[str, Track], title: 
         cuts = [0, *[k + 1 for k in track.put_back], len(xy)]
         for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:], strict=True)):
             ax.plot(*xy[a:b].T, color=colour, lw=1.2, label=label if j == 0 else None)
+        ax.plot(*xy[0], "^", color=colour, ms=8, mec="k", label=f"{label}: release point")
         if track.put_back:
             bad = xy[np.asarray(track.put_back)]
-            ax.plot(*bad.T, "x", color=colour, ms=6)
-    lo = np.min([route.points.min(0)] + [t.arrays()[0].min(0) for t in tracks.values() if t.xy], axis=0) - margin
-    hi = np.max([route.points.max(0)] + [t.arrays()[0].max(0) for t in tracks.values() if t.xy], axis=0) + margin
-    _draw_top_view(ax, top, lo, hi)
+            ax.plot(*bad.T, "x", color=colour, ms=6, label=f"{label}: put back on the route")
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_title(title)
-    ax.legend(loc="best", fontsize=8)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    style.label(ax, title + (f"\n{notes}" if notes else ""), "world x (m)", "world y (m)")
+    style.legend(ax, "right")
+    return style.save(fig, path)
 
 
 def plot_traces(path: str | Path, track: Track, title: str = "") -> Path:
-    """The model's signals (familiarities, motivation) against the decision number; writes a PNG."""
-    plt, fig = _figure((8, 4))
-    ax = fig.add_subplot(111)
-    for key in _TRACE_KEYS:
-        values = track.trace(key)
-        if values.size and np.isfinite(values).any():
-            ax.plot(values, lw=1, label=key)
-    for k in track.put_back:
-        ax.axvline(k, color="0.7", lw=0.8)
-    ax.set_xlabel("decision")
-    ax.set_ylabel("lambda (1 = novel) / signal")
-    ax.set_title(title)
-    ax.legend(loc="upper right", fontsize=7, ncol=2)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    """The model's signals against time (s, the rig's clock): familiarities (λ, 0 familiar .. 1 novel) above,
+    the other signals below, each on its own axis; put-backs marked; writes a PNG."""
+    t = np.asarray(track.t, np.float64)
+    t = t - t[0] if t.size else t
+    groups = {"familiarity": [k for k in _TRACE_KEYS if k.startswith("lambda")],
+              "other": [k for k in _TRACE_KEYS if not k.startswith("lambda")]}
+    shown = {g: [k for k in keys if np.isfinite(track.trace(k)).any()] for g, keys in groups.items()}
+    shown = {g: keys for g, keys in shown.items() if keys}
+    fig, axes = style.figure((9.0, 2.4 + 2.2 * max(1, len(shown))), nrows=max(1, len(shown)), sharex=True,
+                             squeeze=False)
+    ylabels = {"familiarity": "λ (1: 0 familiar .. 1 novel)", "other": "signal (1)"}
+    for ax, (group, keys) in zip(axes[:, 0], shown.items(), strict=False):
+        for key in keys:
+            values = track.trace(key)
+            flat = np.nanmax(values) == np.nanmin(values)
+            ax.plot(t[:len(values)], values, lw=1,
+                    label=key.replace("_", " ") + (f" (constant {np.nanmax(values):g})" if flat else ""))
+        for k in track.put_back:
+            ax.axvline(t[k], color="0.6", lw=0.8, ls="--")
+        style.label(ax, f"{title}: {group}" if title else group, "", ylabels[group])
+        style.legend(ax, "right")
+    axes[-1, 0].set_xlabel(f"time since release (s; {len(t)} decisions"
+                           + (", dashed: put back on the route)" if track.put_back else ")"))
+    for ax in axes[:-1, 0]:
+        ax.set_xlabel("time since release (s)")
+        ax.xaxis.label.set_visible(False)
+    return style.save(fig, path)

@@ -80,11 +80,35 @@ def check_png_path(path: str | Path, what: str = "image") -> Path:
 
 
 def save_png(image: np.ndarray, path: str | Path) -> Path:
-    """Write an (H, W, 3) uint8 RGB image as PNG (the name must end in .png)."""
+    """Write an (H, W, 3) uint8 RGB image as PNG (the name must end in .png); returns the absolute path."""
     import cv2
 
-    path = check_png_path(path)
+    path = check_png_path(path).expanduser().resolve()
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), image[:, :, ::-1]):
         raise ValueError(f"cannot write image {path} (is the suffix .png and the folder writable?)")
     return path
+
+
+def dome_picture(frame: np.ndarray, dome, path: str | Path, title: str, width_px: int = 1400) -> Path:
+    """Write a PNG `width_px` wide: the LEDs of `frame` (20350, 2) uint16 on a Mollweide map seen from inside,
+    one dot per LED in its display colour, with azimuth/elevation axes, the front marked and a colour key."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from antarium.plots import style
+
+    fig = style.pyplot().figure(figsize=(12.0, 7.2))
+    ax = fig.add_subplot(projection="mollweide")
+    rgb = _to_srgb8(frame_colours(frame, np.asarray(dome.is_uv))) / 255.0
+    gb, uv = dome.gb_index, dome.uv_index
+    ax.scatter(-dome.azimuth[gb], dome.elevation[gb], s=7, c=rgb[gb], marker="h", linewidths=0)
+    ax.scatter(-dome.azimuth[uv], dome.elevation[uv], s=14, c=rgb[uv], edgecolors="0.45", linewidths=0.5)
+    style.dome_axes(ax, float(np.degrees(dome.elevation.min())))
+    key = [Patch(color=(0, 1, 0), label="green LED drive"), Patch(color=(0, 0, 1), label="blue LED drive"),
+           Patch(color=(0.8, 0, 1), label="UV pixel (grey ring): plain + polarised UV drive"),
+           Patch(color="black", label="black: LED off, or seam between panels (no LEDs)"),
+           Line2D([], [], marker="^", mfc="none", mec="red", mew=1.5, ls="none", label="front (azimuth 0°, +x)")]
+    style.legend(ax, "below", handles=key)
+    ax.set_title(title)
+    return style.save(fig, path, dpi=max(20, round(width_px / 12.0)))

@@ -7,21 +7,18 @@ from pathlib import Path
 
 import numpy as np
 
+from antarium.plots import style
+
 
 def error_figure(err_x_mm: np.ndarray, err_y_mm: np.ndarray, true_path_m: np.ndarray | None,
                  ball_path_m: np.ndarray | None, out: str | Path, title: str = "") -> Path:
     """Write a PNG: left, probability density of the error from the apex (x, y and distance, mm); right, the
     paths (m, (N, 2) each) if given. NaN errors (frames with a fault) are left out and counted in the legend."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     ex, ey = np.asarray(err_x_mm, float), np.asarray(err_y_mm, float)
     ok = np.isfinite(ex) & np.isfinite(ey)
     dist = np.hypot(ex[ok], ey[ok])
     paths = true_path_m is not None and ball_path_m is not None
-    fig, axes = plt.subplots(1, 2 if paths else 1, figsize=(11 if paths else 6, 4.5), squeeze=False)
+    fig, axes = style.figure((12 if paths else 6.5, 5.2), ncols=2 if paths else 1, squeeze=False)
     ax = axes[0, 0]
     lim = max(1.0, float(np.percentile(np.abs(np.concatenate([ex[ok], ey[ok]])), 99.9)) * 1.2) if ok.any() else 1.0
     bins = np.linspace(-lim, lim, 121)
@@ -33,7 +30,7 @@ def error_figure(err_x_mm: np.ndarray, err_y_mm: np.ndarray, true_path_m: np.nda
     ax.set_xlabel("error from the apex (mm)")
     ax.set_ylabel("probability density (1/mm)")
     ax.set_title(f"Tracker error, {ok.sum()} frames ({(~ok).sum()} with a fault)")
-    ax.legend(fontsize=8)
+    style.legend(ax, "below", ncol=1)
     if paths:
         ax = axes[0, 1]
         tp, bp = np.asarray(true_path_m), np.asarray(ball_path_m)
@@ -43,11 +40,7 @@ def error_figure(err_x_mm: np.ndarray, err_y_mm: np.ndarray, true_path_m: np.nda
         ax.set_ylabel("y (cm)")
         ax.set_aspect("equal", "datalim")
         ax.set_title("Walk")
-        ax.legend(fontsize=8)
+        style.legend(ax, "below", ncol=1)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    out = Path(out)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return style.save(fig, out)

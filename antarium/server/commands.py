@@ -176,7 +176,9 @@ COMMANDS: dict[str, Command] = {
     "trial_start": Command({
         "name": Param("str", True, doc="trial name (part of the log file name)"),
         "metadata": Param("object", False, {}, doc="JSON object stored with the trial"),
-    }, lambda server, p: server.trial_start(p["name"], p["metadata"]), in_loop=False),
+        "folder": Param("str", False, "", doc="absolute folder for this trial's log on the server's computer "
+                                               "(default: [log] dir)"),
+    }, lambda server, p: server.trial_start(p["name"], p["metadata"], p["folder"]), in_loop=False),
     "trial_stop": Command({}, lambda server, p: server.trial_stop(), in_loop=False),
     "sky": Command({
         "sun_azimuth_deg": Param("number", False, None, lo=-360, hi=360),

@@ -330,8 +330,9 @@ class Server:
             self.trial_log.add_scene(self.clock.now(), self.scene_name, digest)
         self.loop.event("scene_loaded", scene=scene, sha256=digest)
 
-    def trial_start(self, name: str, metadata: dict) -> dict[str, Any]:
-        from antarium.trial_log import LogError, TrialLog, log_path
+    def trial_start(self, name: str, metadata: dict, folder: str = "") -> dict[str, Any]:
+        """Open the trial log `<folder or [log] dir>/<rig>_<time>_<name>.h5`; reply {"path": its absolute path}."""
+        from antarium.trial_log import LogError, TrialLog, check_log_dir, log_path
 
         with self._trial_lock:
             if self.trial_log is not None:
@@ -340,8 +341,10 @@ class Server:
                 json.dumps(metadata)
             except (TypeError, ValueError) as exc:
                 raise CommandError(f"trial_start: metadata must be JSON-serialisable: {exc}") from None
-            path = log_path(self.log_dir, self.rig_name, name)
+            if folder and not Path(folder).is_absolute():
+                raise CommandError(f"trial_start: folder must be an absolute path, got {folder!r}")
             try:
+                path = log_path(check_log_dir(folder) if folder else self.log_dir, self.rig_name, name)
                 log = TrialLog(path, self.config.to_toml_dict(), name, metadata, flush_s=self.config.log.flush_s)
             except LogError as exc:
                 raise RuntimeError(f"trial_start: {exc}") from None

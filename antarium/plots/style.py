@@ -1,0 +1,136 @@
+"""The house style of every picture the project writes (matplotlib, Agg), and its check.
+
+A picture has a title; every axis a label with its unit in parentheses ("x (m)", "time (s)", "λ (1)" for a
+ratio); a colour key where colour means something; legends outside the data (`legend`); on dome maps the
+front (azimuth 0, the dome's +x) and the azimuth and elevation directions marked (`dome_axes`). `save` checks
+this with `problems` and refuses a picture that breaks it, so a picture cannot drift from the style unnoticed.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+#: matplotlib settings of every picture
+RC = {"font.size": 9, "axes.titlesize": 10, "axes.labelsize": 9, "legend.fontsize": 8, "figure.dpi": 110,
+      "axes.grid": False, "savefig.bbox": "tight", "savefig.pad_inches": 0.1}
+_UNIT = re.compile(r"\(.+\)\s*$")
+#: label of the front mark on dome maps
+FRONT = "front"
+
+
+def pyplot():
+    """matplotlib.pyplot on the Agg back-end with the house settings."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plt.rcParams.update(RC)
+    return plt
+
+
+def figure(size: tuple[float, float] = (7.0, 5.0), **subplots):
+    """(fig, axes) of `plt.subplots(figsize=size, **subplots)` in the house style."""
+    return pyplot().subplots(figsize=size, **subplots)
+
+
+def label(ax, title: str, x: str, y: str) -> None:
+    """Title and axis labels; each label ends with its unit in parentheses."""
+    ax.set_title(title)
+    ax.set_xlabel(x)
+    ax.set_ylabel(y)
+
+
+def legend(ax, where: str = "right", **kw):
+    """A legend outside the axes, so that it hides no data: "right" of them or "below" them."""
+    if where == "below":  # half an inch under the axes: under their tick labels and axis label
+        from matplotlib.transforms import ScaledTranslation
+
+        below = ax.transAxes + ScaledTranslation(0.0, -0.5, ax.figure.dpi_scale_trans)
+        kw = {"loc": "upper center", "bbox_to_anchor": (0.5, 0.0), "bbox_transform": below, "ncol": 3, **kw}
+    else:
+        kw = {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0), "borderaxespad": 0.0, **kw}
+    return ax.legend(**kw)
+
+
+def azimuth_label(deg: float) -> str:
+    """Azimuth tick text in whole degrees, rounded (never truncated) into (-180, 180]."""
+    d = int(round(float(deg))) % 360
+    return f"{d - 360 if d > 180 else d}°"
+
+
+def dome_axes(ax, min_elevation_deg: float = -57.0, step_deg: int = 30) -> None:
+    """Mollweide axes seen from inside the dome: azimuth grows to the left (plot longitudes at -azimuth),
+    the front (azimuth 0, +x) in the centre marked, azimuth ticks below the lowest LEDs (`min_elevation_deg`)
+    so that they cover no data, elevation ticks at the left edge, axis labels with units."""
+    ax.set_facecolor("black")
+    ax.grid(True, color="0.55", lw=0.3)
+    lons = np.arange(-180 + step_deg, 180, step_deg)
+    ax.set_xticks(np.radians(lons))
+    ax.set_xticklabels([])
+    y = np.radians(min_elevation_deg - 12.0)
+    for lon in lons:
+        ax.text(np.radians(lon), y, azimuth_label(-lon), ha="center", va="center", fontsize=7, color="0.15",
+                bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.8})
+    ax.set_yticks(np.radians(np.arange(-60, 90, 30)))
+    ax.plot([0.0], [0.0], marker="^", ms=9, mfc="none", mec="red", mew=1.5, ls="none",
+            label=f"{FRONT} (azimuth 0°, +x)")
+    ax.annotate("", xy=(np.radians(-60), np.radians(min_elevation_deg - 22)),
+                xytext=(np.radians(60), np.radians(min_elevation_deg - 22)),
+                arrowprops={"arrowstyle": "->", "color": "0.8", "lw": 1.2}, annotation_clip=False)
+    ax.set_xlabel("azimuth (°, counter-clockwise from above: grows to the left, seen from inside)")
+    ax.set_ylabel("elevation (°)")
+
+
+def problems(fig) -> list[str]:
+    """What breaks the house style in `fig`: a missing title, axis labels without a unit, a legend over the data
+    (a colour bar's axes and 3D or text-only axes are judged by their own label only)."""
+    found = []
+    titled = bool(fig._suptitle and fig._suptitle.get_text())
+    for i, ax in enumerate(fig.axes):
+        if not ax.get_visible() or not ax.has_data():
+            continue
+        name = f"axes {i} ({ax.get_title() or 'untitled'})"
+        labels = [ax.get_xlabel(), ax.get_ylabel()] + ([ax.get_zlabel()] if hasattr(ax, "get_zlabel") else [])
+        if getattr(ax, "_colorbar", None) is not None:  # a colour key: one label, with its unit
+            labels = [t for t in labels if t] or [""]
+        elif not (titled or ax.get_title()):
+            found.append(f"{name}: no title")
+        for text in labels:
+            if not _UNIT.search(text or ""):
+                found.append(f"{name}: axis label {text!r} has no unit in parentheses")
+        found += _legend_over_data(ax, name)
+    return found
+
+
+def _legend_over_data(ax, name: str) -> list[str]:
+    """A legend drawn inside the axes hides data; `legend` puts it outside."""
+    leg = ax.get_legend()
+    if leg is None or ax.name != "rectilinear":
+        return []
+    fig = ax.figure
+    fig.canvas.draw()
+    box, area = leg.get_window_extent(), ax.get_window_extent()
+    overlap_w = min(box.x1, area.x1) - max(box.x0, area.x0)
+    overlap_h = min(box.y1, area.y1) - max(box.y0, area.y0)
+    if overlap_w > 1 and overlap_h > 1:
+        return [f"{name}: legend inside the axes (use plots.style.legend)"]
+    return []
+
+
+def save(fig, path: str | Path, dpi: int = 110) -> Path:
+    """Check the house style, write `fig` as PNG (folders made), close it; returns the absolute path.
+    ValueError names what is wrong."""
+    plt = pyplot()
+    wrong = problems(fig)
+    if wrong:
+        plt.close(fig)
+        raise ValueError(f"picture {Path(path).name} breaks the house style: " + "; ".join(wrong))
+    path = Path(path).expanduser().resolve()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path

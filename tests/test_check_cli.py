@@ -1,0 +1,96 @@
+"""`antarium check`: the first-run checklist against the emulator process, the virtual dome, and a port where
+nothing answers; each check one PASS/FAIL/SKIP line, exit status 1 on any failure (issue #20, point 4)."""
+
+import io
+from pathlib import Path
+
+import pytest
+
+from antarium.cli import main
+from antarium.config import load_config
+from antarium.server.emulator_process import EmulatorProcess, free_udp_port
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def _rig(tmp_path, link: str, extra: str = "") -> str:
+    path = tmp_path / "rig.toml"
+    path.write_text(f'[loop]\nrealtime_priority = 0\n[link]\n{link}\n[log]\ndir = "{tmp_path / "trials"}"\n{extra}')
+    return str(path)
+
+
+def _lines(out: str) -> dict[str, str]:
+    """check name -> verdict, from the report's lines."""
+    return {line[5:].split(":")[0]: line[:4].strip() for line in out.splitlines() if line[:4] in
+            ("PASS", "FAIL", "SKIP")}
+
+
+@pytest.fixture
+def emulator():
+    process = EmulatorProcess()
+    process.start()
+    yield process
+    process.stop()
+
+
+def test_every_check_passes_against_the_emulator(tmp_path, emulator, capsys):
+    rig = _rig(tmp_path, f'host = "127.0.0.1"\nport = {emulator.port}\nspawn_emulator = false')
+    assert main(["check", "--config", rig, "--auto", "--timeout-s", "5", "--min-free-gb", "0.01"]) == 0
+    out = capsys.readouterr().out
+    assert _lines(out) == {"distributor": "PASS", "panels": "PASS", "trackball": "SKIP", "real time": "SKIP",
+                           "disk": "PASS", "panel mapping": "PASS"}
+    assert "55 panels of 370 pixels, firmware 1.0, protocol 1" in out
+    assert "55 test patterns sent and latched" in out
+
+
+def test_nothing_answering_fails_with_what_to_do(tmp_path, capsys):
+    rig = _rig(tmp_path, f'host = "127.0.0.1"\nport = {free_udp_port("127.0.0.1")}\nspawn_emulator = false')
+    assert main(["check", "--config", rig, "--auto", "--timeout-s", "0.3", "--min-free-gb", "0.01"]) == 1
+    out = capsys.readouterr().out
+    verdicts = _lines(out)
+    assert verdicts["distributor"] == verdicts["panels"] == verdicts["panel mapping"] == "FAIL"
+    assert verdicts["disk"] == "PASS"
+    assert "network card" in out and "[link] host/port" in out
+    assert "3 failed: distributor, panels, panel mapping" in out
+
+
+def test_the_operator_confirms_each_panel(tmp_path, monkeypatch, capsys):
+    rig = _rig(tmp_path, 'interface = "virtual"')
+    monkeypatch.setattr("sys.stdin", io.StringIO("\nn\n"))  # panel 7 lit where expected, panel 30 not
+    assert main(["check", "--config", rig, "--panels", "7,30", "--min-free-gb", "0.01"]) == 1
+    out = capsys.readouterr().out
+    assert "panel 7 (pentagon 1 slot 2, azimuth" in out
+    assert "FAIL panel mapping: panels [30] not where expected" in out
+
+
+def test_a_usb_trackball_that_is_absent_fails(tmp_path, capsys):
+    rig = _rig(tmp_path, 'interface = "virtual"',
+               '[locomotion]\nsource = "usb"\n[trackball]\nvendor_id = 0xfffe\nproduct_id = 0xfffd\n')
+    assert main(["check", "--config", rig, "--auto", "--min-free-gb", "0.01"]) == 1
+    out = capsys.readouterr().out
+    assert _lines(out)["trackball"] == "FAIL" and "fffe:fffd" in out
+
+
+def test_real_time_refused_and_a_full_disk_fail(tmp_path, monkeypatch, capsys):
+    def refuse(priority, pid=0):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr("antarium.core.realtime.set_realtime", refuse)
+    rig = _rig(tmp_path, 'interface = "virtual"')
+    Path(rig).write_text(Path(rig).read_text().replace("realtime_priority = 0", "realtime_priority = 20"))
+    assert main(["check", "--config", rig, "--auto", "--min-free-gb", "1e9"]) == 1
+    out = capsys.readouterr().out
+    assert _lines(out)["real time"] == "FAIL" and "rtprio 20" in out
+    assert _lines(out)["disk"] == "FAIL" and "GB wanted" in out
+
+
+def test_bad_panels_are_refused(capsys):
+    assert main(["check", "--panels", "3,55"]) == 2
+    assert "--panels must be 'all' or comma-separated numbers 0..54, got '3,55'" in capsys.readouterr().err
+
+
+def test_the_real_rig_example_loads():
+    config = load_config(DOCS / "rig.real.example.toml")
+    assert config.link.interface == "udp" and not config.link.spawn_emulator and config.link.port == 19055
+    assert config.locomotion.source == "usb" and config.loop.realtime_priority > 0
+    assert config.foreign["trackball"]["vendor_id"] == 0x1209

@@ -1,0 +1,53 @@
+"""Command-line hygiene: every option explains itself, calibrate --dry-run needs no rig file, the packaging is
+quiet (issue #20, point 13)."""
+
+import argparse
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from antarium.cli import build_parser, main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _parsers(parser: argparse.ArgumentParser, name: str = "antarium"):
+    """(name, parser) for `parser` and every sub-command below it."""
+    yield name, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub_name, sub in action.choices.items():
+                yield from _parsers(sub, f"{name} {sub_name}")
+
+
+def test_every_ant_option_has_help():
+    ant = dict(_parsers(build_parser()))["antarium ant"]
+    missing = [f"{name} {'/'.join(a.option_strings) or a.dest}" for name, p in _parsers(ant, "antarium ant")
+               for a in p._actions
+               if not isinstance(a, argparse._HelpAction | argparse._SubParsersAction) and not a.help]
+    assert missing == []
+
+
+def test_calibrate_dry_run_needs_no_config(capsys):
+    assert main(["trackball", "calibrate", "--emulate", "--dry-run", "--turns", "0.25"]) == 0
+    assert "dry run: rig config not changed" in capsys.readouterr().out
+
+
+def test_calibrate_without_config_or_dry_run_says_what_is_needed(capsys):
+    assert main(["trackball", "calibrate", "--emulate"]) == 2
+    assert "needs --config RIG.toml" in capsys.readouterr().err
+
+
+def test_building_the_package_is_quiet_about_the_shipped_layout(tmp_path):
+    src = tmp_path / "src"
+    files = subprocess.run(["git", "ls-files"], cwd=ROOT, check=True, capture_output=True, text=True).stdout.split()
+    for name in files:
+        if (ROOT / name).is_file():
+            (src / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, src / name)
+    shutil.copy2(ROOT / "pyproject.toml", src / "pyproject.toml")
+    out = subprocess.run([sys.executable, "-c", "from setuptools import setup; setup()", "-q", "build_py", "-d",
+                          str(tmp_path / "built")], cwd=src, check=True, capture_output=True, text=True)
+    assert "is absent from the `packages` configuration" not in out.stdout + out.stderr
+    assert (tmp_path / "built" / "antarium" / "geometry" / "data" / "layout.npz").is_file()
