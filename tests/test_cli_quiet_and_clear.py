@@ -37,7 +37,7 @@ def test_bench_render_says_what_it_is_doing_before_each_workload(monkeypatch, ca
                                                      "habitat-layer": (lambda: build_scene("uniform"), {})})
     assert main(["bench", "render", "--frames", "3"]) == 0
     assert len(calls) == 2
-    assert "workload 1/2 'grating': 3 frames" in calls[0] and "workload 2/2 'habitat-layer'" in calls[1]
+    assert "workload 1/2 'grating' on the cpu path: 3 frames" in calls[0] and "workload 2/2 'habitat-layer'" in calls[1]
 
 
 def test_a_bad_model_file_does_not_suggest_unpickling(tmp_path, capsys):
