@@ -170,6 +170,9 @@ class Server:
         except (CommandError, ValueError, RuntimeError, OSError) as exc:
             query.reply_err(json.dumps({"error": str(exc)}))
             return
+        except Exception as exc:  # any refusal is an error reply (RigError), never a timeout  # noqa: BLE001
+            query.reply_err(json.dumps({"error": f"{name}: {type(exc).__name__}: {exc}"}))
+            return
         query.reply(query.key_expr, json.dumps({"ok": True, "result": result}, default=_json_default))
 
     def _publish_event(self, t: float, kind: str, data: dict) -> None:
@@ -320,8 +323,9 @@ class Server:
         try:
             renderer.set_scene(scene)
         except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
-            raise RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); "
-                               f"the current scene {self.scene_name!r} stays on the dome") from None
+            kept = "no scene was loaded before" if self.scene_name is None else \
+                f"the current scene {self.scene_name!r} stays on the dome"
+            raise RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); {kept}") from None
         self.scene_name = scene if isinstance(scene, str) else json.dumps(scene, sort_keys=True)
         self._scene_digest = digest
         self.loop.renderer_changed()
