@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import threading
 import time
 
 import numpy as np
@@ -209,11 +210,14 @@ class Renderer:
         tex.filter = (self._mgl.LINEAR, self._mgl.LINEAR)
         return tex
 
+    def footprint_fwhm_for(self, lowpass_deg) -> float:
+        """FWHM (rad) of the LED acceptance widened by an angular low-pass of `lowpass_deg` (None: none)."""
+        fwhm = math.radians(self.footprint_deg)
+        return fwhm if lowpass_deg is None else math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
+
     def _set_footprint(self, lowpass_deg) -> None:
         """The LED acceptance, widened by an angular low-pass; its sampling matrix is made when first needed."""
-        fwhm = math.radians(self.footprint_deg)
-        if lowpass_deg is not None:
-            fwhm = math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
+        fwhm = self.footprint_fwhm_for(lowpass_deg)
         if fwhm != self._fwhm:
             self._fwhm, self._kernel_matrix = fwhm, None
 
@@ -246,21 +250,27 @@ class Renderer:
     # ------------------------------------------------------------------------------------------ scenes
     @_gl_current
     def set_scene(self, scene) -> Scene:
-        """Load a `Scene`, a scene name, a spec dict or a file path. On any error the previous scene stays."""
+        """Load a `Scene`, a scene name, a spec dict, a file path, or a `PreparedScene` (`prepare_scene`, made in
+        another thread: only the GL uploads run here). On any error the previous scene stays."""
         from .library import build_scene
+        from .prepared import PreparedScene
 
-        new = scene if isinstance(scene, Scene) else build_scene(scene)
+        prepared = scene if isinstance(scene, PreparedScene) else None
+        new = prepared.scene if prepared else scene if isinstance(scene, Scene) else build_scene(scene)
         far_tex = meshes = table = None
         try:
             self._set_footprint(new.lowpass_deg)
-            if self._table_ok(new):
+            if prepared is not None and prepared.table is not None:
+                table = prepared.table
+            elif self._table_ok(new):
                 table = FarFieldTable.of_scene(new, self._directions, self._fwhm)
             else:
                 far_tex = self._make_far_texture(new)
             if new.objects:
-                meshes = MeshBuffers(self.ctx, self._mesh_prog, new.objects, self.chunk_size, self.lod_angle)
+                meshes = MeshBuffers(self.ctx, self._mesh_prog, new.objects, self.chunk_size, self.lod_angle,
+                                     arrays=prepared.arrays if prepared else None)
         except BaseException:
-            for res in (far_tex, meshes):
+            for res in (far_tex, meshes, prepared):
                 if res is not None:
                     res.release()
             self._set_footprint(self.scene.lowpass_deg if self.scene else None)
@@ -273,8 +283,21 @@ class Renderer:
         for res in (old_tex, old_meshes):
             if res is not None:
                 res.release()
-        self._restart_layer()
+        if prepared is not None and prepared.layer is not None:
+            old_layer, self._layer, prepared.layer = self._layer, prepared.layer, None
+            if old_layer is not None:  # an async layer's process may take a while to stop: not in this thread
+                threading.Thread(target=old_layer.release, name="far-layer-release", daemon=True).start() \
+                    if old_layer.mode == "async" else old_layer.release()
+        else:
+            self._restart_layer()
         return new
+
+    def prepare_scene(self, scene, pose=None, timeout_s: float | None = None):
+        """`set_scene`'s work but the GL uploads, for any thread (see `renderers.prepared`); pose: a callable
+        giving the eye's pose now, to wait for the scene's far layer there."""
+        from .prepared import LAYER_WAIT_S, prepare_scene
+
+        return prepare_scene(self, scene, pose, LAYER_WAIT_S if timeout_s is None else timeout_s)
 
     def _restart_layer(self) -> None:
         """A new far layer for the current scene and footprint (none when off, or nothing to split)."""

@@ -40,11 +40,14 @@ class Param:
 @dataclass(frozen=True)
 class Command:
     """params: name -> declaration; handler(server, checked params) -> result (None: the rig's state);
-    in_loop: run in the frame loop's thread between two frames (anything that changes what the dome shows)."""
+    in_loop: run in the frame loop's thread between two frames (anything that changes what the dome shows);
+    prepare(server, checked params): the slow part of an in-loop command, run before it in the caller's thread
+    (never holding a frame); its result reaches the handler as parameter "prepared"."""
 
     params: dict[str, Param]
     handler: Callable[[Server, dict[str, Any]], Any]
     in_loop: bool = True
+    prepare: Callable[[Server, dict[str, Any]], Any] | None = None
 
 
 # -- handlers: run with checked parameters; a handler that raises changes nothing --------------------------------
@@ -146,7 +149,8 @@ _XY = 1e6  # metres: anything farther is a typo, not a world
 COMMANDS: dict[str, Command] = {
     "load_scene": Command(
         {"scene": Param("scene", True, doc="scene name, file path, or {scene: name, ...parameters}")},
-        lambda server, p: server.load_scene(p["scene"])),
+        lambda server, p: server.load_scene(p["scene"], p["prepared"]),
+        prepare=lambda server, p: server.prepare_scene(p["scene"])),
     "set_pose": Command({
         "x": Param("number", True, lo=-_XY, hi=_XY, doc="m"),
         "y": Param("number", True, lo=-_XY, hi=_XY, doc="m"),

@@ -279,10 +279,19 @@ class Server:
             return command.handler(self, checked)
         if self.loop is None or not self._loop_running():
             raise RuntimeError(f"{name}: the server is not running")
+        if command.prepare is not None:
+            try:
+                checked["prepared"] = command.prepare(self, checked)
+            except (CommandError, ValueError, RuntimeError, OSError) as exc:
+                self._log_command(name, params, {"error": str(exc)}, False)
+                raise
         future = self.loop.call_soon(self._apply, name, checked, params)
         try:
             return future.result(COMMAND_TIMEOUT_S)
         except TimeoutError:
+            release = getattr(checked.get("prepared"), "release", None)
+            if release is not None and not future.running() and future.cancel():
+                release()
             raise RuntimeError(f"{name}: the frame loop did not run the command within {COMMAND_TIMEOUT_S} s") \
                 from None
 
@@ -316,22 +325,38 @@ class Server:
             raise RuntimeError(f"{what}: this rig has no renderer (pose-only)")
         return self.renderer
 
-    def load_scene(self, scene: str | dict) -> None:
-        """Load a scene (name, file path or spec) into the renderer; on failure the previous scene stays."""
+    def prepare_scene(self, scene: str | dict):
+        """The CPU work of loading `scene` (parsing, buffers, far field, far layer), in the calling thread while
+        frames go on; None for a renderer that cannot prepare (it then loads in `load_scene`)."""
+        renderer = self.require_renderer("load_scene")
+        if not hasattr(renderer, "prepare_scene"):
+            return None
+        loop = self.loop
+        try:
+            return renderer.prepare_scene(scene, pose=lambda: loop.pose)
+        except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
+            raise self._scene_failed(scene, exc) from None
+
+    def load_scene(self, scene: str | dict, prepared=None) -> None:
+        """Load a scene (name, file path or spec; `prepared` by `prepare_scene`: only swapped in here) into the
+        renderer; on failure the previous scene stays."""
         renderer = self.require_renderer("load_scene")
         digest = _scene_sha256(scene)
         try:
-            renderer.set_scene(scene)
+            renderer.set_scene(scene if prepared is None else prepared)
         except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
-            kept = "no scene was loaded before" if self.scene_name is None else \
-                f"the current scene {self.scene_name!r} stays on the dome"
-            raise RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); {kept}") from None
+            raise self._scene_failed(scene, exc) from None
         self.scene_name = scene if isinstance(scene, str) else json.dumps(scene, sort_keys=True)
         self._scene_digest = digest
         self.loop.renderer_changed()
         if self.trial_log is not None:
             self.trial_log.add_scene(self.clock.now(), self.scene_name, digest)
         self.loop.event("scene_loaded", scene=scene, sha256=digest)
+
+    def _scene_failed(self, scene: str | dict, exc: BaseException) -> RuntimeError:
+        kept = "no scene was loaded before" if self.scene_name is None else \
+            f"the current scene {self.scene_name!r} stays on the dome"
+        return RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); {kept}")
 
     def trial_start(self, name: str, metadata: dict) -> dict[str, Any]:
         from antarium.trial_log import LogError, TrialLog, log_path
