@@ -115,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
         result["rejected_frames"] = server.final_stats.get("rejected_frames", 0)
         result["link_outages"] = server.final_stats.get("link_outages", 0)
         result["far_layer"] = server.final_stats.get("far_layer")
-        result["config"] = {"render": config.render, "loop_rate_hz": config.loop.rate_hz,
+        result["config"] = {"render": {"scene": config.render.scene, "face_size": config.render.face_size_px},
+                            "loop_rate_hz": config.loop.rate_hz,
                             "link": config.link.interface, "locomotion": config.locomotion.source}
     _print(result)
     if args.json_out:
