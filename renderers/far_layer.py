@@ -179,6 +179,10 @@ class FarLayer:
         self._asked = 0.0
         self._last = None  # (eye, time) of the previous frame, and the eye's smoothed velocity (m/s)
         self._velocity = np.zeros(3)
+        #: async: a layer asked for ahead of a jump of the eye (`prefetch`): its eye, then (eye, generation, index)
+        #: once built; held in the spare table until a frame's eye is within its range
+        self._ahead_eye = None
+        self._ahead = None
         args = (objects, radius, face_size, chunk_size, lod_angle)
         if mode == "sync":
             self._builder = FarLayerBuilder(ctx, objects, far_field, *args[1:])
@@ -224,10 +228,22 @@ class FarLayer:
                 self._velocity += VELOCITY_SMOOTHING * (step - self._velocity)
             self._last = (eye, now)
             for eye_built, gen, index in self._worker.results():
-                self._adopt(eye_built, gen, index)
+                if self._ahead_eye is not None and np.array_equal(eye_built, self._ahead_eye):
+                    self._ahead, self._ahead_eye = (eye_built, gen, index), None
+                else:
+                    self._adopt(eye_built, gen, index)
+            ahead = self._ahead
+            if ahead is not None and ahead[1] == self.generation \
+                    and float(np.linalg.norm(eye - ahead[0])) <= self.max_shift:
+                self._ahead = None
+                self._adopt(*ahead)
+            elif ahead is not None and ahead[1] != self.generation:
+                self._ahead = None
+            if self._ahead_eye is not None and not self._worker.busy:  # a prefetch waiting for the builder
+                self._send_build(self._ahead_eye)
             stale = (self._eye is None or self._gen_ready != self.generation
                      or np.linalg.norm(eye - self._eye) > REFRESH_FRACTION * self.max_shift)
-            if stale and not self._worker.busy:
+            if stale and not self._worker.busy and self._ahead is None and self._ahead_eye is None:
                 # for where the eye will be when the layer is in: ahead by the last build's latency (at most
                 # half the allowed shift), so that a walking ant stays near the middle of the layer's range
                 lead = self._velocity * self.latency
@@ -235,11 +251,34 @@ class FarLayer:
                 if norm > 0.5 * self.max_shift:
                     lead *= 0.5 * self.max_shift / norm
                 self._asked = now
-                self._worker.send(("build", eye + lead, self.generation,
-                                   1 - self._index if self._eye is not None else 0))
+                self._send_build(eye + lead)
         if not self._usable(eye):
             return None
         return self._tables[self._index], self._near
+
+    def _send_build(self, eye: np.ndarray) -> None:
+        self._worker.send(("build", eye, self.generation, 1 - self._index if self._eye is not None else 0))
+
+    def prefetch(self, eye: np.ndarray) -> None:
+        """Async: build a layer for `eye` (m), where the eye is about to jump, into the spare table, while frames
+        go on with the current one; the first frame whose eye is in its range uses it (`ready_at`)."""
+        if self.mode != "async" or self.ready_at(eye):
+            return
+        self._ahead, self._ahead_eye = None, np.array(eye, dtype=np.float64)
+        self._asked = time.perf_counter()
+        if not self._worker.busy:
+            self._send_build(self._ahead_eye)
+
+    def ready_at(self, eye: np.ndarray) -> bool:
+        """Whether a frame at `eye` (m) would find a layer (the current one, or one prefetched); any thread."""
+        eye = np.asarray(eye, dtype=np.float64)
+        if self.error:
+            return True  # nothing to wait for: every frame is drawn in full
+        for held in (self._ahead, (self._eye, self._gen_ready)):
+            if held is not None and held[0] is not None and held[1] == self.generation \
+                    and float(np.linalg.norm(eye - held[0])) <= self.max_shift:
+                return True
+        return False
 
     def _adopt(self, eye: np.ndarray, generation: int, index: int) -> None:
         self._eye, self._gen_ready, self._index = np.asarray(eye, dtype=np.float64), generation, index

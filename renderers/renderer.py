@@ -330,6 +330,17 @@ class Renderer:
             time.sleep(0.005)
         return True
 
+    def prefetch_pose(self, pose) -> None:
+        """The eye is about to jump to `pose` (a virtual displacement): have the far layer built there meanwhile
+        (async; frames go on with the current one). Call in the rendering thread; `ready_for(pose)` says when."""
+        if self._layer is not None:
+            self._layer.prefetch(self._scene_eye(self._require_scene(), _check_pose(pose)))
+
+    def ready_for(self, pose) -> bool:
+        """Whether a frame at `pose` would be drawn with a far layer (or needs none); any thread."""
+        layer = self._layer
+        return layer is None or layer.ready_at(self._scene_eye(self._require_scene(), _check_pose(pose)))
+
     def far_layer_status(self) -> dict:
         """Mode, frames drawn with the far layer and in full, layers built, the builder's error ("" if none),
         process id (None unless async), and the latest and largest time from asking for a layer to using it (s)."""

@@ -1,6 +1,7 @@
-"""Scene loads are prepared off the frame loop and swapped in between two frames (issue 20, point 1): the scene is
-parsed and built in the command's thread while frames go on, and the reply comes when the new scene is on the
-dome with its far layer (no frame drawn in full for the swap). Real renderer (EGL), async far layer."""
+"""Scene loads and displacements are prepared off the frame loop and swapped in between two frames (issue 20,
+point 1): the scene is parsed and built in the command's thread while frames go on, and the reply comes when the
+new scene is on the dome with its far layer; a displacement waits for the far layer at its target. No frame is
+drawn in full for either. Real renderer (EGL), async far layer."""
 
 import threading
 
@@ -21,14 +22,36 @@ def small_renderer(render_cfg, clock=None):
     return Renderer(face_size=64, layer_face_size=64, clock=clock, far_layer="async")
 
 
-@pytest.fixture
-def server(tmp_path):
+SMALL_HABITAT = {"scene": "habitat", "n_tussocks": 60, "n_stones": 20, "n_bushes": 3, "n_trees": 2}
+
+
+def _serve(tmp_path, scene):
     config = resolve({"rig": {"name": "tswap"}, "bus": {"enabled": False}, "log": {"dir": str(tmp_path / "logs")},
                       "link": {"interface": "virtual"}, "loop": {"rate_hz": 100.0, "closed_loop": False},
-                      "render": {"scene": "horizon"}})
-    server = Server(config, renderer_factory=small_renderer, echo=lambda line: None).start_thread()
+                      "render": {"scene": scene}})
+    return Server(config, renderer_factory=small_renderer, echo=lambda line: None).start_thread()
+
+
+@pytest.fixture
+def server(tmp_path):
+    server = _serve(tmp_path, "horizon")
     yield server
     server.stop()
+
+
+def test_a_displacement_waits_for_the_far_layer_at_its_target(tmp_path):
+    server = _serve(tmp_path, SMALL_HABITAT)
+    try:
+        for step in (0.5, -0.5, 0.5):
+            full_before = server.renderer.far_layer_status()["full_frames"]
+            pose = server.loop.pose
+            state = server.command("set_pose", {"x": pose.x + step, "y": pose.y})
+            assert state["pose"]["x"] == pytest.approx(pose.x + step)
+            frames = server.loop.frame
+            assert wait_for(lambda: server.loop.frame >= frames + 5, 10.0)
+            assert server.renderer.far_layer_status()["full_frames"] == full_before
+    finally:
+        server.stop()
 
 
 def test_a_scene_is_built_while_frames_go_on_and_shown_with_its_far_layer(server, monkeypatch):

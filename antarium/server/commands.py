@@ -58,6 +58,27 @@ def _set_pose(server: Server, p: dict[str, Any]) -> None:
     server.loop.set_pose(Pose(p["x"], p["y"], z, math.remainder(heading, math.tau)))
 
 
+#: how long a displacement waits for the far layer at its target before it is applied anyway (s)
+DISPLACEMENT_WAIT_S = 2.0
+
+
+def _prepare_pose(server: Server, p: dict[str, Any]) -> None:
+    """Before a displacement: the far layer at its target is built while frames go on (caller's thread)."""
+    import time
+
+    renderer = server.renderer
+    if renderer is None or not hasattr(renderer, "prefetch_pose"):
+        return
+    target = Pose(p["x"], p["y"], server.loop.pose.z if p["z"] is None else p["z"], 0.0)
+    try:
+        server.loop.call_soon(renderer.prefetch_pose, target).result(DISPLACEMENT_WAIT_S)
+    except TimeoutError:  # the loop is held up: the displacement then waits in its queue, nothing to prepare
+        return
+    deadline = time.monotonic() + DISPLACEMENT_WAIT_S
+    while not renderer.ready_for(target) and time.monotonic() < deadline:
+        time.sleep(0.002)
+
+
 def _reset_origin(server: Server, p: dict[str, Any]) -> None:
     origin = None
     if p["x"] is not None:
@@ -156,7 +177,7 @@ COMMANDS: dict[str, Command] = {
         "y": Param("number", True, lo=-_XY, hi=_XY, doc="m"),
         "z": Param("number", False, None, lo=-_XY, hi=_XY, doc="m (eye height; default: keep)"),
         "heading_deg": Param("number", False, None, lo=-3600, hi=3600, doc="world azimuth of the dome's +x"),
-    }, _set_pose),
+    }, _set_pose, prepare=_prepare_pose),
     "reset_origin": Command({
         "x": Param("number", False, None, lo=-_XY, hi=_XY, doc="m; with y: a new origin"),
         "y": Param("number", False, None, lo=-_XY, hi=_XY, doc="m"),
