@@ -183,6 +183,8 @@ class FarLayer:
         #: once built; held in the spare table until a frame's eye is within its range
         self._ahead_eye = None
         self._ahead = None
+        #: async: an edit sent to the builder ahead of the renderer's (`edit_ahead`), until the renderer makes it
+        self._ahead_edit = None
         args = (objects, radius, face_size, chunk_size, lod_angle)
         if mode == "sync":
             self._builder = FarLayerBuilder(ctx, objects, far_field, *args[1:])
@@ -202,7 +204,13 @@ class FarLayer:
         return None if self.mode == "sync" else self._worker.pid
 
     def edit(self, edit: tuple) -> None:
-        """Apply a scene edit (see `FarLayerBuilder.apply`); the layer is unusable until rebuilt."""
+        """Apply a scene edit (see `FarLayerBuilder.apply`); the layer is unusable until rebuilt, unless the
+        edit was sent ahead (`edit_ahead`): its layer is then used from the next frame."""
+        if self._ahead_edit is not None and _same_edit(edit, self._ahead_edit):
+            self._ahead_edit = None
+            self.generation += 1
+            return
+        self._ahead_edit = None
         self.generation += 1
         if self.mode == "sync":
             self._builder.apply(edit)
@@ -237,7 +245,7 @@ class FarLayer:
                     and float(np.linalg.norm(eye - ahead[0])) <= self.max_shift:
                 self._ahead = None
                 self._adopt(*ahead)
-            elif ahead is not None and ahead[1] != self.generation:
+            elif ahead is not None and ahead[1] < self.generation:
                 self._ahead = None
             if self._ahead_eye is not None and not self._worker.busy:  # a prefetch waiting for the builder
                 self._send_build(self._ahead_eye)
@@ -257,7 +265,30 @@ class FarLayer:
         return self._tables[self._index], self._near
 
     def _send_build(self, eye: np.ndarray) -> None:
-        self._worker.send(("build", eye, self.generation, 1 - self._index if self._eye is not None else 0))
+        generation = self.generation + (self._ahead_edit is not None)
+        self._worker.send(("build", eye, generation, 1 - self._index if self._eye is not None else 0))
+
+    def edit_ahead(self, edit: tuple, eye: np.ndarray) -> bool:
+        """Async: send `edit` to the builder now and have its layer built for `eye` (m) into the spare table while
+        frames go on with the current layer; the renderer's own `edit(edit)` then switches to it. False (nothing
+        done) when sync, or another edit is ahead already."""
+        if self.mode != "async" or self._ahead_edit is not None or self.error:
+            return False
+        self._worker.send(("edit", edit))
+        self._ahead_edit = edit
+        self._ahead, self._ahead_eye = None, np.array(eye, dtype=np.float64)
+        self._asked = time.perf_counter()
+        if not self._worker.busy:
+            self._send_build(self._ahead_eye)
+        return True
+
+    def edit_ready(self, eye: np.ndarray) -> bool:
+        """Whether the layer of an edit sent ahead is built, usable at `eye` (m); True when none is ahead."""
+        ahead = self._ahead
+        if self._ahead_edit is None or self.error:
+            return True
+        return ahead is not None and ahead[1] == self.generation + 1 \
+            and float(np.linalg.norm(np.asarray(eye, dtype=np.float64) - ahead[0])) <= self.max_shift
 
     def prefetch(self, eye: np.ndarray) -> None:
         """Async: build a layer for `eye` (m), where the eye is about to jump, into the spare table, while frames
@@ -292,6 +323,14 @@ class FarLayer:
             self._builder.release()
         else:
             self._worker.close()
+
+
+def _same_edit(a: tuple, b: tuple) -> bool:
+    """Whether two far-layer edits do the same (a move to the same place, or hiding the same object)."""
+    if a[0] != b[0] or a[1] != b[1] or a[0] not in ("move", "hide"):
+        return False
+    return a[0] == "hide" or (np.array_equal(a[2].position, b[2].position) and a[2].yaw == b[2].yaw
+                              and a[2].mesh is b[2].mesh and a[2].scale == b[2].scale)
 
 
 def _empty_tables(grid: TableGrid, buffer=None) -> tuple[np.ndarray, np.ndarray]:

@@ -384,18 +384,39 @@ class Renderer:
             scene.pivot = (float(p[0]), float(p[1]))
         scene.rotation = float(angle)
 
+    def _moved(self, name: str, position=None, yaw: float | None = None):
+        """The named object moved to `position` (3,) m and/or turned to `yaw` (rad)."""
+        from .scene import SceneObject
+
+        obj = self._object(name)
+        return SceneObject(obj.mesh, obj.position if position is None else position,
+                           obj.yaw if yaw is None else yaw, obj.scale)
+
     @_gl_current
     def move_object(self, name: str, position=None, yaw: float | None = None) -> None:
         """Move a named object to `position` (3,) m and/or turn it to `yaw` (rad)."""
         scene = self._require_scene()
-        obj = self._object(name)
-        from .scene import SceneObject
-
-        moved = SceneObject(obj.mesh, obj.position if position is None else position,
-                            obj.yaw if yaw is None else yaw, obj.scale)
+        moved = self._moved(name, position, yaw)
         self._meshes.update_object(name, moved)
         scene.objects[name] = moved
         self._layer_edit(("move", name, moved))
+
+    def prefetch_edit(self, pose, op: str, **kwargs) -> None:
+        """A "move_object" or "remove_object" about to come, the eye at `pose`: the async far layer is built with
+        it meanwhile, so that the edit shows with its layer from its first frame (`edit_ready`). Rendering thread."""
+        if self._layer is None or op not in ("move_object", "remove_object"):
+            return
+        if op == "move_object":
+            edit = ("move", kwargs["name"], self._moved(**kwargs))
+        else:
+            self._object(kwargs["name"])
+            edit = ("hide", kwargs["name"])
+        self._layer.edit_ahead(edit, self._scene_eye(self._require_scene(), _check_pose(pose)))
+
+    def edit_ready(self, pose) -> bool:
+        """Whether a prefetched edit can be shown with its far layer at `pose` (True when none is); any thread."""
+        layer = self._layer
+        return layer is None or layer.edit_ready(self._scene_eye(self._require_scene(), _check_pose(pose)))
 
     @_gl_current
     def remove_object(self, name: str) -> None:

@@ -1,7 +1,7 @@
-"""Scene loads and displacements are prepared off the frame loop and swapped in between two frames (issue 20,
-point 1): the scene is parsed and built in the command's thread while frames go on, and the reply comes when the
-new scene is on the dome with its far layer; a displacement waits for the far layer at its target. No frame is
-drawn in full for either. Real renderer (EGL), async far layer."""
+"""Scene loads, displacements and object edits are prepared off the frame loop and swapped in between two frames
+(issue 20, point 1): the scene is parsed and built in the command's thread while frames go on, and the reply comes
+when the new scene is on the dome with its far layer; a displacement (an object edit) waits for the far layer at
+its target (with the edit). No frame is drawn in full for any of them. Real renderer (EGL), async far layer."""
 
 import threading
 
@@ -39,19 +39,39 @@ def server(tmp_path):
     server.stop()
 
 
-def test_a_displacement_waits_for_the_far_layer_at_its_target(tmp_path):
-    server = _serve(tmp_path, SMALL_HABITAT)
-    try:
-        for step in (0.5, -0.5, 0.5):
-            full_before = server.renderer.far_layer_status()["full_frames"]
-            pose = server.loop.pose
-            state = server.command("set_pose", {"x": pose.x + step, "y": pose.y})
-            assert state["pose"]["x"] == pytest.approx(pose.x + step)
-            frames = server.loop.frame
-            assert wait_for(lambda: server.loop.frame >= frames + 5, 10.0)
-            assert server.renderer.far_layer_status()["full_frames"] == full_before
-    finally:
-        server.stop()
+@pytest.fixture(scope="module")
+def habitat_server(tmp_path_factory):
+    server = _serve(tmp_path_factory.mktemp("swap"), SMALL_HABITAT)
+    yield server
+    server.stop()
+
+
+def _no_full_frames_through(server, command: str, params: dict) -> None:
+    """Run `command`, then 5 frames: none of them (nor any while it was prepared) drawn in full."""
+    full_before = server.renderer.far_layer_status()["full_frames"]
+    server.command(command, params)
+    frames = server.loop.frame
+    assert wait_for(lambda: server.loop.frame >= frames + 5, 10.0)
+    assert server.renderer.far_layer_status()["full_frames"] == full_before
+
+
+def test_a_displacement_waits_for_the_far_layer_at_its_target(habitat_server):
+    for step in (0.5, -0.5, 0.5):
+        pose = habitat_server.loop.pose
+        _no_full_frames_through(habitat_server, "set_pose", {"x": pose.x + step, "y": pose.y})
+        assert habitat_server.loop.pose.x == pytest.approx(pose.x + step)
+
+
+def test_an_object_edit_waits_for_the_far_layer_with_it(habitat_server):
+    objects = habitat_server.renderer.scene.objects
+    name = next(n for n in objects if n.startswith("bush"))
+    for dx in (0.2, -0.2, 0.2):
+        x, y, z = (float(c) for c in objects[name].position)
+        _no_full_frames_through(habitat_server, "scene_edit",
+                                {"op": "move_object", "args": {"name": name, "position": [x + dx, y, z]}})
+        assert float(habitat_server.renderer.scene.objects[name].position[0]) == pytest.approx(x + dx)
+    _no_full_frames_through(habitat_server, "scene_edit", {"op": "remove_object", "args": {"name": name}})
+    assert name not in habitat_server.renderer.scene.objects
 
 
 def test_a_scene_is_built_while_frames_go_on_and_shown_with_its_far_layer(server, monkeypatch):
