@@ -285,13 +285,15 @@ class Server:
             except (CommandError, ValueError, RuntimeError, OSError) as exc:
                 self._log_command(name, params, {"error": str(exc)}, False)
                 raise
+            if not self._loop_running():  # stopped meanwhile: what was prepared is never shown
+                _release(checked["prepared"])
+                raise RuntimeError(f"{name}: the server is not running")
         future = self.loop.call_soon(self._apply, name, checked, params)
         try:
             return future.result(COMMAND_TIMEOUT_S)
         except TimeoutError:
-            release = getattr(checked.get("prepared"), "release", None)
-            if release is not None and not future.running() and future.cancel():
-                release()
+            if future.cancel():
+                _release(checked.get("prepared"))
             raise RuntimeError(f"{name}: the frame loop did not run the command within {COMMAND_TIMEOUT_S} s") \
                 from None
 
@@ -602,6 +604,13 @@ class Server:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def _release(prepared) -> None:
+    """Free what a command's prepare step made (a prepared scene's far-layer process) when it is not shown."""
+    release = getattr(prepared, "release", None)
+    if release is not None:
+        release()
 
 
 def _nan0(v: float) -> float:
