@@ -25,12 +25,10 @@ LAYER_WAIT_S = 60.0
 
 @dataclass
 class PreparedScene:
-    """A scene ready for `Renderer.set_scene`: the scene, its footprint FWHM (rad), its far-field table (None:
-    drawn from a cube texture), its meshes' arrays (None: no objects) and its started async far layer (None:
-    none, or made by the renderer)."""
+    """A scene ready for `Renderer.set_scene`: the scene, its far-field table (None: drawn from a cube texture),
+    its meshes' arrays (None: no objects) and its started async far layer (None: none, or made by the renderer)."""
 
     scene: Scene
-    fwhm: float
     table: FarFieldTable | None
     arrays: MeshArrays | None
     layer: object | None = None
@@ -53,7 +51,7 @@ def prepare_scene(renderer, spec, pose: Callable[[], Pose] | None = None,
     fwhm = renderer.footprint_fwhm_for(scene.lowpass_deg)
     table = FarFieldTable.of_scene(scene, renderer._directions, fwhm) if renderer._table_ok(scene) else None
     arrays = MeshArrays(scene.objects, renderer.chunk_size) if scene.objects else None
-    prepared = PreparedScene(scene, fwhm, table, arrays)
+    prepared = PreparedScene(scene, table, arrays)
     if renderer.far_layer_mode != "async" or table is None or not scene.objects or scene.yaw_rate != 0:
         return prepared
     from . import cubemap
