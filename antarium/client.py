@@ -35,6 +35,15 @@ class RigError(RuntimeError):
     """The server refused a command (its message says why), or no server answered."""
 
 
+def _plain(value: Any) -> Any:
+    """numpy scalars and arrays as plain numbers and lists (for JSON, and for messages: `-5.0`, not
+    `np.float64(-5.0)`); anything else is not a command parameter (TypeError)."""
+    tolist = getattr(value, "tolist", None)
+    if tolist is None:
+        raise TypeError(f"{type(value).__name__} is not a number, string, list or object")
+    return tolist()
+
+
 @dataclass(frozen=True, slots=True)
 class PoseUpdate:
     """One pose from the server's stream: frame number, server time (s), pose, scene rotation (rad), mode."""
@@ -143,8 +152,13 @@ class Rig:
             raise RigError(f"unknown command {command!r}; allowed: {', '.join(COMMANDS)}")
         if self._session is None:
             raise RigError("the rig is not connected; use `with Rig(...) as rig:` or `rig.connect()`")
+        try:
+            payload = json.dumps(params, default=_plain)
+        except (TypeError, ValueError) as exc:
+            raise RigError(f"{command}: a parameter cannot be sent: {exc}; allowed: numbers, strings, booleans, "
+                           "lists and objects (numpy arrays and numbers too)") from None
         key = bus.command_key(self.name, command)
-        replies = self._session.get(key, payload=json.dumps(params), timeout=self.timeout_s)
+        replies = self._session.get(key, payload=payload, timeout=self.timeout_s)
         for reply in replies:
             if reply.ok is not None:
                 body = json.loads(reply.ok.payload.to_bytes())
@@ -207,11 +221,9 @@ class Rig:
         return self.call("sky", **params)
 
     def polarisers(self, angles_deg=None) -> dict:
-        """Hold the 55 x 9 polariser e-vector angles (degrees), or None to follow the scene's sky again."""
-        import numpy as np
-
-        value = None if angles_deg is None else np.asarray(angles_deg, dtype=float).tolist()
-        return self.call("polarisers", angles_deg=value)
+        """Hold the 55 x 9 polariser e-vector angles (degrees), or None to follow the scene's sky again
+        (the server checks the shape and values)."""
+        return self.call("polarisers", angles_deg=angles_deg)
 
     def start_trial(self, name: str, **metadata: Any) -> str:
         """Start recording a trial; returns the log file's absolute path (on the server's computer)."""
@@ -281,8 +293,10 @@ class Rig:
     @staticmethod
     def wait(seconds: float) -> None:
         """Wait `seconds` of wall time (the dome keeps running)."""
-        if not isinstance(seconds, (int, float)) or seconds < 0 or not math.isfinite(seconds):
-            raise ValueError(f"wait needs a finite number of seconds >= 0, got {seconds!r}")
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not seconds >= 0 \
+                or not math.isfinite(seconds):
+            shown = float(seconds) if isinstance(seconds, (int, float)) else repr(seconds)
+            raise RigError(f"wait needs a finite number of seconds >= 0, got {shown}")
         time.sleep(seconds)
 
 

@@ -179,6 +179,12 @@ class FarLayer:
         self._asked = 0.0
         self._last = None  # (eye, time) of the previous frame, and the eye's smoothed velocity (m/s)
         self._velocity = np.zeros(3)
+        #: async: a layer asked for ahead of a jump of the eye (`prefetch`): its eye, then (eye, generation, index)
+        #: once built; held in the spare table until a frame's eye is within its range
+        self._ahead_eye = None
+        self._ahead = None
+        #: async: an edit sent to the builder ahead of the renderer's (`edit_ahead`), until the renderer makes it
+        self._ahead_edit = None
         args = (objects, radius, face_size, chunk_size, lod_angle)
         if mode == "sync":
             self._builder = FarLayerBuilder(ctx, objects, far_field, *args[1:])
@@ -198,7 +204,13 @@ class FarLayer:
         return None if self.mode == "sync" else self._worker.pid
 
     def edit(self, edit: tuple) -> None:
-        """Apply a scene edit (see `FarLayerBuilder.apply`); the layer is unusable until rebuilt."""
+        """Apply a scene edit (see `FarLayerBuilder.apply`); the layer is unusable until rebuilt, unless the
+        edit was sent ahead (`edit_ahead`): its layer is then used from the next frame."""
+        if self._ahead_edit is not None and _same_edit(edit, self._ahead_edit):
+            self._ahead_edit = None
+            self.generation += 1
+            return
+        self._ahead_edit = None
         self.generation += 1
         if self.mode == "sync":
             self._builder.apply(edit)
@@ -224,10 +236,22 @@ class FarLayer:
                 self._velocity += VELOCITY_SMOOTHING * (step - self._velocity)
             self._last = (eye, now)
             for eye_built, gen, index in self._worker.results():
-                self._adopt(eye_built, gen, index)
+                if self._ahead_eye is not None and np.array_equal(eye_built, self._ahead_eye):
+                    self._ahead, self._ahead_eye = (eye_built, gen, index), None
+                else:
+                    self._adopt(eye_built, gen, index)
+            ahead = self._ahead
+            if ahead is not None and ahead[1] == self.generation \
+                    and float(np.linalg.norm(eye - ahead[0])) <= self.max_shift:
+                self._ahead = None
+                self._adopt(*ahead)
+            elif ahead is not None and ahead[1] < self.generation:
+                self._ahead = None
+            if self._ahead_eye is not None and not self._worker.busy:  # a prefetch waiting for the builder
+                self._send_build(self._ahead_eye)
             stale = (self._eye is None or self._gen_ready != self.generation
                      or np.linalg.norm(eye - self._eye) > REFRESH_FRACTION * self.max_shift)
-            if stale and not self._worker.busy:
+            if stale and not self._worker.busy and self._ahead is None and self._ahead_eye is None:
                 # for where the eye will be when the layer is in: ahead by the last build's latency (at most
                 # half the allowed shift), so that a walking ant stays near the middle of the layer's range
                 lead = self._velocity * self.latency
@@ -235,11 +259,57 @@ class FarLayer:
                 if norm > 0.5 * self.max_shift:
                     lead *= 0.5 * self.max_shift / norm
                 self._asked = now
-                self._worker.send(("build", eye + lead, self.generation,
-                                   1 - self._index if self._eye is not None else 0))
+                self._send_build(eye + lead)
         if not self._usable(eye):
             return None
         return self._tables[self._index], self._near
+
+    def _send_build(self, eye: np.ndarray) -> None:
+        generation = self.generation + (self._ahead_edit is not None)
+        self._worker.send(("build", eye, generation, 1 - self._index if self._eye is not None else 0))
+
+    def edit_ahead(self, edit: tuple, eye: np.ndarray) -> bool:
+        """Async: send `edit` to the builder now and have its layer built for `eye` (m) into the spare table while
+        frames go on with the current layer; the renderer's own `edit(edit)` then switches to it. False (nothing
+        done) when sync, or another edit is ahead already."""
+        if self.mode != "async" or self._ahead_edit is not None or self.error:
+            return False
+        self._worker.send(("edit", edit))
+        self._ahead_edit = edit
+        self._ahead, self._ahead_eye = None, np.array(eye, dtype=np.float64)
+        self._asked = time.perf_counter()
+        if not self._worker.busy:
+            self._send_build(self._ahead_eye)
+        return True
+
+    def edit_ready(self, eye: np.ndarray) -> bool:
+        """Whether the layer of an edit sent ahead is built, usable at `eye` (m); True when none is ahead."""
+        ahead = self._ahead
+        if self._ahead_edit is None or self.error:
+            return True
+        return ahead is not None and ahead[1] == self.generation + 1 \
+            and float(np.linalg.norm(np.asarray(eye, dtype=np.float64) - ahead[0])) <= self.max_shift
+
+    def prefetch(self, eye: np.ndarray) -> None:
+        """Async: build a layer for `eye` (m), where the eye is about to jump, into the spare table, while frames
+        go on with the current one; the first frame whose eye is in its range uses it (`ready_at`)."""
+        if self.mode != "async" or self.ready_at(eye):
+            return
+        self._ahead, self._ahead_eye = None, np.array(eye, dtype=np.float64)
+        self._asked = time.perf_counter()
+        if not self._worker.busy:
+            self._send_build(self._ahead_eye)
+
+    def ready_at(self, eye: np.ndarray) -> bool:
+        """Whether a frame at `eye` (m) would find a layer (the current one, or one prefetched); any thread."""
+        eye = np.asarray(eye, dtype=np.float64)
+        if self.error:
+            return True  # nothing to wait for: every frame is drawn in full
+        for held in (self._ahead, (self._eye, self._gen_ready)):
+            if held is not None and held[0] is not None and held[1] == self.generation \
+                    and float(np.linalg.norm(eye - held[0])) <= self.max_shift:
+                return True
+        return False
 
     def _adopt(self, eye: np.ndarray, generation: int, index: int) -> None:
         self._eye, self._gen_ready, self._index = np.asarray(eye, dtype=np.float64), generation, index
@@ -253,6 +323,14 @@ class FarLayer:
             self._builder.release()
         else:
             self._worker.close()
+
+
+def _same_edit(a: tuple, b: tuple) -> bool:
+    """Whether two far-layer edits do the same (a move to the same place, or hiding the same object)."""
+    if a[0] != b[0] or a[1] != b[1] or a[0] not in ("move", "hide"):
+        return False
+    return a[0] == "hide" or (np.array_equal(a[2].position, b[2].position) and a[2].yaw == b[2].yaw
+                              and a[2].mesh is b[2].mesh and a[2].scale == b[2].scale)
 
 
 def _empty_tables(grid: TableGrid, buffer=None) -> tuple[np.ndarray, np.ndarray]:

@@ -73,27 +73,22 @@ def cluster_vertices(vertices, colours, faces, tri_chunk, cell: float):
     return new_v.astype(np.float32), new_c.astype(np.float32), tri[first], tri_chunk[first]
 
 
-class MeshBuffers:
-    """All objects of a scene on the GPU. Per frame, `draw` culls chunks per face and renders them.
+class MeshArrays:
+    """The CPU half of `MeshBuffers`: interleaved vertices, indices, per-chunk draw ranges and bounding spheres
+    of a scene's objects. Needs no GL context: built in any thread, uploaded by `MeshBuffers` in the GL one.
 
-    lod_angle: radians; a chunk at distance D uses level-of-detail cells up to lod_angle * D (0: no LOD).
+    vertices (V, 9) float32 [position (world, m), colour, uv, texture layer]; indices (I,) uint32; first, count
+    (n_chunks, levels) uint32 index ranges per level of detail; centre (n_chunks, 3), radius (n_chunks,) m.
     """
 
-    def __init__(self, ctx, prog, objects: dict, chunk_size: float = 2.0, lod_angle: float = 0.0):
-        self.ctx, self.prog = ctx, prog
-        self.lod_angle = float(lod_angle)
-        self._resources = []
+    def __init__(self, objects: dict, chunk_size: float = 2.0):
         self.n_chunks = 0
+        self.ranges = {}  # name -> vertex start, object-space vertices, colours, uv, layer, order, chunks
         if not objects:
             return
-        import moderngl
-
-        self._mgl = moderngl
-        self._textures = self._texture_array(objects)
         n_levels = 1 + len(LOD_CELLS)
         vert_blocks, idx_blocks = [], []
         first, count, sided = [], [], []  # per chunk: (n_levels,) index offsets and counts; back-face culling
-        self._ranges = {}  # name -> vertex start, object-space vertices, colours, uv, layer, order, chunks
         v0 = i0 = c0 = 0
         layer = 0
         for name, obj in objects.items():
@@ -136,37 +131,83 @@ class MeshBuffers:
             first.append(f_obj)
             count.append(n_obj)
             sided.append(np.full(n_chunks, not mesh.double_sided))
-            self._ranges[name] = (v0, local, colours, uv, tex_layer, order, tri_chunk, c0, c0 + n_chunks)
-            vert_blocks.append(self._interleave(obj, local, colours, uv, tex_layer))
+            self.ranges[name] = (v0, local, colours, uv, tex_layer, order, tri_chunk, c0, c0 + n_chunks)
+            vert_blocks.append(interleave(obj, local, colours, uv, tex_layer))
             v0 += len(local)
             c0 += n_chunks
-        self._vbo = ctx.buffer(np.concatenate(vert_blocks).tobytes())
-        self._ibo = ctx.buffer(np.concatenate(idx_blocks).astype(np.uint32).tobytes())
+        self.vertices = np.concatenate(vert_blocks)
+        self.indices = np.concatenate(idx_blocks).astype(np.uint32)
+        self.n_chunks = c0
+        self.first = np.concatenate(first).astype(np.uint32)
+        self.count = np.concatenate(count).astype(np.uint32)
+        self.single_sided = np.concatenate(sided)
+        self.centre = np.zeros((self.n_chunks, 3))
+        self.radius = np.zeros(self.n_chunks)
+        for name, obj in objects.items():
+            self.bounds(name, obj)
+
+    def bounds(self, name: str, obj) -> None:
+        """Bounding spheres (world coordinates) of an object's chunks, from its full-detail triangles."""
+        *_, order, tri_chunk, c0, c1 = self.ranges[name]
+        tri = obj.world_vertices()[obj.mesh.faces[order]]
+        n = c1 - c0
+        lo = np.full((n, 3), np.inf)
+        hi = np.full((n, 3), -np.inf)
+        np.minimum.at(lo, tri_chunk, tri.min(axis=1))
+        np.maximum.at(hi, tri_chunk, tri.max(axis=1))
+        self.centre[c0:c1] = (lo + hi) / 2
+        self.radius[c0:c1] = np.linalg.norm(hi - lo, axis=1) / 2
+
+    def near_chunks(self, eye: np.ndarray, radius: float) -> np.ndarray:
+        """(n_chunks,) bool: some of the chunk's bounding sphere lies within `radius` (m) of `eye` (m)."""
+        return np.linalg.norm(self.centre - eye, axis=1) - self.radius < radius
+
+
+def interleave(obj, local, colours, uv, tex_layer: float) -> np.ndarray:
+    """(V, 9) float32 vertex block of an object: world positions, colours, uv, texture layer."""
+    v = np.empty((len(local), _FLOATS_PER_VERTEX), dtype=np.float32)
+    v[:, 0:3] = obj.to_world(local)
+    v[:, 3:6] = colours
+    v[:, 6:8] = uv
+    v[:, 8] = tex_layer
+    return v
+
+
+class MeshBuffers:
+    """All objects of a scene on the GPU. Per frame, `draw` culls chunks per face and renders them.
+
+    lod_angle: radians; a chunk at distance D uses level-of-detail cells up to lod_angle * D (0: no LOD).
+    arrays: the objects' `MeshArrays`, made beforehand in another thread (default: made here); only the GL
+    uploads then run here.
+    """
+
+    def __init__(self, ctx, prog, objects: dict, chunk_size: float = 2.0, lod_angle: float = 0.0,
+                 arrays: MeshArrays | None = None):
+        self.ctx, self.prog = ctx, prog
+        self.lod_angle = float(lod_angle)
+        self._resources = []
+        self.n_chunks = 0
+        if not objects:
+            return
+        import moderngl
+
+        self._mgl = moderngl
+        a = MeshArrays(objects, chunk_size) if arrays is None else arrays
+        self._arrays = a
+        self._textures = self._texture_array(objects)
+        self._ranges, self._centre, self._radius = a.ranges, a.centre, a.radius
+        self._vbo = ctx.buffer(a.vertices.tobytes())
+        self._ibo = ctx.buffer(a.indices.tobytes())
         self._vao = ctx.vertex_array(prog, [(self._vbo, "3f 3f 2f 1f", "in_pos", "in_col", "in_uv", "in_layer")],
                                      self._ibo, index_element_size=4)
-        self.n_chunks = c0
-        self._first = np.concatenate(first).astype(np.uint32)
-        self._count = np.concatenate(count).astype(np.uint32)
-        self._single_sided = np.concatenate(sided)
+        self.n_chunks = a.n_chunks
+        self._first, self._count, self._single_sided = a.first, a.count, a.single_sided
         self._active = np.ones(self.n_chunks, dtype=bool)
-        self._centre = np.zeros((self.n_chunks, 3))
-        self._radius = np.zeros(self.n_chunks)
-        for name, obj in objects.items():
-            self._bounds(name, obj)
         self._indirect = ctx.buffer(reserve=6 * self.n_chunks * 20)
         self._cmds = np.zeros((6 * self.n_chunks, 5), dtype=np.uint32)
         self._cmds[:, 1] = 1
         self.last_triangles = 0
         self._resources += [self._vao, self._vbo, self._ibo, self._indirect]
-
-    @staticmethod
-    def _interleave(obj, local, colours, uv, tex_layer: float) -> np.ndarray:
-        v = np.empty((len(local), _FLOATS_PER_VERTEX), dtype=np.float32)
-        v[:, 0:3] = obj.to_world(local)
-        v[:, 3:6] = colours
-        v[:, 6:8] = uv
-        v[:, 8] = tex_layer
-        return v
 
     def _texture_array(self, objects):
         import cv2
@@ -183,24 +224,12 @@ class MeshBuffers:
         self._resources.append(tex)
         return tex
 
-    def _bounds(self, name: str, obj) -> None:
-        """Bounding spheres (world coordinates) of an object's chunks, from its full-detail triangles."""
-        *_, order, tri_chunk, c0, c1 = self._ranges[name]
-        tri = obj.world_vertices()[obj.mesh.faces[order]]
-        n = c1 - c0
-        lo = np.full((n, 3), np.inf)
-        hi = np.full((n, 3), -np.inf)
-        np.minimum.at(lo, tri_chunk, tri.min(axis=1))
-        np.maximum.at(hi, tri_chunk, tri.max(axis=1))
-        self._centre[c0:c1] = (lo + hi) / 2
-        self._radius[c0:c1] = np.linalg.norm(hi - lo, axis=1) / 2
-
     def update_object(self, name: str, obj) -> None:
         """Re-upload a moved object's vertices (all levels) and recompute its chunks' bounds."""
         v0, local, colours, uv, tex_layer, *_ = self._ranges[name]
-        block = self._interleave(obj, local, colours, uv, tex_layer)
+        block = interleave(obj, local, colours, uv, tex_layer)
         self._vbo.write(block.tobytes(), offset=v0 * _FLOATS_PER_VERTEX * 4)
-        self._bounds(name, obj)
+        self._arrays.bounds(name, obj)
 
     @property
     def drawable(self) -> bool:
@@ -233,7 +262,7 @@ class MeshBuffers:
 
     def near_chunks(self, eye: np.ndarray, radius: float) -> np.ndarray:
         """(n_chunks,) bool: some of the chunk's bounding sphere lies within `radius` (m) of `eye` (m)."""
-        return np.linalg.norm(self._centre - eye, axis=1) - self._radius < radius
+        return self._arrays.near_chunks(eye, radius)
 
     def draw(self, fbo, views: np.ndarray, proj: np.ndarray, q: np.ndarray, eye: np.ndarray, n: int,
              chunks: np.ndarray | None = None) -> int:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import threading
 import time
 
 import numpy as np
@@ -237,11 +238,14 @@ class Renderer:
         tex.filter = (self._mgl.LINEAR, self._mgl.LINEAR)
         return tex
 
+    def footprint_fwhm_for(self, lowpass_deg) -> float:
+        """FWHM (rad) of the LED acceptance widened by an angular low-pass of `lowpass_deg` (None: none)."""
+        fwhm = math.radians(self.footprint_deg)
+        return fwhm if lowpass_deg is None else math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
+
     def _set_footprint(self, lowpass_deg) -> None:
         """The LED acceptance, widened by an angular low-pass; its sampling matrix is made when first needed."""
-        fwhm = math.radians(self.footprint_deg)
-        if lowpass_deg is not None:
-            fwhm = math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
+        fwhm = self.footprint_fwhm_for(lowpass_deg)
         if fwhm != self._fwhm:
             self._fwhm, self._kernel_matrix = fwhm, None
 
@@ -274,21 +278,27 @@ class Renderer:
     # ------------------------------------------------------------------------------------------ scenes
     @_gl_current
     def set_scene(self, scene) -> Scene:
-        """Load a `Scene`, a scene name, a spec dict or a file path. On any error the previous scene stays."""
+        """Load a `Scene`, a scene name, a spec dict, a file path, or a `PreparedScene` (`prepare_scene`, made in
+        another thread: only the GL uploads run here). On any error the previous scene stays."""
         from .library import build_scene
+        from .prepared import PreparedScene
 
-        new = scene if isinstance(scene, Scene) else build_scene(scene)
+        prepared = scene if isinstance(scene, PreparedScene) else None
+        new = prepared.scene if prepared else scene if isinstance(scene, Scene) else build_scene(scene)
         far_tex = meshes = table = None
         try:
             self._set_footprint(new.lowpass_deg)
-            if self._table_ok(new):
+            if prepared is not None and prepared.table is not None:
+                table = prepared.table
+            elif self._table_ok(new):
                 table = FarFieldTable.of_scene(new, self._directions, self._fwhm)
             else:
                 far_tex = self._make_far_texture(new)
             if new.objects:
-                meshes = MeshBuffers(self.ctx, self._mesh_prog, new.objects, self.chunk_size, self.lod_angle)
+                meshes = MeshBuffers(self.ctx, self._mesh_prog, new.objects, self.chunk_size, self.lod_angle,
+                                     arrays=prepared.arrays if prepared else None)
         except BaseException:
-            for res in (far_tex, meshes):
+            for res in (far_tex, meshes, prepared):
                 if res is not None:
                     res.release()
             self._set_footprint(self.scene.lowpass_deg if self.scene else None)
@@ -301,13 +311,26 @@ class Renderer:
         for res in (old_tex, old_meshes):
             if res is not None:
                 res.release()
-        self._restart_layer()
+        if prepared is not None and prepared.layer is not None:
+            old_layer, self._layer, prepared.layer = self._layer, prepared.layer, None
+            if old_layer is not None:  # an async layer's process may take a while to stop: not in this thread
+                threading.Thread(target=old_layer.release, name="far-layer-release", daemon=True).start() \
+                    if old_layer.mode == "async" else old_layer.release()
+        else:
+            self._restart_layer()
         return new
 
     def use_clock(self, clock) -> None:
         """Render on `clock` from now on, its current time the scene's start (a renderer reused for a new run)."""
         self.clock = clock
         self._t0 = clock.now()
+
+    def prepare_scene(self, scene, pose=None, timeout_s: float | None = None):
+        """`set_scene`'s work but the GL uploads, for any thread (see `renderers.prepared`); pose: a callable
+        giving the eye's pose now, to wait for the scene's far layer there."""
+        from .prepared import LAYER_WAIT_S, prepare_scene
+
+        return prepare_scene(self, scene, pose, LAYER_WAIT_S if timeout_s is None else timeout_s)
 
     def _restart_layer(self) -> None:
         """A new far layer for the current scene and footprint (none when off, or nothing to split)."""
@@ -339,6 +362,17 @@ class Renderer:
                 return False
             time.sleep(0.005)
         return True
+
+    def prefetch_pose(self, pose) -> None:
+        """The eye is about to jump to `pose` (a virtual displacement): have the far layer built there meanwhile
+        (async; frames go on with the current one). Call in the rendering thread; `ready_for(pose)` says when."""
+        if self._layer is not None:
+            self._layer.prefetch(self._scene_eye(self._require_scene(), _check_pose(pose)))
+
+    def ready_for(self, pose) -> bool:
+        """Whether a frame at `pose` would be drawn with a far layer (or needs none); any thread."""
+        layer = self._layer
+        return layer is None or layer.ready_at(self._scene_eye(self._require_scene(), _check_pose(pose)))
 
     def far_layer_status(self) -> dict:
         """Mode, frames drawn with the far layer and in full, layers built, the builder's error ("" if none),
@@ -383,18 +417,39 @@ class Renderer:
             scene.pivot = (float(p[0]), float(p[1]))
         scene.rotation = float(angle)
 
+    def _moved(self, name: str, position=None, yaw: float | None = None):
+        """The named object moved to `position` (3,) m and/or turned to `yaw` (rad)."""
+        from .scene import SceneObject
+
+        obj = self._object(name)
+        return SceneObject(obj.mesh, obj.position if position is None else position,
+                           obj.yaw if yaw is None else yaw, obj.scale)
+
     @_gl_current
     def move_object(self, name: str, position=None, yaw: float | None = None) -> None:
         """Move a named object to `position` (3,) m and/or turn it to `yaw` (rad)."""
         scene = self._require_scene()
-        obj = self._object(name)
-        from .scene import SceneObject
-
-        moved = SceneObject(obj.mesh, obj.position if position is None else position,
-                            obj.yaw if yaw is None else yaw, obj.scale)
+        moved = self._moved(name, position, yaw)
         self._meshes.update_object(name, moved)
         scene.objects[name] = moved
         self._layer_edit(("move", name, moved))
+
+    def prefetch_edit(self, pose, op: str, **kwargs) -> None:
+        """A "move_object" or "remove_object" about to come, the eye at `pose`: the async far layer is built with
+        it meanwhile, so that the edit shows with its layer from its first frame (`edit_ready`). Rendering thread."""
+        if self._layer is None or op not in ("move_object", "remove_object"):
+            return
+        if op == "move_object":
+            edit = ("move", kwargs["name"], self._moved(**kwargs))
+        else:
+            self._object(kwargs["name"])
+            edit = ("hide", kwargs["name"])
+        self._layer.edit_ahead(edit, self._scene_eye(self._require_scene(), _check_pose(pose)))
+
+    def edit_ready(self, pose) -> bool:
+        """Whether a prefetched edit can be shown with its far layer at `pose` (True when none is); any thread."""
+        layer = self._layer
+        return layer is None or layer.edit_ready(self._scene_eye(self._require_scene(), _check_pose(pose)))
 
     @_gl_current
     def remove_object(self, name: str) -> None:

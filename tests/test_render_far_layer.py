@@ -210,7 +210,7 @@ def test_a_frame_never_waits_for_a_helper_that_has_not_started_its_work(dome):
     r = Renderer(dome, far_layer="sync")
     r.set_scene(small_habitat())
     expected = r.render(WALK[3], t=0.0).copy()
-    assert r.helper_misses == 0
+    before = r.helper_misses  # a busy machine may already have made the first frame take its work back
     release = threading.Event()
     r._helper_thread().submit(release.wait, 30.0)  # the helper held off (on a rig: its CPU or the GIL taken)
     try:
@@ -218,7 +218,7 @@ def test_a_frame_never_waits_for_a_helper_that_has_not_started_its_work(dome):
     finally:
         release.set()
     # the far-field lookup and the helper's half of the sampling were taken back and done by the caller
-    assert r.helper_misses == 2
+    assert r.helper_misses == before + 2
     np.testing.assert_array_equal(held_off, expected)
     np.testing.assert_array_equal(r.render(WALK[3], t=0.0), expected)
     r.release()

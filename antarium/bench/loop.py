@@ -6,6 +6,11 @@ the goal is stated for 600) or `--frames`, then reads the recorded per-frame tab
 frame rate against target, late and skipped frames, closed-loop latency p50/p99/max and per-stage times,
 as ratios to the dome's needs (190 frames/s, 5.3 ms frame period). The first second (warm-up) is excluded.
 
+With `--load-every S`, `--displace-every S` and `--edit-every S` a script thread sends the rig's scene again
+(`load_scene`), a virtual displacement (`set_pose` 0.5 m away and back) or an object move (`scene_edit`) on that
+schedule, as an experiment script would; the report then lists each kind's reply times and the late frames from
+its sending to 1 s after its reply.
+
 With `--machine-probe`, a stall probe runs on every CPU beside it (`antarium.bench.jitter.StallProbes`, real-time
 above the loop): the report then says how often the machine itself stopped a CPU, and how many late frames
 overlap such a stall (the machine's) and how many do not (the loop's own).
@@ -116,12 +121,16 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None)
         server = Server(config, record="bench-loop", echo=lambda line: None)
         probes = _start_probes(config.loop.realtime_priority) if getattr(args, "machine_probe", False) \
             else None
+        script = ScriptedCommands(server, config.render.scene, getattr(args, "load_every", None),
+                                  getattr(args, "displace_every", None), getattr(args, "edit_every", None))
         try:
             server.run(seconds=seconds, frames=args.frames)
         finally:
             stalls = probes.stop() if probes is not None else None
+            script.stop()
         frames = read_table(server.trial_paths[0], "frames")
         result = summarise(frames, config.loop.rate_hz, stalls)
+        result["commands"] = script.summary(frames)
         result["rejected_frames"] = server.final_stats.get("rejected_frames", 0)
         result["link_outages"] = server.final_stats.get("link_outages", 0)
         result["far_layer"] = server.final_stats.get("far_layer")
@@ -131,6 +140,82 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None)
     if args.json_out:
         with open(args.json_out, "w") as fh:
             json.dump(result, fh, indent=2)
+
+
+#: after a scripted command's reply, its late frames are counted for this long (s)
+AFTER_REPLY_S = 1.0
+
+
+class ScriptedCommands:
+    """A thread sending commands to `server` on a schedule (seconds between them; None: never), and recording
+    (kind, sent, replied, error) for each on the server's clock."""
+
+    def __init__(self, server, scene, load_every: float | None, displace_every: float | None,
+                 edit_every: float | None) -> None:
+        import threading
+
+        self.server, self.scene = server, scene
+        self.every = {k: v for k, v in (("load_scene", load_every), ("set_pose", displace_every),
+                                        ("scene_edit", edit_every)) if v}
+        for kind, every in self.every.items():
+            if not every > 0:
+                raise ValueError(f"--{kind} interval must be > 0 seconds, got {every}")
+        self.records: list[tuple[str, float, float, str]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="bench-script", daemon=True) if self.every else None
+        if self._thread is not None:
+            self._thread.start()
+
+    def _params(self, kind: str, n: int) -> dict:
+        if kind == "load_scene":
+            return {"scene": self.scene}
+        if kind == "set_pose":
+            pose = self.server.loop.pose
+            return {"x": pose.x + (0.5 if n % 2 == 0 else -0.5), "y": pose.y}
+        scene = self.server.renderer.scene
+        name = next(iter(scene.objects))
+        x, y, z = (float(c) for c in scene.objects[name].position)
+        return {"op": "move_object", "args": {"name": name, "position": [x + (0.2 if n % 2 == 0 else -0.2), y, z]}}
+
+    def _run(self) -> None:
+        if not self.server.wait_ready(None):
+            return
+        clock = self.server.clock
+        t0 = clock.now()
+        due = {kind: t0 + every for kind, every in self.every.items()}
+        count = dict.fromkeys(self.every, 0)
+        while not self._stop.is_set():
+            kind = min(due, key=due.get)
+            if self._stop.wait(max(0.0, due[kind] - clock.now())):
+                return
+            sent, error = clock.now(), ""
+            try:
+                self.server.command(kind, self._params(kind, count[kind]))
+            except (ValueError, RuntimeError, OSError, StopIteration) as exc:
+                error = str(exc) or type(exc).__name__
+            self.records.append((kind, sent, clock.now(), error))
+            count[kind] += 1
+            due[kind] += self.every[kind]
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(10.0)
+
+    def summary(self, frames: dict[str, np.ndarray]) -> dict[str, Any]:
+        """Per kind: how many were sent, refused, their reply times, and the late frames around them."""
+        out: dict[str, Any] = {}
+        t, late = frames["t_start"], frames["late"].astype(bool)
+        for kind in self.every:
+            rows = [r for r in self.records if r[0] == kind]
+            replies = np.array([r[2] - r[1] for r in rows])
+            around = np.zeros(len(t), dtype=bool)
+            for _, sent, replied, _ in rows:
+                around |= (t >= sent) & (t <= replied + AFTER_REPLY_S)
+            out[kind] = {"sent": len(rows), "errors": [r[3] for r in rows if r[3]][:3],
+                         "reply": _pct(replies) if len(rows) else None,
+                         "late_frames_around": int((late & around).sum()), "frames_around": int(around.sum())}
+        return out
 
 
 def _start_probes(loop_priority: int):
@@ -168,6 +253,10 @@ def _print(r: dict[str, Any]) -> None:
     for stage, p in r["stages"].items():
         print(f"    {stage:<12}  {_fmt(p)}")
     print(f"  pacing error    {_fmt(r['pacing_error'])}")
+    for kind, c in (r.get("commands") or {}).items():
+        errors = f"; ERRORS: {' | '.join(c['errors'])}" if c["errors"] else ""
+        print(f"  {kind:<14}  {c['sent']} sent, reply {_fmt(c['reply'])}; {c['late_frames_around']} late of the "
+              f"{c['frames_around']} frames from sending to {AFTER_REPLY_S:g} s after the reply{errors}")
     m = r.get("machine")
     if m is not None:
         for cpu, p in m["probes"].items():

@@ -21,6 +21,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--path", action="append", choices=("gpu", "cpu"), default=None,
                         help="render, loop: per-LED sampling on the GL device or the CPU (repeat to compare both in "
                              "one run; default: chosen from the GL renderer)")
+    parser.add_argument("--load-every", type=float, default=None, metavar="S",
+                        help="loop: load the rig's scene again every S seconds (a scripted load_scene)")
+    parser.add_argument("--displace-every", type=float, default=None, metavar="S",
+                        help="loop: a virtual displacement (set_pose, 0.5 m away and back) every S seconds")
+    parser.add_argument("--edit-every", type=float, default=None, metavar="S",
+                        help="loop: move the scene's first object 0.2 m and back (scene_edit) every S seconds")
     parser.add_argument("--json", dest="json_out", default=None, help="also write the results to this JSON file")
 
 

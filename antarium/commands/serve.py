@@ -62,8 +62,9 @@ def run(args: argparse.Namespace) -> int:
 
     from antarium.config import load_config
     from antarium.server import Server
+    from antarium.server.config_check import check_config
 
-    config = load_config(args.config)
+    config = check_config(load_config(args.config))
     if args.print_config:
         import tomli_w
 

@@ -40,11 +40,14 @@ class Param:
 @dataclass(frozen=True)
 class Command:
     """params: name -> declaration; handler(server, checked params) -> result (None: the rig's state);
-    in_loop: run in the frame loop's thread between two frames (anything that changes what the dome shows)."""
+    in_loop: run in the frame loop's thread between two frames (anything that changes what the dome shows);
+    prepare(server, checked params): the slow part of an in-loop command, run before it in the caller's thread
+    (never holding a frame); its result reaches the handler as parameter "prepared"."""
 
     params: dict[str, Param]
     handler: Callable[[Server, dict[str, Any]], Any]
     in_loop: bool = True
+    prepare: Callable[[Server, dict[str, Any]], Any] | None = None
 
 
 # -- handlers: run with checked parameters; a handler that raises changes nothing --------------------------------
@@ -53,6 +56,28 @@ def _set_pose(server: Server, p: dict[str, Any]) -> None:
     z = cur.z if p["z"] is None else p["z"]
     heading = cur.heading if p["heading_deg"] is None else math.radians(p["heading_deg"])
     server.loop.set_pose(Pose(p["x"], p["y"], z, math.remainder(heading, math.tau)))
+
+
+#: how long a displacement (an object edit) waits for the far layer at its target (with it) before it is applied
+#: anyway (s)
+DISPLACEMENT_WAIT_S = EDIT_WAIT_S = 2.0
+
+
+def _prepare_pose(server: Server, p: dict[str, Any]) -> None:
+    """Before a displacement: the far layer at its target is built while frames go on (caller's thread)."""
+    import time
+
+    renderer = server.renderer
+    if renderer is None or not hasattr(renderer, "prefetch_pose"):
+        return
+    target = Pose(p["x"], p["y"], server.loop.pose.z if p["z"] is None else p["z"], 0.0)
+    try:
+        server.loop.call_soon(renderer.prefetch_pose, target).result(DISPLACEMENT_WAIT_S)
+    except TimeoutError:  # the loop is held up: the displacement then waits in its queue, nothing to prepare
+        return
+    deadline = time.monotonic() + DISPLACEMENT_WAIT_S
+    while not renderer.ready_for(target) and time.monotonic() < deadline:
+        time.sleep(0.002)
 
 
 def _reset_origin(server: Server, p: dict[str, Any]) -> None:
@@ -97,11 +122,9 @@ SCENE_EDITS: dict[str, tuple[str, dict[str, tuple[str, Callable[[Any], Any]]]]] 
 }
 
 
-def _scene_edit(server: Server, p: dict[str, Any]) -> None:
-    """One edit of the current scene (a renderer method); a failing edit changes nothing."""
-    op, args = p["op"], p["args"]
-    renderer = server.require_renderer("scene_edit")
-    method, allowed = SCENE_EDITS[op]
+def _edit_kwargs(op: str, args: dict[str, Any]) -> dict[str, Any]:
+    """The renderer method's keyword arguments of a scene_edit, converted; CommandError naming what was wrong."""
+    _, allowed = SCENE_EDITS[op]
     unknown = sorted(set(args) - set(allowed))
     if unknown:
         raise CommandError(f"scene_edit {op}: unknown argument(s) {unknown}; allowed: {sorted(allowed)}")
@@ -112,8 +135,35 @@ def _scene_edit(server: Server, p: dict[str, Any]) -> None:
             kwargs[target] = convert(value)
         except (TypeError, ValueError):
             raise CommandError(f"scene_edit {op}: argument {key!r} has a wrong type: {value!r}") from None
+    return kwargs
+
+
+def _prepare_edit(server: Server, p: dict[str, Any]) -> None:
+    """Before an object edit: the far layer with the edit is built while frames go on (caller's thread)."""
+    import time
+
+    renderer = server.renderer
+    if renderer is None or not hasattr(renderer, "prefetch_edit"):
+        return
+    kwargs = _edit_kwargs(p["op"], p["args"])
     try:
-        getattr(renderer, method)(**kwargs)
+        server.loop.call_soon(renderer.prefetch_edit, server.loop.pose, p["op"], **kwargs).result(EDIT_WAIT_S)
+    except TimeoutError:  # the loop is held up: the edit then waits in its queue, nothing to prepare
+        return
+    except TypeError as exc:
+        raise CommandError(f"scene_edit {p['op']}: {exc}") from None
+    deadline = time.monotonic() + EDIT_WAIT_S
+    while not renderer.edit_ready(server.loop.pose) and time.monotonic() < deadline:
+        time.sleep(0.002)
+
+
+def _scene_edit(server: Server, p: dict[str, Any]) -> None:
+    """One edit of the current scene (a renderer method); a failing edit changes nothing."""
+    op, args = p["op"], p["args"]
+    renderer = server.require_renderer("scene_edit")
+    kwargs = _edit_kwargs(op, args)
+    try:
+        getattr(renderer, SCENE_EDITS[op][0])(**kwargs)
     except TypeError as exc:
         raise CommandError(f"scene_edit {op}: {exc}") from None
     server.loop.renderer_changed()
@@ -146,13 +196,14 @@ _XY = 1e6  # metres: anything farther is a typo, not a world
 COMMANDS: dict[str, Command] = {
     "load_scene": Command(
         {"scene": Param("scene", True, doc="scene name, file path, or {scene: name, ...parameters}")},
-        lambda server, p: server.load_scene(p["scene"])),
+        lambda server, p: server.load_scene(p["scene"], p["prepared"]),
+        prepare=lambda server, p: server.prepare_scene(p["scene"])),
     "set_pose": Command({
         "x": Param("number", True, lo=-_XY, hi=_XY, doc="m"),
         "y": Param("number", True, lo=-_XY, hi=_XY, doc="m"),
         "z": Param("number", False, None, lo=-_XY, hi=_XY, doc="m (eye height; default: keep)"),
         "heading_deg": Param("number", False, None, lo=-3600, hi=3600, doc="world azimuth of the dome's +x"),
-    }, _set_pose),
+    }, _set_pose, prepare=_prepare_pose),
     "reset_origin": Command({
         "x": Param("number", False, None, lo=-_XY, hi=_XY, doc="m; with y: a new origin"),
         "y": Param("number", False, None, lo=-_XY, hi=_XY, doc="m"),
@@ -172,7 +223,7 @@ COMMANDS: dict[str, Command] = {
     "scene_edit": Command({
         "op": Param("str", True, choices=tuple(SCENE_EDITS)),
         "args": Param("object", False, {}, doc="the operation's arguments (see docs/bus.md)"),
-    }, _scene_edit),
+    }, _scene_edit, prepare=_prepare_edit),
     "trial_start": Command({
         "name": Param("str", True, doc="trial name (part of the log file name)"),
         "metadata": Param("object", False, {}, doc="JSON object stored with the trial"),

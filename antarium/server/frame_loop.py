@@ -52,6 +52,8 @@ LOCOMOTION_CHECK_EVERY = 10
 #: LINK_TIMEOUT_S, or when datagrams failed (peer refused: the distributor or emulator is gone)
 TELEMETRY_EVERY_S = 0.1
 LINK_TIMEOUT_S = 0.5
+#: the link is down from the start until the distributor answers; one that has not answered this long after the
+#: first frame (or by the end of a shorter run) counts as an outage
 LINK_STARTUP_S = 5.0
 #: `when_idle` work runs after a frame only when at least this much time (s) is left before the next slot
 IDLE_MARGIN_S = 2.5e-3
@@ -141,9 +143,10 @@ class FrameLoop:
         self.skipped_frames = 0
         self.samples_used = 0
         self.locomotion_connected = True
-        self.link_ok = True
+        self.link_ok = link is None  # a link is down until the distributor has answered
         self.link_outages = 0
-        self.last_link_error = ""
+        self.last_link_error = "" if link is None else "the distributor has not answered yet"
+        self._unanswered_reported = False
         self._next_t: float | None = None
         self._frame_buf = None
         self._pending: queue.SimpleQueue = queue.SimpleQueue()
@@ -310,21 +313,33 @@ class FrameLoop:
         failed = self.telemetry.get("link", {}).get("datagrams_failed", 0)
         new_failures, self._failed_datagrams = failed - self._failed_datagrams, failed
         age = self.telemetry.get("age_s")
-        if age is None:  # the distributor has not answered yet: allow it time to come up
-            fresh = now - self._t_first < LINK_STARTUP_S
-        else:
-            fresh = age <= LINK_TIMEOUT_S + since_poll
+        if age is None:  # not answered yet: down from the start; an outage once it had LINK_STARTUP_S to come up
+            if now - self._t_first >= LINK_STARTUP_S:
+                self._report_unanswered(now)
+            return
+        fresh = age <= LINK_TIMEOUT_S + since_poll
         ok = fresh and new_failures == 0
         if new_failures:
             self.last_link_error = f"{new_failures} datagrams failed (peer refused or buffer full)"
         elif not fresh:
-            since = f" for {age:.2f} s" if age is not None else ""
-            self.last_link_error = f"no telemetry from the distributor{since}"
+            self.last_link_error = f"no telemetry from the distributor for {age:.2f} s"
         if ok != self.link_ok:
             self.link_ok = ok
             if not ok:
                 self.link_outages += 1
-            self.event("link_back" if ok else "link_outage", error="" if ok else self.last_link_error)
+            first = ok and self.link_outages == 0
+            self.event("link_up" if first else "link_back" if ok else "link_outage",
+                       error="" if ok else self.last_link_error)
+
+    def _report_unanswered(self, now: float) -> None:
+        """The distributor never answered since the first frame: count one outage (once)."""
+        if self.link is None or self.link_ok or self._unanswered_reported or self._t_first is None \
+                or self.telemetry.get("age_s") is not None:
+            return
+        self._unanswered_reported = True
+        self.link_outages += 1
+        self.last_link_error = f"the distributor has not answered in {now - self._t_first:.2f} s"
+        self.event("link_outage", error=self.last_link_error)
 
     def _read_source(self, t: float) -> list:
         """The source's new samples; a source that raises is reported as disconnected, never stops the loop."""
@@ -476,6 +491,7 @@ class FrameLoop:
         finally:
             self._stop.clear()
             self._run_pending()
+            self._report_unanswered(self.clock.now())  # a run shorter than LINK_STARTUP_S with the dome dark
         return n
 
     def stop(self) -> None:

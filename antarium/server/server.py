@@ -169,6 +169,9 @@ class Server:
         except (CommandError, ValueError, RuntimeError, OSError) as exc:
             query.reply_err(json.dumps({"error": str(exc)}))
             return
+        except Exception as exc:  # any refusal is an error reply (RigError), never a timeout  # noqa: BLE001
+            query.reply_err(json.dumps({"error": f"{name}: {type(exc).__name__}: {exc}"}))
+            return
         query.reply(query.key_expr, json.dumps({"ok": True, "result": result}, default=_json_default))
 
     def _publish_event(self, t: float, kind: str, data: dict) -> None:
@@ -277,10 +280,21 @@ class Server:
             return command.handler(self, checked)
         if self.loop is None or not self._loop_running():
             raise RuntimeError(f"{name}: the server is not running")
+        if command.prepare is not None:
+            try:
+                checked["prepared"] = command.prepare(self, checked)
+            except (CommandError, ValueError, RuntimeError, OSError) as exc:
+                self._log_command(name, params, {"error": str(exc)}, False)
+                raise
+            if not self._loop_running():  # stopped meanwhile: what was prepared is never shown
+                _release(checked["prepared"])
+                raise RuntimeError(f"{name}: the server is not running")
         future = self.loop.call_soon(self._apply, name, checked, params)
         try:
             return future.result(COMMAND_TIMEOUT_S)
         except TimeoutError:
+            if future.cancel():
+                _release(checked.get("prepared"))
             raise RuntimeError(f"{name}: the frame loop did not run the command within {COMMAND_TIMEOUT_S} s") \
                 from None
 
@@ -314,21 +328,38 @@ class Server:
             raise RuntimeError(f"{what}: this rig has no renderer (pose-only)")
         return self.renderer
 
-    def load_scene(self, scene: str | dict) -> None:
-        """Load a scene (name, file path or spec) into the renderer; on failure the previous scene stays."""
+    def prepare_scene(self, scene: str | dict):
+        """The CPU work of loading `scene` (parsing, buffers, far field, far layer), in the calling thread while
+        frames go on; None for a renderer that cannot prepare (it then loads in `load_scene`)."""
+        renderer = self.require_renderer("load_scene")
+        if not hasattr(renderer, "prepare_scene"):
+            return None
+        loop = self.loop
+        try:
+            return renderer.prepare_scene(scene, pose=lambda: loop.pose)
+        except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
+            raise self._scene_failed(scene, exc) from None
+
+    def load_scene(self, scene: str | dict, prepared=None) -> None:
+        """Load a scene (name, file path or spec; `prepared` by `prepare_scene`: only swapped in here) into the
+        renderer; on failure the previous scene stays."""
         renderer = self.require_renderer("load_scene")
         digest = _scene_sha256(scene)
         try:
-            renderer.set_scene(scene)
+            renderer.set_scene(scene if prepared is None else prepared)
         except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
-            raise RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); "
-                               f"the current scene {self.scene_name!r} stays on the dome") from None
+            raise self._scene_failed(scene, exc) from None
         self.scene_name = scene if isinstance(scene, str) else json.dumps(scene, sort_keys=True)
         self._scene_digest = digest
         self.loop.renderer_changed()
         if self.trial_log is not None:
             self.trial_log.add_scene(self.clock.now(), self.scene_name, digest)
         self.loop.event("scene_loaded", scene=scene, sha256=digest)
+
+    def _scene_failed(self, scene: str | dict, exc: BaseException) -> RuntimeError:
+        kept = "no scene was loaded before" if self.scene_name is None else \
+            f"the current scene {self.scene_name!r} stays on the dome"
+        return RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); {kept}")
 
     def trial_start(self, name: str, metadata: dict, folder: str = "") -> dict[str, Any]:
         """Open the trial log `<folder or [log] dir>/<rig>_<time>_<name>.h5`; reply {"path": its absolute path}."""
@@ -523,6 +554,13 @@ class Server:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def _release(prepared) -> None:
+    """Free what a command's prepare step made (a prepared scene's far-layer process) when it is not shown."""
+    release = getattr(prepared, "release", None)
+    if release is not None:
+        release()
 
 
 def _nan0(v: float) -> float:

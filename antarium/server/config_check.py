@@ -1,0 +1,97 @@
+"""`check_config(config)`: everything `antarium serve` would find wrong only once it runs, found before anything
+starts (scene names and files, the locomotion back-end, face sizes, ports in use). One line per problem:
+`ConfigError` naming the key, what was wrong and what is allowed. `serve` and `serve --print-config` run it.
+"""
+
+from __future__ import annotations
+
+import errno
+import socket
+from pathlib import Path
+
+from antarium.config import ConfigError, RigConfig
+
+#: scene parameters that name files which must exist
+SCENE_FILE_KEYS = ("path", "panorama", "uv")
+#: cube face sides the renderer accepts (texels); 0 in the config means its default
+FACE_SIZE_RANGE = (16, 2048)
+
+
+def check_config(config: RigConfig) -> RigConfig:
+    """Raise `ConfigError` for the first thing in `config` that `serve` could not use; return `config`."""
+    _check_scene(config.render.scene)
+    _check_face_size(config.render.face_size_px)
+    _check_locomotion(config)
+    _check_ports(config)
+    return config
+
+
+def _check_scene(spec: str | dict) -> None:
+    from antarium.renderers.library import MESH_SUFFIXES, SCENES
+    from antarium.renderers.panorama import IMAGE_SUFFIXES
+
+    params = {"scene": spec} if isinstance(spec, str) else dict(spec)
+    name = params.pop("scene")
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"[render] scene must be a scene name or a file path, got {name!r}")
+    if name not in SCENES:
+        suffix = Path(name).suffix.lower()
+        if suffix not in MESH_SUFFIXES + IMAGE_SUFFIXES:
+            raise ConfigError(f"[render] scene {name!r} is not a known scene or a scene file; allowed: "
+                              f"{', '.join(SCENES)}, or a mesh ({', '.join(MESH_SUFFIXES)}) or panorama "
+                              f"({', '.join(IMAGE_SUFFIXES)}) file")
+        params["path"] = name
+    for key in SCENE_FILE_KEYS:
+        value = params.get(key)
+        if isinstance(value, str) and not Path(value).is_file():
+            raise ConfigError(f"[render] scene file {value!r} ({key}) does not exist; give an existing file")
+
+
+def _check_face_size(size: int) -> None:
+    lo, hi = FACE_SIZE_RANGE
+    if size != 0 and not lo <= size <= hi:
+        raise ConfigError(f"[render] face_size_px = {size} is not a face size the renderer accepts; allowed: "
+                          f"{lo}..{hi} texels, or 0 for its default")
+
+
+def _check_locomotion(config: RigConfig) -> None:
+    from antarium.locomotion import BACKENDS
+
+    source = config.locomotion.source
+    if source not in BACKENDS:
+        raise ConfigError(f"[locomotion] source {source!r} is unknown; allowed: {', '.join(sorted(BACKENDS))}")
+    if source == "replay" or source.endswith("-replay"):
+        path = config.locomotion.options.get("path")
+        if isinstance(path, str) and not Path(path).is_file():
+            raise ConfigError(f"[locomotion] path {path!r} does not exist; give the recording to replay")
+
+
+def _check_ports(config: RigConfig) -> None:
+    """The bus' listen endpoints (TCP/UDP) and a fixed emulator port must be free on this computer."""
+    if config.bus.enabled:
+        for endpoint in config.bus.listen:
+            proto, _, address = endpoint.partition("/")
+            host, _, port = address.split("#")[0].rpartition(":")
+            if proto not in ("tcp", "udp") or not port.isdigit() or int(port) == 0:
+                continue
+            if port_in_use(proto, host.strip("[]"), int(port)):
+                raise ConfigError(f"[bus] listen endpoint {endpoint} is in use (another antarium serve?); set "
+                                  "[bus] listen to another port, or stop the other server")
+    link = config.link
+    if link.interface == "udp" and link.spawn_emulator and link.port and port_in_use("udp", link.host, link.port):
+        raise ConfigError(f"[link] port {link.port} on {link.host} is in use, so the emulator cannot listen there; "
+                          "set [link] port to another port (0: a free one), or stop what uses it")
+
+
+def port_in_use(proto: str, host: str, port: int) -> bool:
+    """True when binding `proto` ("tcp"/"udp") `host`:`port` fails because something holds it."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    kind = socket.SOCK_STREAM if proto == "tcp" else socket.SOCK_DGRAM
+    with socket.socket(family, kind) as s:
+        if proto == "tcp":
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as zenoh: a closed socket's TIME_WAIT is free
+        try:
+            s.bind((host, port))
+        except OSError as exc:
+            return exc.errno == errno.EADDRINUSE
+    return False

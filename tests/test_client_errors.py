@@ -1,0 +1,58 @@
+"""`antarium.Rig` raises `RigError`, and only `RigError`, for what the server refuses; messages show plain numbers
+(issue 20, point 10). Pose-only rig on the bus; the start-up scene error with a real renderer."""
+
+import numpy as np
+import pytest
+
+import antarium
+from antarium import bus
+from antarium.client import RigError
+from antarium.config import resolve
+from antarium.server import Server, ServerError
+
+
+def _config(tmp_path, rig, **extra):
+    return resolve({"rig": {"name": rig}, "bus": {"listen": [bus.free_tcp_endpoint()]},
+                    "log": {"dir": str(tmp_path / "logs")}, **extra})
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory):
+    config = _config(tmp_path_factory.mktemp("client"), "terr")
+    server = Server(config, renderer_factory=None, link=False).start_thread()
+    with antarium.Rig("terr", config=config, timeout_s=10.0) as rig:
+        yield rig
+    server.stop()
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda rig: rig.polarisers("x"), "polarisers: parameter 'angles_deg' must be a (nested) list of numbers"),
+    (lambda rig: rig.polarisers([[1.0, 2.0]]), "55 x 9"),
+    (lambda rig: rig.gains(translation=np.float32(500.0)), "must be in [-100, 100], got 500.0"),
+    (lambda rig: rig.set_pose(np.float64(1.0), np.int64(2), heading_deg=np.float64(1e5)), "got 100000.0"),
+    (lambda rig: rig.wait(np.float64(-5.0)), "seconds >= 0, got -5.0"),
+    (lambda rig: rig.rotate_scene(object()), "a parameter cannot be sent"),
+])
+def test_every_refusal_is_a_rig_error_with_plain_numbers(rig, call, message):
+    with pytest.raises(RigError) as info:
+        call(rig)
+    assert type(info.value) is RigError
+    assert message in str(info.value) and "np." not in str(info.value)
+
+
+def test_numpy_values_are_accepted(rig):
+    state = rig.set_pose(np.float64(0.5), np.int64(1), heading_deg=np.float32(90.0))
+    assert state["pose"]["x"] == 0.5 and state["pose"]["y"] == 1.0
+
+
+def test_a_start_up_scene_error_does_not_name_a_scene_none(tmp_path):
+    def small_renderer(render_cfg, clock=None):
+        from antarium.renderers import Renderer
+
+        return Renderer(face_size=64, clock=clock)
+
+    config = _config(tmp_path, "tstart", render={"scene": str(tmp_path / "missing.glb")}, link={"interface": "virtual"})
+    with pytest.raises(ServerError) as info:
+        Server(config, renderer_factory=small_renderer, echo=lambda line: None).start_thread()
+    assert "failed to load" in str(info.value) and "no scene was loaded before" in str(info.value)
+    assert "None" not in str(info.value)
