@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import gc
 import json
-import math
 import sys
 import threading
 from collections.abc import Callable
@@ -28,6 +27,7 @@ from antarium.server.commands import COMMANDS, CommandError, parse_command
 from antarium.server.emulator_process import EmulatorProcess
 from antarium.server.frame_loop import FrameLoop, FrameRecord
 from antarium.server.placement import LoopPlacement
+from antarium.server.status import loop_state, rig_status
 
 #: events that are also printed on stderr: an operator must notice them
 ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "frame_rejected")
@@ -227,44 +227,12 @@ class Server:
             self.session.put(bus.status_key(self.rig_name), json.dumps(status, default=_json_default))
 
     def status(self) -> dict[str, Any]:
-        """Frame rate, late frames, latency percentiles, distributor telemetry, trial and log state."""
-        loop = self.loop
-        out: dict[str, Any] = {"rig": self.rig_name, "t": self.clock.now(), "trial": self.trial_name,
-                               "scene": self.scene_name, "alarms": []}
-        if loop is not None:
-            p = loop.pose
-            out.update(loop.stats())
-            out.update({"pose": {"x": p.x, "y": p.y, "z": p.z, "heading_deg": math.degrees(p.heading)},
-                        "scene_rotation_deg": math.degrees(loop.scene_rotation), "closed_loop": loop.closed_loop,
-                        "tether": loop.tether, "gains": {"translation": loop.gain_translation,
-                                                          "rotation": loop.gain_rotation}})
-            if not loop.link_ok:
-                out["alarms"].append("dome link down: " + (loop.last_link_error or "no telemetry"))
-            if not loop.locomotion_connected:
-                out["alarms"].append("locomotion source disconnected: pose held")
-        renderer = self.renderer
-        if renderer is not None and hasattr(renderer, "far_layer_status"):
-            out["far_layer"] = renderer.far_layer_status()
-            if out["far_layer"]["error"]:
-                out["alarms"].append("far layer stopped, every frame drawn in full: " + out["far_layer"]["error"])
-        if self.source is not None:
-            out["locomotion"] = self.source.status()
-        if loop is not None and self.link is not None:
-            out["telemetry"] = loop.telemetry  # polled by the loop's thread (the link is not shared)
-        if self.emulator is not None:
-            out["emulator_running"] = self.emulator.running
-            if not out["emulator_running"]:
-                last = self.emulator.output().strip().splitlines()[-1:] or ["no output"]
-                out["alarms"].append(f"the dome emulator process is not running ({last[0]})")
-        log = self.trial_log
-        if log is not None:
-            out["log"] = log.status()
-            error = out["log"]["error"]
-            if error:
-                out["alarms"].append("TRIAL LOG NOT WRITTEN: " + error)
-                if error != self._last_log_error and loop is not None:
-                    self._last_log_error = error
-                    loop.call_soon(loop.event, "log_error", error=error)
+        """`antarium.server.status.rig_status`; a trial-log error seen for the first time also goes out as an event."""
+        out = rig_status(self)
+        error = out.get("log", {}).get("error")
+        if error and error != self._last_log_error and self.loop is not None:
+            self._last_log_error = error
+            self.loop.call_soon(self.loop.event, "log_error", error=error)
         return out
 
     # -- commands --------------------------------------------------------------------------------------
@@ -315,12 +283,7 @@ class Server:
 
     def state(self) -> dict[str, Any]:
         """What a command replies: pose, scene rotation, loop mode, gains, scene and trial."""
-        loop = self.loop
-        pose = loop.pose
-        return {"pose": {"x": pose.x, "y": pose.y, "z": pose.z, "heading_deg": math.degrees(pose.heading)},
-                "scene_rotation_deg": math.degrees(loop.scene_rotation), "closed_loop": loop.closed_loop,
-                "tether": loop.tether, "gains": {"translation": loop.gain_translation, "rotation": loop.gain_rotation},
-                "scene": self.scene_name, "trial": self.trial_name}
+        return {**loop_state(self.loop), "scene": self.scene_name, "trial": self.trial_name}
 
     def require_renderer(self, what: str):
         """The renderer, or RuntimeError naming `what` needed it (a pose-only rig has none)."""

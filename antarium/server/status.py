@@ -1,0 +1,55 @@
+"""What a rig reports: its state (the reply to every command that changes it) and its status (once a second on the
+bus and on `status`): frame statistics, telemetry, the locomotion source, the trial log and the alarms an operator
+must see."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from antarium.server.frame_loop import FrameLoop
+    from antarium.server.server import Server
+
+
+def loop_state(loop: FrameLoop) -> dict[str, Any]:
+    """Pose (heading in degrees), scene rotation, loop mode, tether and gains of the frame loop now."""
+    p = loop.pose
+    return {"pose": {"x": p.x, "y": p.y, "z": p.z, "heading_deg": math.degrees(p.heading)},
+            "scene_rotation_deg": math.degrees(loop.scene_rotation), "closed_loop": loop.closed_loop,
+            "tether": loop.tether, "gains": {"translation": loop.gain_translation, "rotation": loop.gain_rotation}}
+
+
+def rig_status(server: Server) -> dict[str, Any]:
+    """Frame rate, late frames, latency percentiles, distributor telemetry, trial and log state, and "alarms": one
+    line for each thing an operator must act on."""
+    loop = server.loop
+    out: dict[str, Any] = {"rig": server.rig_name, "t": server.clock.now(), "trial": server.trial_name,
+                           "scene": server.scene_name, "alarms": []}
+    alarms = out["alarms"]
+    if loop is not None:
+        out.update(loop.stats())
+        out.update(loop_state(loop))
+        if not loop.link_ok:
+            alarms.append("dome link down: " + (loop.last_link_error or "no telemetry"))
+        if not loop.locomotion_connected:
+            alarms.append("locomotion source disconnected: pose held")
+    renderer = server.renderer
+    if renderer is not None and hasattr(renderer, "far_layer_status"):
+        out["far_layer"] = renderer.far_layer_status()
+        if out["far_layer"]["error"]:
+            alarms.append("far layer stopped, every frame drawn in full: " + out["far_layer"]["error"])
+    if server.source is not None:
+        out["locomotion"] = server.source.status()
+    if loop is not None and server.link is not None:
+        out["telemetry"] = loop.telemetry  # polled by the loop's thread (the link is not shared)
+    if server.emulator is not None:
+        out["emulator_running"] = server.emulator.running
+        if not out["emulator_running"]:
+            last = server.emulator.output().strip().splitlines()[-1:] or ["no output"]
+            alarms.append(f"the dome emulator process is not running ({last[0]})")
+    if server.trial_log is not None:
+        out["log"] = server.trial_log.status()
+        if out["log"]["error"]:
+            alarms.append("TRIAL LOG NOT WRITTEN: " + out["log"]["error"])
+    return out
