@@ -183,7 +183,7 @@ class ArdinModel:
         self.learned_views += 1
 
     def decide(self, view: View) -> Command:
-        novelty = self.mbons["familiarity"].novelty(self.kc.active(view.pns(self._scan)))
+        novelty = self.kc.novelty(view.pns(self._scan), [self.mbons["familiarity"]])[:, 0]
         i = _best_angle(self._scan, novelty)
         return Command(self.params.step, float(self._scan[i]), {"novelty": float(novelty[i])})
 
