@@ -3,8 +3,8 @@
 `novelty(pn, pn_index, k, weights)` equals `MBON.novelty(KenyonCells.active(pn))` for every MBON in `weights`:
   EP (n_kc, m) = the sum of each KC's PNs for all m vectors at once (SIMD over m; the PNs summed in ascending
   index order in float32, the order of the sparse product in `KenyonCells.excitation`, so EP is the same),
-  the k-th largest EP of each vector from the candidates above a lower bound (the smallest of k block maxima:
-  each of the k blocks holds one value at least that large), and lambda = undepressed active KCs / k.
+  the k-th largest EP of each vector from the candidates above a lower bound (the k-th largest of the maxima of
+  blocks of 16 KCs: only the blocks reaching it are read), and lambda = undepressed active KCs / k.
 Ties at the k-th value (equal EP) are broken toward the lower KC index; `np.argpartition` breaks them in an
 unspecified way, so the two agree exactly whenever the k-th largest EP is unique (any natural image).
 Compiled on first use and cached on disk; single-threaded (one core per model in a sweep).
@@ -15,55 +15,105 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+_GROUP = 64  # PN vectors whose EPs are summed together (a 61-direction scan is one group)
+_BLOCK = 16  # KCs per block: summed together, then written out direction by direction; one maximum each
+
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy", boundscheck=False)
-def _excitation(pn_t, pn_index, k, ep, block_max):
-    """EP (n_kc, m) float32 into `ep` and the maxima of k contiguous KC blocks (k, m) into `block_max`.
-    (fastmath only lets the compiler vectorise over m; each EP is still summed in ascending PN order.)"""
+def _excitation(pn_g, pn_index, ep_t, block_max):
+    """EP of a group of G vectors into `ep_t` (G, n_kc) float32 and the maxima of blocks of `size` consecutive
+    KCs into `block_max` (G, ceil(n_kc / size)), from the group's PNs `pn_g` (n_pn, G). A block's EPs are summed
+    together over the G vectors (SIMD; fastmath only lets the compiler vectorise, each EP is still summed in
+    ascending PN order), then written out vector by vector."""
     n_kc, p = pn_index.shape
-    m = pn_t.shape[1]
-    acc = np.empty(m, np.float32)
-    for b in range(k):
-        for d in range(m):
-            block_max[b, d] = -np.inf
-    for c in range(n_kc):
-        for d in range(m):
-            acc[d] = 0.0
-        for j in range(p):
-            i = pn_index[c, j]
-            for d in range(m):
-                acc[d] += pn_t[i, d]
-        b = (c * k) // n_kc
-        for d in range(m):
-            ep[c, d] = acc[d]
-            block_max[b, d] = max(block_max[b, d], acc[d])
+    g = _GROUP  # a compile-time constant: the inner loops unroll into SIMD
+    size = (n_kc + block_max.shape[1] - 1) // block_max.shape[1]
+    tile = np.empty((size, g), np.float32)
+    for b in range(block_max.shape[1]):
+        c0 = b * size
+        n = min(size, n_kc - c0)
+        for t in range(n):
+            for d in range(g):
+                tile[t, d] = 0.0
+            for j in range(p):
+                i = pn_index[c0 + t, j]
+                for d in range(g):
+                    tile[t, d] += pn_g[i, d]
+        for d in range(g):
+            top = tile[0, d]
+            for t in range(n):
+                v = tile[t, d]
+                ep_t[d, c0 + t] = v
+                top = max(top, v)
+            block_max[d, b] = top
+
+
+@njit(cache=True, nogil=True)
+def _novelty(pn_groups, pn_index, k, block, weights, out):
+    """novelty (m, n_out) into `out` for PN vectors in groups (n_groups, n_pn, G) (the last one zero-padded):
+    one group's EPs (G x n_kc, a few hundred kB) stay in cache from their sum to their selection."""
+    n_groups, _, g = pn_groups.shape
+    n_kc = pn_index.shape[0]
+    m = out.shape[0]
+    ep_t = np.empty((g, n_kc), np.float32)
+    block_max = np.empty((g, (n_kc + block - 1) // block), np.float32)
+    for q in range(n_groups):
+        _excitation(pn_groups[q], pn_index, ep_t, block_max)
+        d0 = q * g
+        _select(ep_t, k, block_max, weights, out[d0:min(m, d0 + g)])
 
 
 @njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
-def _select(ep, k, block_max, weights, out):
-    """novelty (m, n_out) float64 into `out` from EP (n_kc, m) and the MBONs' weights (n_out, n_kc) uint8."""
-    n_kc, m = ep.shape
+def _kth_largest(a, n, k):
+    """The k-th largest of a[:n] (1 <= k <= n), found in place (quickselect; a[:n] is reordered)."""
+    lo, hi, target = 0, n - 1, k - 1
+    while lo < hi:
+        pivot = a[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] > pivot:
+                i += 1
+            while a[j] < pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if target <= j:
+            hi = j
+        elif target >= i:
+            lo = i
+        else:
+            break
+    return a[target]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+def _select(ep_t, k, block_max, weights, out):
+    """novelty (G, n_out) float64 into `out` from EP (G, n_kc) and the MBONs' weights (n_out, n_kc) uint8.
+
+    The k-th largest block maximum is a lower bound of the k-th largest EP (k blocks hold a value at least that
+    large), so only the blocks whose maximum reaches it can hold active KCs."""
+    n_kc = ep_t.shape[1]
+    n_blocks = block_max.shape[1]
+    size = (n_kc + n_blocks - 1) // n_blocks
     n_out = weights.shape[0]
-    low = np.empty(m, np.float32)
-    for d in range(m):
-        low[d] = block_max[:, d].min()
-    count = np.zeros(m, np.int64)
-    cand = np.empty((m, n_kc), np.int32)
-    for c in range(n_kc):
-        hit = False
-        for d in range(m):
-            hit |= ep[c, d] >= low[d]
-        if hit:
-            for d in range(m):
-                if ep[c, d] >= low[d]:
-                    cand[d, count[d]] = c
-                    count[d] += 1
-    for d in range(m):
-        n = count[d]
-        vals = np.empty(n, np.float32)
-        for i in range(n):
-            vals[i] = ep[cand[d, i], d]
-        kth = np.partition(vals, n - k)[n - k]
+    cand = np.empty(n_kc, np.int32)
+    vals = np.empty(n_kc, np.float32)
+    scratch = np.empty(max(n_kc, n_blocks), np.float32)
+    for d in range(out.shape[0]):
+        scratch[:n_blocks] = block_max[d]
+        low = _kth_largest(scratch, n_blocks, k)
+        n = 0
+        for b in range(n_blocks):
+            if block_max[d, b] >= low:
+                for c in range(b * size, min(n_kc, (b + 1) * size)):
+                    if ep_t[d, c] >= low:
+                        cand[n] = c
+                        vals[n] = ep_t[d, c]
+                        n += 1
+        scratch[:n] = vals[:n]
+        kth = _kth_largest(scratch, n, k)
         ties_left = k
         for i in range(n):
             if vals[i] > kth:
@@ -77,9 +127,8 @@ def _select(ep, k, block_max, weights, out):
                 take = True
                 ties_left -= 1
             if take:
-                c = cand[d, i]
                 for o in range(n_out):
-                    out[d, o] += weights[o, c]
+                    out[d, o] += weights[o, cand[i]]
         for o in range(n_out):
             out[d, o] /= k
 
@@ -95,12 +144,14 @@ def novelty(pn: np.ndarray, pn_index: np.ndarray, k: int, weights: np.ndarray) -
     pn_index: (n_kc, pn_per_kc) int32 ascending rows (`sorted_pn_index`); k: active KCs per vector (k-WTA);
     weights:  (n_out, n_kc) bool or uint8, True = undepressed synapse.
     """
-    pn_t = np.ascontiguousarray(np.asarray(pn, dtype=np.float32).T)
-    m = pn_t.shape[1]
+    pn = np.asarray(pn, dtype=np.float32)
+    m, n_pn = pn.shape
+    n_groups = -(-m // _GROUP)
+    groups = np.zeros((n_groups * _GROUP, n_pn), np.float32)
+    groups[:m] = pn
+    groups = np.ascontiguousarray(groups.reshape(n_groups, _GROUP, n_pn).transpose(0, 2, 1))
     n_kc = pn_index.shape[0]
-    ep = np.empty((n_kc, m), np.float32)
-    block_max = np.empty((k, m), np.float32)
-    _excitation(pn_t, pn_index, k, ep, block_max)
     out = np.empty((m, weights.shape[0]), np.float64)
-    _select(ep, k, block_max, np.ascontiguousarray(weights, dtype=np.uint8), out)
+    block = max(1, min(_BLOCK, n_kc // k))  # at least k blocks
+    _novelty(groups, pn_index, k, block, np.ascontiguousarray(weights, dtype=np.uint8), out)
     return out
