@@ -74,8 +74,8 @@ class View:
         self._cols = cols
         self._row_gain = bool(row_gain)
 
-    def rotated_panoramas(self, angles) -> np.ndarray:
-        """Low-resolution panoramas (len(angles), rows, cols) float32 after turning by `angles` (rad)."""
+    def _columns(self, angles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The fine columns i0, i1 (m, cols) int64 and weights w (m, cols) float32 of the panoramas at `angles`."""
         angles = np.atleast_1d(np.asarray(angles, dtype=np.float64)) + self.yaw
         n_fine = self.band.shape[1]
         step = math.tau / n_fine
@@ -84,18 +84,23 @@ class View:
         i0 = np.floor(pos).astype(np.int64)
         w = (pos - i0).astype(np.float32)
         i0 %= n_fine
-        i1 = (i0 + 1) % n_fine
+        return i0, (i0 + 1) % n_fine, w
+
+    def rotated_panoramas(self, angles) -> np.ndarray:
+        """Low-resolution panoramas (len(angles), rows, cols) float32 after turning by `angles` (rad)."""
+        i0, i1, w = self._columns(angles)
         band = self.band
         return band[:, i0].transpose(1, 0, 2) * (1.0 - w[:, None, :]) + band[:, i1].transpose(1, 0, 2) * w[:, None, :]
 
     def pns(self, angles=(0.0,)) -> np.ndarray:
         """Projection-neuron vectors (len(angles), rows * cols) float32: Sobel magnitude of the panoramas
         (divided row by row by its mean over azimuth when the eye has `row_gain`)."""
-        pano = self.rotated_panoramas(angles)
-        edges = sobel_magnitude(pano)
+        from antarium.ant.eye_kernel import scan_edges  # = sobel_magnitude(self.rotated_panoramas(angles))
+
+        edges = scan_edges(self.band, *self._columns(angles))
         if self._row_gain:
             edges = row_gain_control(edges)
-        return edges.reshape(pano.shape[0], -1)
+        return edges.reshape(edges.shape[0], -1)
 
 
 def sobel_magnitude(pano: np.ndarray) -> np.ndarray:
