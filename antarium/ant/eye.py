@@ -156,6 +156,7 @@ class Eye:
             raise ValueError(f"is_uv must have shape ({n},), got {is_uv.shape}")
         use_uv, self._columns = CHANNELS[p.channel]
         self._pixels = np.flatnonzero(is_uv == use_uv)
+        self._flat = self._pixels[:, None] * 2 + np.asarray(self._columns)[None, :]  # in the flattened (N, 2) frame
         if self._pixels.size < p.neighbours:
             raise ValueError(f"the layout has only {self._pixels.size} {p.channel} pixels")
         self.n_leds = n
@@ -201,7 +202,7 @@ class Eye:
         led_values = np.asarray(led_values)
         if led_values.shape != (self.n_leds, 2):
             raise ValueError(f"LED values must have shape ({self.n_leds}, 2), got {led_values.shape}")
-        vals = led_values[self._pixels][:, self._columns].sum(axis=1, dtype=np.float32) * self._scale
+        vals = led_values.reshape(-1)[self._flat].sum(axis=1, dtype=np.float32) * self._scale
         return vals if self.params.gamma == 1.0 else np.power(vals, np.float32(self.params.gamma))
 
     def look(self, led_values: np.ndarray, yaw: float = 0.0) -> View:
@@ -212,7 +213,9 @@ class Eye:
         """Like `look`, from the channel's intensities ((n_channel_pixels,) floats)."""
         if not math.isfinite(yaw):
             raise ValueError(f"yaw must be a finite angle in radians, got {yaw!r}")
-        fine = (self._sample @ intensity).reshape(self._fine_shape).astype(np.float32)
+        from antarium.ant.eye_kernel import sample  # = (self._sample @ intensity).astype(np.float32)
+
+        fine = sample(self._sample, intensity).reshape(self._fine_shape)
         band = self._blur_el @ fine @ self._blur_az
         return View(band, self.params.fine_per_col, self.params.cols, yaw, self.params.row_gain)
 

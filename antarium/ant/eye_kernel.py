@@ -48,3 +48,21 @@ def scan_edges(band: np.ndarray, i0: np.ndarray, i1: np.ndarray, w: np.ndarray) 
     _scan_edges(np.ascontiguousarray(band, dtype=np.float32), np.ascontiguousarray(i0), np.ascontiguousarray(i1),
                 np.ascontiguousarray(w, dtype=np.float32), out)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _sample(indptr, indices, data, x, out):
+    """out[i] = float32(sum_j data[j] * x[indices[j]]) over row i of a CSR matrix, summed in float64 in storage
+    order (what scipy's product followed by astype(float32) gives)."""
+    for i in range(out.shape[0]):
+        s = 0.0
+        for jj in range(indptr[i], indptr[i + 1]):
+            s += data[jj] * np.float64(x[indices[jj]])
+        out[i] = np.float32(s)
+
+
+def sample(matrix, x: np.ndarray) -> np.ndarray:
+    """`(matrix @ x).astype(np.float32)` for a float64 CSR `matrix` (n, N) and float32 `x` (N,): (n,) float32."""
+    out = np.empty(matrix.shape[0], np.float32)
+    _sample(matrix.indptr, matrix.indices, matrix.data, np.ascontiguousarray(x, dtype=np.float32), out)
+    return out
