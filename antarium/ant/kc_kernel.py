@@ -1,7 +1,8 @@
 """Compiled k-WTA familiarity (numba): the MBONs' novelty for many PN vectors at once, without sorting.
 
-`novelty(pn, pn_index, k, weights)` equals `MBON.novelty(KenyonCells.active(pn))` for every MBON in `weights`:
-  EP (n_kc, m) = the sum of each KC's PNs for all m vectors at once (SIMD over m; the PNs summed in ascending
+`Workspace(pn_index, k, n_pn).novelty(pn, weights)` equals `MBON.novelty(KenyonCells.active(pn))` for every
+MBON in `weights`:
+  EP = the sum of each KC's PNs, for 64 PN vectors at once (SIMD over the vectors; the PNs summed in ascending
   index order in float32, the order of the sparse product in `KenyonCells.excitation`, so EP is the same),
   the k-th largest EP of each vector from the candidates above a lower bound (the k-th largest of the maxima of
   blocks of 16 KCs: only the blocks reaching it are read), and lambda = undepressed active KCs / k.
@@ -49,14 +50,11 @@ def _excitation(pn_g, pn_index, ep_t, block_max):
 
 
 @njit(cache=True, nogil=True)
-def _novelty(pn_groups, pn_index, k, block, weights, out):
-    """novelty (m, n_out) into `out` for PN vectors in groups (n_groups, n_pn, G) (the last one zero-padded):
-    one group's EPs (G x n_kc, a few hundred kB) stay in cache from their sum to their selection."""
+def _novelty(pn_groups, pn_index, k, ep_t, block_max, weights, out):
+    """novelty (m, n_out) into `out` for PN vectors in groups (n_groups, n_pn, G) (the last one zero-padded),
+    with the work arrays ep_t (G, n_kc) and block_max (G, n_blocks) float32."""
     n_groups, _, g = pn_groups.shape
-    n_kc = pn_index.shape[0]
     m = out.shape[0]
-    ep_t = np.empty((g, n_kc), np.float32)
-    block_max = np.empty((g, (n_kc + block - 1) // block), np.float32)
     for q in range(n_groups):
         _excitation(pn_groups[q], pn_index, ep_t, block_max)
         d0 = q * g
@@ -138,20 +136,31 @@ def sorted_pn_index(pn_index: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.sort(pn_index, axis=1), dtype=np.int32)
 
 
-def novelty(pn: np.ndarray, pn_index: np.ndarray, k: int, weights: np.ndarray) -> np.ndarray:
-    """lambda (m, n_out) float64 in [0, 1] (1 = novel) of n_out MBONs for PN vectors (m, n_pn) float32.
+class Workspace:
+    """The kernel's work arrays for one KC layer, allocated once (fresh multi-MB arrays cost page faults)."""
 
-    pn_index: (n_kc, pn_per_kc) int32 ascending rows (`sorted_pn_index`); k: active KCs per vector (k-WTA);
-    weights:  (n_out, n_kc) bool or uint8, True = undepressed synapse.
-    """
-    pn = np.asarray(pn, dtype=np.float32)
-    m, n_pn = pn.shape
-    n_groups = -(-m // _GROUP)
-    groups = np.zeros((n_groups * _GROUP, n_pn), np.float32)
-    groups[:m] = pn
-    groups = np.ascontiguousarray(groups.reshape(n_groups, _GROUP, n_pn).transpose(0, 2, 1))
-    n_kc = pn_index.shape[0]
-    out = np.empty((m, weights.shape[0]), np.float64)
-    block = max(1, min(_BLOCK, n_kc // k))  # at least k blocks
-    _novelty(groups, pn_index, k, block, np.ascontiguousarray(weights, dtype=np.uint8), out)
-    return out
+    def __init__(self, pn_index: np.ndarray, k: int, n_pn: int) -> None:
+        self.pn_index = sorted_pn_index(pn_index)
+        self.k = k
+        n_kc = self.pn_index.shape[0]
+        block = max(1, min(_BLOCK, n_kc // k))  # at least k blocks
+        self.ep_t = np.empty((_GROUP, n_kc), np.float32)
+        self.block_max = np.empty((_GROUP, (n_kc + block - 1) // block), np.float32)
+        self.groups = np.zeros((1, n_pn, _GROUP), np.float32)
+
+    def novelty(self, pn: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """lambda (m, n_out) float64 in [0, 1] (1 = novel) of n_out MBONs for PN vectors (m, n_pn) float32;
+        weights: (n_out, n_kc) bool or uint8, True = undepressed synapse."""
+        m = pn.shape[0]
+        n_groups = -(-m // _GROUP)
+        if self.groups.shape[0] < n_groups:
+            self.groups = np.zeros((n_groups, self.groups.shape[1], _GROUP), np.float32)
+        groups = self.groups[:n_groups]
+        for q in range(n_groups):
+            part = pn[q * _GROUP:(q + 1) * _GROUP]
+            groups[q, :, :part.shape[0]] = part.T
+            groups[q, :, part.shape[0]:] = 0.0
+        out = np.empty((m, weights.shape[0]), np.float64)
+        _novelty(groups, self.pn_index, self.k, self.ep_t, self.block_max,
+                 np.ascontiguousarray(weights, dtype=np.uint8), out)
+        return out

@@ -42,7 +42,7 @@ class KenyonCells:
                 break
             idx[bad] = rng.integers(0, n_pn, size=(bad.size, pn_per_kc))
         self.pn_index = idx
-        self._sorted_index = None  # the compiled kernel's table, made on first `novelty`
+        self._kernel = None  # the compiled kernel's tables and work arrays, made on first `novelty`
         data = np.ones(idx.size, dtype=np.float32)
         # (n_pn, n_kc) so that EP = PN @ matrix for a batch of PN rows.
         self._matrix = sparse.csr_matrix(
@@ -69,10 +69,9 @@ class KenyonCells:
         pn = np.asarray(pn, dtype=np.float32)
         if pn.ndim != 2 or pn.shape[1] != self.n_pn:
             raise ValueError(f"PN input must have shape (m, {self.n_pn}), got {pn.shape}")
-        if getattr(self, "_sorted_index", None) is None:
-            self._sorted_index = kc_kernel.sorted_pn_index(self.pn_index)
-        weights = np.stack([mbon.weights for mbon in mbons])
-        return kc_kernel.novelty(pn, self._sorted_index, self.k, weights)
+        if self._kernel is None:
+            self._kernel = kc_kernel.Workspace(self.pn_index, self.k, self.n_pn)
+        return self._kernel.novelty(pn, np.stack([mbon.weights for mbon in mbons]))
 
 
 class MBON:
