@@ -88,3 +88,29 @@ def test_perfect_memory_store_matches_direct_differences_and_headings():
         cmd = model.decide(view)
         assert cmd.turn == pytest.approx(float(model._scan[_best_angle(model._scan, ref)]), abs=1e-12)
         assert reloaded.decide(view).turn == cmd.turn
+
+
+def test_compiled_scan_edges_equal_the_numpy_stages():
+    from antarium.ant.eye import sobel_magnitude
+
+    angles = np.linspace(-1.05, 1.05, 61)
+    for seed, yaw in ((0, 0.0), (4, 0.37), (9, -2.0)):
+        view = random_view(seed, yaw)
+        ref = sobel_magnitude(view.rotated_panoramas(angles)).reshape(61, -1)
+        fast = view.pns(angles)
+        assert fast.dtype == np.float32 and fast.shape == ref.shape
+        # the same float32 operations in the same order; tolerance: a few ULPs of edges of order 1
+        np.testing.assert_allclose(fast, ref, rtol=1e-6, atol=1e-6)
+
+
+def test_compiled_fine_sampling_equals_the_sparse_product():
+    from scipy import sparse
+
+    from antarium.ant.eye_kernel import sample
+
+    rng = np.random.default_rng(5)
+    matrix = sparse.random(300, 1000, density=0.004, random_state=6, format="csr")
+    x = rng.random(1000, dtype=np.float32)
+    fast = sample(matrix, x)
+    assert fast.dtype == np.float32 and fast.shape == (300,)
+    np.testing.assert_allclose(fast, (matrix @ x).astype(np.float32), rtol=1e-6, atol=1e-7)
