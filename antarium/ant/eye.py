@@ -74,8 +74,8 @@ class View:
         self._cols = cols
         self._row_gain = bool(row_gain)
 
-    def rotated_panoramas(self, angles) -> np.ndarray:
-        """Low-resolution panoramas (len(angles), rows, cols) float32 after turning by `angles` (rad)."""
+    def _columns(self, angles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The fine columns i0, i1 (m, cols) int64 and weights w (m, cols) float32 of the panoramas at `angles`."""
         angles = np.atleast_1d(np.asarray(angles, dtype=np.float64)) + self.yaw
         n_fine = self.band.shape[1]
         step = math.tau / n_fine
@@ -84,18 +84,23 @@ class View:
         i0 = np.floor(pos).astype(np.int64)
         w = (pos - i0).astype(np.float32)
         i0 %= n_fine
-        i1 = (i0 + 1) % n_fine
+        return i0, (i0 + 1) % n_fine, w
+
+    def rotated_panoramas(self, angles) -> np.ndarray:
+        """Low-resolution panoramas (len(angles), rows, cols) float32 after turning by `angles` (rad)."""
+        i0, i1, w = self._columns(angles)
         band = self.band
         return band[:, i0].transpose(1, 0, 2) * (1.0 - w[:, None, :]) + band[:, i1].transpose(1, 0, 2) * w[:, None, :]
 
     def pns(self, angles=(0.0,)) -> np.ndarray:
         """Projection-neuron vectors (len(angles), rows * cols) float32: Sobel magnitude of the panoramas
         (divided row by row by its mean over azimuth when the eye has `row_gain`)."""
-        pano = self.rotated_panoramas(angles)
-        edges = sobel_magnitude(pano)
+        from antarium.ant.eye_kernel import scan_edges  # = sobel_magnitude(self.rotated_panoramas(angles))
+
+        edges = scan_edges(self.band, *self._columns(angles))
         if self._row_gain:
             edges = row_gain_control(edges)
-        return edges.reshape(pano.shape[0], -1)
+        return edges.reshape(edges.shape[0], -1)
 
 
 def sobel_magnitude(pano: np.ndarray) -> np.ndarray:
@@ -151,6 +156,7 @@ class Eye:
             raise ValueError(f"is_uv must have shape ({n},), got {is_uv.shape}")
         use_uv, self._columns = CHANNELS[p.channel]
         self._pixels = np.flatnonzero(is_uv == use_uv)
+        self._flat = self._pixels[:, None] * 2 + np.asarray(self._columns)[None, :]  # in the flattened (N, 2) frame
         if self._pixels.size < p.neighbours:
             raise ValueError(f"the layout has only {self._pixels.size} {p.channel} pixels")
         self.n_leds = n
@@ -196,7 +202,7 @@ class Eye:
         led_values = np.asarray(led_values)
         if led_values.shape != (self.n_leds, 2):
             raise ValueError(f"LED values must have shape ({self.n_leds}, 2), got {led_values.shape}")
-        vals = led_values[self._pixels][:, self._columns].sum(axis=1, dtype=np.float32) * self._scale
+        vals = led_values.reshape(-1)[self._flat].sum(axis=1, dtype=np.float32) * self._scale
         return vals if self.params.gamma == 1.0 else np.power(vals, np.float32(self.params.gamma))
 
     def look(self, led_values: np.ndarray, yaw: float = 0.0) -> View:
@@ -207,7 +213,9 @@ class Eye:
         """Like `look`, from the channel's intensities ((n_channel_pixels,) floats)."""
         if not math.isfinite(yaw):
             raise ValueError(f"yaw must be a finite angle in radians, got {yaw!r}")
-        fine = (self._sample @ intensity).reshape(self._fine_shape).astype(np.float32)
+        from antarium.ant.eye_kernel import sample  # = (self._sample @ intensity).astype(np.float32)
+
+        fine = sample(self._sample, intensity).reshape(self._fine_shape)
         band = self._blur_el @ fine @ self._blur_az
         return View(band, self.params.fine_per_col, self.params.cols, yaw, self.params.row_gain)
 

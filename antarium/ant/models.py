@@ -183,7 +183,7 @@ class ArdinModel:
         self.learned_views += 1
 
     def decide(self, view: View) -> Command:
-        novelty = self.mbons["familiarity"].novelty(self.kc.active(view.pns(self._scan)))
+        novelty = self.kc.novelty(view.pns(self._scan), [self.mbons["familiarity"]])[:, 0]
         i = _best_angle(self._scan, novelty)
         return Command(self.params.step, float(self._scan[i]), {"novelty": float(novelty[i])})
 
@@ -206,26 +206,47 @@ class PerfectMemoryModel:
     def __init__(self, n_pn: int, params: PerfectMemoryParams | None = None, views: np.ndarray | None = None):
         self.params = p = params or PerfectMemoryParams()
         self.n_pn = n_pn
-        self.views = np.zeros((0, n_pn), np.float32) if views is None else np.asarray(views, np.float32)
-        if self.views.ndim != 2 or self.views.shape[1] != n_pn:
-            raise ValueError(f"stored views must have shape (n, {n_pn}), got {self.views.shape}")
+        views = np.zeros((0, n_pn), np.float32) if views is None else np.asarray(views, np.float32)
+        if views.ndim != 2 or views.shape[1] != n_pn:
+            raise ValueError(f"stored views must have shape (n, {n_pn}), got {views.shape}")
         self._scan = _scan_angles(math.radians(p.scan_deg), math.radians(p.scan_step_deg))
+        # Preallocated (capacity, n_pn) store, doubled when full, and each view's squared norm, kept as learned.
+        self._store = np.zeros((max(16, views.shape[0]), n_pn), np.float32)
+        self._norms = np.zeros(self._store.shape[0], np.float32)
+        self._n = 0
+        for row in views:
+            self._append(row[None, :])
+
+    @property
+    def views(self) -> np.ndarray:
+        """The stored views (n, n_pn) float32 (a view of the store)."""
+        return self._store[:self._n]
 
     @property
     def learned_views(self) -> int:
-        return self.views.shape[0]
+        return self._n
 
     def reset(self) -> None:
         """Nothing to reset between runs."""
 
+    def _append(self, pn: np.ndarray) -> None:
+        if self._n == self._store.shape[0]:
+            self._store = np.concatenate([self._store, np.zeros_like(self._store)])
+            self._norms = np.concatenate([self._norms, np.zeros_like(self._norms)])
+        self._store[self._n] = pn[0]
+        self._norms[self._n] = (pn * pn).sum(1)[0]
+        self._n += 1
+
     def learn(self, view: View) -> None:
-        self.views = np.concatenate([self.views, view.pns((0.0,))])
+        self._append(view.pns((0.0,)))
 
     def differences(self, pn: np.ndarray) -> np.ndarray:
-        """Smallest RMS difference (m,) between each PN vector (m, n_pn) and any stored view."""
-        if self.views.shape[0] == 0:
+        """Smallest RMS difference (m,) between each PN vector (m, n_pn) and any stored view: one float32
+        matrix product against the stored views, with their squared norms kept from learning."""
+        if self._n == 0:
             raise RuntimeError("the perfect-memory model has learned no view yet")
-        sq = (pn * pn).sum(1)[:, None] + (self.views * self.views).sum(1)[None, :] - 2.0 * pn @ self.views.T
+        views = self.views
+        sq = (pn * pn).sum(1)[:, None] + self._norms[None, :self._n] - 2.0 * pn @ views.T
         return np.sqrt(np.maximum(sq.min(axis=1), 0.0) / self.n_pn)
 
     def decide(self, view: View) -> Command:

@@ -42,6 +42,7 @@ class KenyonCells:
                 break
             idx[bad] = rng.integers(0, n_pn, size=(bad.size, pn_per_kc))
         self.pn_index = idx
+        self._kernel = None  # the compiled kernel's tables and work arrays, made on first `novelty`
         data = np.ones(idx.size, dtype=np.float32)
         # (n_pn, n_kc) so that EP = PN @ matrix for a batch of PN rows.
         self._matrix = sparse.csr_matrix(
@@ -59,6 +60,18 @@ class KenyonCells:
         """Indices (m, k) int64 of the active KCs (k-WTA) for PN vectors (m, n_pn)."""
         ep = self.excitation(pn)
         return np.argpartition(ep, self.n_kc - self.k, axis=1)[:, self.n_kc - self.k:]
+
+    def novelty(self, pn: np.ndarray, mbons: list[MBON]) -> np.ndarray:
+        """lambda (m, len(mbons)) float64 of each MBON for PN vectors (m, n_pn): `mbon.novelty(self.active(pn))`
+        for all of them in one compiled pass without sorting (`kc_kernel`; ties broken toward lower KC index)."""
+        from antarium.ant import kc_kernel
+
+        pn = np.asarray(pn, dtype=np.float32)
+        if pn.ndim != 2 or pn.shape[1] != self.n_pn:
+            raise ValueError(f"PN input must have shape (m, {self.n_pn}), got {pn.shape}")
+        if self._kernel is None:
+            self._kernel = kc_kernel.Workspace(self.pn_index, self.k, self.n_pn)
+        return self._kernel.novelty(pn, np.stack([mbon.weights for mbon in mbons]))
 
 
 class MBON:

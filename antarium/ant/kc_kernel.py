@@ -1,0 +1,166 @@
+"""Compiled k-WTA familiarity (numba): the MBONs' novelty for many PN vectors at once, without sorting.
+
+`Workspace(pn_index, k, n_pn).novelty(pn, weights)` equals `MBON.novelty(KenyonCells.active(pn))` for every
+MBON in `weights`:
+  EP = the sum of each KC's PNs, for 64 PN vectors at once (SIMD over the vectors; the PNs summed in ascending
+  index order in float32, the order of the sparse product in `KenyonCells.excitation`, so EP is the same),
+  the k-th largest EP of each vector from the candidates above a lower bound (the k-th largest of the maxima of
+  blocks of 16 KCs: only the blocks reaching it are read), and lambda = undepressed active KCs / k.
+Ties at the k-th value (equal EP) are broken toward the lower KC index; `np.argpartition` breaks them in an
+unspecified way, so the two agree exactly whenever the k-th largest EP is unique (any natural image).
+Compiled on first use and cached on disk; single-threaded (one core per model in a sweep).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_GROUP = 64  # PN vectors whose EPs are summed together (a 61-direction scan is one group)
+_BLOCK = 16  # KCs per block: summed together, then written out direction by direction; one maximum each
+
+
+@njit(cache=True, nogil=True, fastmath=True, error_model="numpy", boundscheck=False)
+def _excitation(pn_g, pn_index, ep_t, block_max):
+    """EP of a group of G vectors into `ep_t` (G, n_kc) float32 and the maxima of blocks of `size` consecutive
+    KCs into `block_max` (G, ceil(n_kc / size)), from the group's PNs `pn_g` (n_pn, G). A block's EPs are summed
+    together over the G vectors (SIMD; fastmath only lets the compiler vectorise, each EP is still summed in
+    ascending PN order), then written out vector by vector."""
+    n_kc, p = pn_index.shape
+    g = _GROUP  # a compile-time constant: the inner loops unroll into SIMD
+    size = (n_kc + block_max.shape[1] - 1) // block_max.shape[1]
+    tile = np.empty((size, g), np.float32)
+    for b in range(block_max.shape[1]):
+        c0 = b * size
+        n = min(size, n_kc - c0)
+        for t in range(n):
+            for d in range(g):
+                tile[t, d] = 0.0
+            for j in range(p):
+                i = pn_index[c0 + t, j]
+                for d in range(g):
+                    tile[t, d] += pn_g[i, d]
+        for d in range(g):
+            top = tile[0, d]
+            for t in range(n):
+                v = tile[t, d]
+                ep_t[d, c0 + t] = v
+                top = max(top, v)
+            block_max[d, b] = top
+
+
+@njit(cache=True, nogil=True)
+def _novelty(pn_groups, pn_index, k, ep_t, block_max, weights, out):
+    """novelty (m, n_out) into `out` for PN vectors in groups (n_groups, n_pn, G) (the last one zero-padded),
+    with the work arrays ep_t (G, n_kc) and block_max (G, n_blocks) float32."""
+    n_groups, _, g = pn_groups.shape
+    m = out.shape[0]
+    for q in range(n_groups):
+        _excitation(pn_groups[q], pn_index, ep_t, block_max)
+        d0 = q * g
+        _select(ep_t, k, block_max, weights, out[d0:min(m, d0 + g)])
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+def _kth_largest(a, n, k):
+    """The k-th largest of a[:n] (1 <= k <= n), found in place (quickselect; a[:n] is reordered)."""
+    lo, hi, target = 0, n - 1, k - 1
+    while lo < hi:
+        pivot = a[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] > pivot:
+                i += 1
+            while a[j] < pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if target <= j:
+            hi = j
+        elif target >= i:
+            lo = i
+        else:
+            break
+    return a[target]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+def _select(ep_t, k, block_max, weights, out):
+    """novelty (G, n_out) float64 into `out` from EP (G, n_kc) and the MBONs' weights (n_out, n_kc) uint8.
+
+    The k-th largest block maximum is a lower bound of the k-th largest EP (k blocks hold a value at least that
+    large), so only the blocks whose maximum reaches it can hold active KCs."""
+    n_kc = ep_t.shape[1]
+    n_blocks = block_max.shape[1]
+    size = (n_kc + n_blocks - 1) // n_blocks
+    n_out = weights.shape[0]
+    cand = np.empty(n_kc, np.int32)
+    vals = np.empty(n_kc, np.float32)
+    scratch = np.empty(max(n_kc, n_blocks), np.float32)
+    for d in range(out.shape[0]):
+        scratch[:n_blocks] = block_max[d]
+        low = _kth_largest(scratch, n_blocks, k)
+        n = 0
+        for b in range(n_blocks):
+            if block_max[d, b] >= low:
+                for c in range(b * size, min(n_kc, (b + 1) * size)):
+                    if ep_t[d, c] >= low:
+                        cand[n] = c
+                        vals[n] = ep_t[d, c]
+                        n += 1
+        scratch[:n] = vals[:n]
+        kth = _kth_largest(scratch, n, k)
+        ties_left = k
+        for i in range(n):
+            if vals[i] > kth:
+                ties_left -= 1
+        for o in range(n_out):
+            out[d, o] = 0.0
+        for i in range(n):
+            v = vals[i]
+            take = v > kth
+            if not take and v == kth and ties_left > 0:
+                take = True
+                ties_left -= 1
+            if take:
+                for o in range(n_out):
+                    out[d, o] += weights[o, cand[i]]
+        for o in range(n_out):
+            out[d, o] /= k
+
+
+def sorted_pn_index(pn_index: np.ndarray) -> np.ndarray:
+    """Each KC's PN indices (n_kc, pn_per_kc) in ascending order, int32 C-contiguous (the kernel's table)."""
+    return np.ascontiguousarray(np.sort(pn_index, axis=1), dtype=np.int32)
+
+
+class Workspace:
+    """The kernel's work arrays for one KC layer, allocated once (fresh multi-MB arrays cost page faults)."""
+
+    def __init__(self, pn_index: np.ndarray, k: int, n_pn: int) -> None:
+        self.pn_index = sorted_pn_index(pn_index)
+        self.k = k
+        n_kc = self.pn_index.shape[0]
+        block = max(1, min(_BLOCK, n_kc // k))  # at least k blocks
+        self.ep_t = np.empty((_GROUP, n_kc), np.float32)
+        self.block_max = np.empty((_GROUP, (n_kc + block - 1) // block), np.float32)
+        self.groups = np.zeros((1, n_pn, _GROUP), np.float32)
+
+    def novelty(self, pn: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """lambda (m, n_out) float64 in [0, 1] (1 = novel) of n_out MBONs for PN vectors (m, n_pn) float32;
+        weights: (n_out, n_kc) bool or uint8, True = undepressed synapse."""
+        m = pn.shape[0]
+        n_groups = -(-m // _GROUP)
+        if self.groups.shape[0] < n_groups:
+            self.groups = np.zeros((n_groups, self.groups.shape[1], _GROUP), np.float32)
+        groups = self.groups[:n_groups]
+        for q in range(n_groups):
+            part = pn[q * _GROUP:(q + 1) * _GROUP]
+            groups[q, :, :part.shape[0]] = part.T
+            groups[q, :, part.shape[0]:] = 0.0
+        out = np.empty((m, weights.shape[0]), np.float64)
+        _novelty(groups, self.pn_index, self.k, self.ep_t, self.block_max,
+                 np.ascontiguousarray(weights, dtype=np.uint8), out)
+        return out

@@ -1,0 +1,116 @@
+"""The optimised decision paths (compiled KC kernel, perfect memory's store) against the straightforward ones."""
+
+import numpy as np
+import pytest
+
+from antarium.ant.eye import View
+from antarium.ant.models import ArdinModel, PerfectMemoryModel, _best_angle
+from antarium.ant.mushroom_body import MBON, KenyonCells
+
+N_PN = 800
+
+
+def random_view(seed: int, yaw: float = 0.0) -> View:
+    """A smooth random panorama band (16 rows x 300 fine azimuths) like the eye's."""
+    rng = np.random.default_rng(seed)
+    spectrum = rng.normal(size=(16, 151)) + 1j * rng.normal(size=(16, 151))
+    spectrum[:, 25:] = 0.0
+    return View(np.fft.irfft(spectrum, n=300, axis=1).astype(np.float32), 6, 50, yaw)
+
+
+def test_kernel_novelty_equals_argpartition_for_every_batch_size():
+    # Tolerance: one KC swapped at the k-WTA boundary (1 / k); on these inputs no swap happens in practice.
+    kc = KenyonCells(N_PN, 20_000, 10, 0.01, seed=0)
+    left, right = MBON(kc.n_kc), MBON(kc.n_kc)
+    left.learn(kc.active(random_view(1).pns(np.linspace(-0.5, 0.5, 9))))
+    right.learn(kc.active(random_view(2).pns([0.0])))
+    pn = random_view(1, yaw=0.1).pns(np.linspace(-1.0, 1.0, 70))
+    for m in (1, 7, 61, 64, 70):
+        fast = kc.novelty(pn[:m], [left, right])
+        assert fast.shape == (m, 2) and fast.dtype == np.float64
+        ref = kc.active(pn[:m])
+        np.testing.assert_allclose(fast[:, 0], left.novelty(ref), rtol=0, atol=0.5 / kc.k)
+        np.testing.assert_allclose(fast[:, 1], right.novelty(ref), rtol=0, atol=0.5 / kc.k)
+    assert fast[:, 0].min() < 0.5 and fast[:, 1].max() == 1.0  # the learned directions are familiar
+
+
+def test_kernel_breaks_ties_toward_lower_kc_and_handles_all_active():
+    kc = KenyonCells(N_PN, 1_000, 4, 0.01, seed=1)
+    mbon = MBON(kc.n_kc)
+    mbon.learn(np.arange(5))                       # KCs 0..4 depressed: half of the k = 10 lowest
+    flat = np.zeros((3, N_PN), np.float32)         # every EP ties at 0
+    np.testing.assert_allclose(kc.novelty(flat, [mbon])[:, 0], 0.5, rtol=0, atol=1e-12)
+    everyone = KenyonCells(N_PN, 50, 4, 1.0, seed=1)   # k = n_kc: all active
+    m = MBON(50)
+    m.learn(np.arange(10))
+    np.testing.assert_allclose(everyone.novelty(random_view(3).pns([0.0, 1.0]), [m])[:, 0], 0.8, atol=1e-12)
+
+
+def test_kernel_rejects_wrong_pn_shape():
+    kc = KenyonCells(N_PN, 1_000, 4, 0.01, seed=1)
+    with pytest.raises(ValueError, match=r"shape \(m, 800\)"):
+        kc.novelty(np.zeros((2, 799), np.float32), [MBON(1_000)])
+
+
+def test_ardin_decides_the_heading_of_the_straightforward_scan():
+    model = ArdinModel(N_PN)
+    for seed in range(5):
+        model.learn(random_view(seed))
+    mbon = model.mbons["familiarity"]
+    for seed, yaw in ((0, 0.2), (3, -0.4), (7, 0.0)):
+        view = random_view(seed, yaw)
+        ref = mbon.novelty(model.kc.active(view.pns(model._scan)))
+        cmd = model.decide(view)
+        i = _best_angle(model._scan, ref)
+        assert cmd.turn == pytest.approx(float(model._scan[i]), abs=1e-12)
+        assert cmd.trace["novelty"] == pytest.approx(float(ref[i]), abs=0.5 / model.kc.k)
+
+
+def _reference_differences(views: np.ndarray, pn: np.ndarray) -> np.ndarray:
+    """Smallest RMS difference computed directly in float64, view by view."""
+    d = pn.astype(np.float64)[:, None, :] - views.astype(np.float64)[None, :, :]
+    return np.sqrt((d * d).mean(axis=2).min(axis=1))
+
+
+def test_perfect_memory_store_matches_direct_differences_and_headings():
+    model = PerfectMemoryModel(N_PN)
+    for seed in range(40):                          # more than the first capacity (16): the store grows
+        model.learn(random_view(seed))
+    assert model.learned_views == 40 and model.views.shape == (40, N_PN)
+    reloaded = PerfectMemoryModel(N_PN, views=model.views.copy())
+    for seed, yaw in ((3, 0.3), (41, 0.0), (17, -0.2)):
+        view = random_view(seed, yaw)
+        pn = view.pns(model._scan)
+        ref = _reference_differences(model.views, pn)
+        fast = model.differences(pn)
+        # float32 product vs float64 differences: the image differences here are ~0.1-1, so 1e-3 is ~0.1-1 %.
+        np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-3)
+        cmd = model.decide(view)
+        assert cmd.turn == pytest.approx(float(model._scan[_best_angle(model._scan, ref)]), abs=1e-12)
+        assert reloaded.decide(view).turn == cmd.turn
+
+
+def test_compiled_scan_edges_equal_the_numpy_stages():
+    from antarium.ant.eye import sobel_magnitude
+
+    angles = np.linspace(-1.05, 1.05, 61)
+    for seed, yaw in ((0, 0.0), (4, 0.37), (9, -2.0)):
+        view = random_view(seed, yaw)
+        ref = sobel_magnitude(view.rotated_panoramas(angles)).reshape(61, -1)
+        fast = view.pns(angles)
+        assert fast.dtype == np.float32 and fast.shape == ref.shape
+        # the same float32 operations in the same order; tolerance: a few ULPs of edges of order 1
+        np.testing.assert_allclose(fast, ref, rtol=1e-6, atol=1e-6)
+
+
+def test_compiled_fine_sampling_equals_the_sparse_product():
+    from scipy import sparse
+
+    from antarium.ant.eye_kernel import sample
+
+    rng = np.random.default_rng(5)
+    matrix = sparse.random(300, 1000, density=0.004, random_state=6, format="csr")
+    x = rng.random(1000, dtype=np.float32)
+    fast = sample(matrix, x)
+    assert fast.dtype == np.float32 and fast.shape == (300,)
+    np.testing.assert_allclose(fast, (matrix @ x).astype(np.float32), rtol=1e-6, atol=1e-7)
