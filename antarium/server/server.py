@@ -17,7 +17,7 @@ import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from antarium.server.frame_loop import FrameLoop, FrameRecord
 from antarium.server.placement import LoopPlacement
 from antarium.server.status import loop_state, rig_status
 
+if TYPE_CHECKING:
+    from antarium.config import RenderSection, RigConfig
+
 #: events that are also printed on stderr: an operator must notice them
 ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "frame_rejected")
 COMMAND_TIMEOUT_S = 60.0
@@ -38,7 +41,7 @@ class ServerError(RuntimeError):
     """The server cannot start as configured (the message says what to change)."""
 
 
-def default_renderer_factory(render_cfg: dict[str, Any], clock: Clock | None = None):
+def default_renderer_factory(render_cfg: RenderSection, clock: Clock | None = None):
     """The renderer from `[render]` (built in the thread that will render; the scene is loaded after)."""
     from antarium.geometry import load_dome
     from antarium.renderers import Renderer
@@ -55,7 +58,7 @@ class Server:
     False: no dome), session (an open zenoh session; None: from `[bus]` if enabled); record: a trial name
     to record from the first frame (also `[log] record = true`)."""
 
-    def __init__(self, config: dict[str, Any], *, clock: Clock | None = None, source=None,
+    def __init__(self, config: RigConfig, *, clock: Clock | None = None, source=None,
                  renderer_factory: Callable | None | bool = True, link=None, session=None,
                  record: str | None = None, echo: Callable[[str], None] | None = None) -> None:
         from antarium.trial_log import check_log_dir, prepare_writer
