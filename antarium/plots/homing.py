@@ -7,78 +7,59 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from antarium.plots import style
+
 if TYPE_CHECKING:  # plots sit below the ant: they draw its records, never import it
     from antarium.ant.homing import Trip
 
+#: the arena run's trips: name -> (colour, legend)
+ARENA_TRIPS = {"outbound": ("0.6", "outbound (random walk + optic flow)"), "cx": ("C0", "home 1: CX (MBONs learn)"),
+               "cxmb": ("C3", "home 2: CXMB (memory restored)"), "cx_again": ("C2", "home 2: CX alone (restored)")}
 
-def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str) -> Path:
-    """Outbound (thin grey) and homeward paths (colour) of several trips from the nest at the origin; PNG."""
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 7))
-    for i, (label, (out, home)) in enumerate(trips.items()):
-        ax.plot(*out.xy.T, color="0.6", lw=0.8, label="outbound" if i == 0 else None)
-        ax.plot(*home.xy.T, color=f"C{i % 10}", lw=1.0, label=label)
-        ax.plot(*out.xy[-1], "s", color=f"C{i % 10}", ms=4)
+def _map(path: str | Path, title: str, draw) -> Path:
+    """A top view in metres with the nest marked; `draw(ax)` adds the trips."""
+    fig, ax = style.figure((7.5, 7.0))
+    draw(ax)
     ax.plot(0, 0, "*", color="k", ms=14, label="nest")
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_title(title)
-    ax.legend(fontsize=7, loc="best")
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    style.label(ax, title, "world x (m)", "world y (m)")
+    style.legend(ax, "below", ncol=2, fontsize=7)
+    return style.save(fig, path)
+
+
+def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str) -> Path:
+    """Outbound routes (grey), homeward trips (one colour each) and where each turned home (squares); PNG."""
+    def draw(ax) -> None:
+        for i, (label, (out, home)) in enumerate(trips.items()):
+            ax.plot(*out.xy.T, color="0.6", lw=0.8, label="outbound" if i == 0 else None)
+            ax.plot(*home.xy.T, color=f"C{i % 10}", lw=1.0, label=label)
+            ax.plot(*out.xy[-1], "s", color=f"C{i % 10}", ms=4)
+
+    return _map(path, title, draw)
 
 
 def plot_distance(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str) -> Path:
     """Distance from the nest over the homeward trip, as a share of the outbound path length; PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = style.figure((8.5, 4.5))
     for i, (label, (out, home)) in enumerate(trips.items()):
         length = float(np.linalg.norm(np.diff(np.vstack([(0, 0), out.xy]), axis=0), axis=1).sum())
-        ax.plot(np.hypot(*home.xy.T) / length, color=f"C{i % 10}", lw=0.8, label=label)
-    ax.axhline(0.05, color="k", ls="--", lw=0.8, label="goal: 5 % of the outbound path")
-    ax.set_xlabel("homeward decision")
-    ax.set_ylabel("distance to nest / outbound length")
-    ax.set_title(title)
-    ax.legend(fontsize=7, loc="best")
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+        ax.plot(100 * np.hypot(*home.xy.T) / length, color=f"C{i % 10}", lw=0.8, label=label)
+    ax.axhline(5.0, color="k", ls="--", lw=0.8, label="goal: 5 % of the outbound path")
+    style.label(ax, title, "homeward decision (steps of 1 cm)", "distance to the nest (% of the outbound path)")
+    style.legend(ax, "right", fontsize=7)
+    return style.save(fig, path)
 
 
-def plot_arena(path, clutter, trips: dict[str, Trip], title: str) -> Path:
+def plot_arena(path: str | Path, clutter, trips: dict[str, Trip], title: str) -> Path:
     """Cylinders (grey discs) and the four trips of one arena run; PNG."""
-    import matplotlib
+    def draw(ax) -> None:
+        import matplotlib.patches as mpatches
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+        for (x, y), r in zip(clutter.centres, clutter.radii, strict=True):
+            ax.add_patch(mpatches.Circle((x, y), r, color="0.4"))
+        for name, trip in trips.items():
+            colour, label = ARENA_TRIPS[name]
+            ax.plot(*trip.xy.T, color=colour, lw=0.9, label=label)
 
-    fig, ax = plt.subplots(figsize=(7, 7))
-    for (x, y), r in zip(clutter.centres, clutter.radii, strict=True):
-        ax.add_patch(plt.Circle((x, y), r, color="0.4"))
-    styles = {"outbound": ("0.6", "outbound (random walk + optic flow)"), "cx": ("C0", "home 1: CX (MBONs learn)"),
-              "cxmb": ("C3", "home 2: CXMB (memory restored)"), "cx_again": ("C2", "home 2: CX alone (restored)")}
-    for name, trip in trips.items():
-        colour, label = styles[name]
-        ax.plot(*trip.xy.T, color=colour, lw=0.9, label=label)
-    ax.plot(0, 0, "*", color="k", ms=14, label="nest")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_title(title)
-    ax.legend(fontsize=7, loc="best")
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _map(path, title, draw)
