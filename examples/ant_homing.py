@@ -3,8 +3,8 @@ back and look") and a nest place MBON; released at the feeder, the ant walks the
 stops by itself when the nest MBON recognises the nest (lambda_N < p = 0.2, the paper's threshold; Gattaux et
 al. 2025, Fig. 7).
 
-The nest views are learned on the first 5 cm of the route (`experiments.PLACE_LENGTH_M`) with Antcar's eye of
-this project (`experiments.MODEL_EYES`): gain control per elevation row, so that the grass and stones near the
+The nest views are learned on the first 5 cm of the route (`route_following.PLACE_LENGTH_M`) with Antcar's eye of
+this project (`route_following.MODEL_EYES`): gain control per elevation row, so that the grass and stones near the
 nest, not the far field that looks the same metres away, make the nest familiar.
 
     .venv/bin/python examples/ant_homing.py --out ant-homing/          # 3 m route, about a minute
@@ -20,8 +20,8 @@ import math
 from pathlib import Path
 
 from antarium.ant.agent import follow_route, learning_walk
-from antarium.ant.experiments import FACE_SIZE, MODEL_EYES, MODEL_PARAMS, PLACE_LENGTH_M
 from antarium.ant.models import make_model
+from antarium.ant.route_following import FACE_SIZE, MODEL_EYES, MODEL_PARAMS, PLACE_LENGTH_M
 from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
 from antarium.plots.ant import plot_paths, plot_traces, scene_top_view

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from antarium.ant.agent import learning_walk
-from antarium.ant.experiments import FACE_SIZE
 from antarium.ant.models import make_model
+from antarium.ant.route_following import FACE_SIZE
 from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
 

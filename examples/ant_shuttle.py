@@ -16,9 +16,9 @@ import math
 from pathlib import Path
 
 from antarium.ant.agent import follow_route, learning_walk
-from antarium.ant.experiments import FACE_SIZE, MODEL_EYES, MODEL_PARAMS, PLACE_LENGTH_M
 from antarium.ant.metrics import motivation_switches
 from antarium.ant.models import make_model
+from antarium.ant.route_following import FACE_SIZE, MODEL_EYES, MODEL_PARAMS, PLACE_LENGTH_M
 from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
 from antarium.plots.ant import plot_paths, plot_traces, scene_top_view

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from antarium.ant.experiments import route_from_log
+from antarium.ant.route_following import route_from_log
 from antarium.ant.routes import Route
 from antarium.ant.storage import FORMAT_VERSION
 from antarium.cli import main

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from antarium.ant.agent import follow_route, learning_walk
-from antarium.ant.experiments import MODEL_EYES, MODEL_PARAMS
 from antarium.ant.locomotion import AntLocomotion, Strides, TrackballLegs
 from antarium.ant.models import make_model
+from antarium.ant.route_following import MODEL_EYES, MODEL_PARAMS
 from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
 from antarium.core.clock import MonotonicClock, SimulatedClock

@@ -5,7 +5,7 @@ trial log, a picture of the learned and followed path and a picture of the dome;
 import h5py
 import numpy as np
 
-from antarium.ant.experiments import ARRIVE_RADIUS_M, DEMO_ROUTE_SEED
+from antarium.ant.route_following import ARRIVE_RADIUS_M, DEMO_ROUTE_SEED
 from antarium.ant.routes import curved_route
 from antarium.cli import main
 from antarium.demos.served_rig import run_demo_rig

@@ -140,7 +140,7 @@ def _bar(desc: str, total=None):
 
 
 def run(args: argparse.Namespace) -> int:
-    from antarium.ant import experiments
+    from antarium.ant import route_following
 
     if args.action == "learn":
         return _learn(args)
@@ -180,16 +180,17 @@ def run(args: argparse.Namespace) -> int:
         if args.put_back_cm < 0:
             raise ValueError(f"--put-back-cm must be >= 0 (0: never put back), got {args.put_back_cm}")
         put_back = args.put_back_cm / 100.0 if args.put_back_cm > 0 else math.inf
-        print(experiments.evaluate(out, args.routes, args.length, kinds, args.seed, args.scene, _bar, put_back))
+        print(route_following.evaluate(out, args.routes, args.length, kinds, args.seed, args.scene, _bar, put_back))
         return 0
-    outcome = experiments.demo(out, scene=args.scene, progress=_bar("virtual ant demo").update)
+    outcome = route_following.demo(out, scene=args.scene, progress=_bar("virtual ant demo").update)
     print(f"virtual ant demo: {outcome.summary}\n  log: {outcome.log}\n  picture: {outcome.picture}")
     return 0
 
 
 def _learn(args: argparse.Namespace) -> int:
     from antarium.ant.agent import learning_walk
-    from antarium.ant.experiments import (
+    from antarium.ant.models import make_model
+    from antarium.ant.route_following import (
         FACE_SIZE,
         LEARN_SPACING_M,
         MODEL_EYES,
@@ -197,7 +198,6 @@ def _learn(args: argparse.Namespace) -> int:
         PLACE_LENGTH_M,
         parse_route,
     )
-    from antarium.ant.models import make_model
     from antarium.ant.storage import mbon_bytes, save_model
     from antarium.ant.world import virtual_rig
 
@@ -219,7 +219,7 @@ def _learn(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from antarium.ant.experiments import follow_saved, parse_route
+    from antarium.ant.route_following import follow_saved, parse_route
     from antarium.ant.routes import Route
     from antarium.ant.storage import load_model
 

@@ -28,8 +28,8 @@ DECISIONS_PER_M = 150
 def run_ant_demo(out: str | Path, echo: Callable[[str], None] = print, scene: Any = "habitat",
                  route_length: float | None = None, face_size: int | None = None) -> dict[str, Path]:
     """Learn a short curved route, follow it in closed loop; write the outputs and return their paths by name.
-    route_length: metres (default: the demo route of `antarium.ant.experiments`); face_size: cube-face texels."""
-    from antarium.ant import experiments as ex
+    route_length: metres (default: the demo route of `antarium.ant.route_following`); face_size: cube-face texels."""
+    from antarium.ant import route_following as ex
     from antarium.ant.agent import follow_route, learning_walk
     from antarium.ant.eye import EyeParams
     from antarium.ant.models import make_model

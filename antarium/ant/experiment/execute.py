@@ -51,8 +51,8 @@ def _renderer(face_size: int, scene, x: float, y: float, z: float):
 def _model_args(run: Run):
     """(eye parameters, model overrides, learning spacing) of a run: each model's own eye and parameters, then
     the run's eye.* keys, model parameters and seed (where the model has one)."""
-    from antarium.ant.experiments import MODEL_EYES, MODEL_PARAMS
     from antarium.ant.models import MODELS
+    from antarium.ant.route_following import MODEL_EYES, MODEL_PARAMS
 
     params = dict(run.params)
     eye = {k[4:]: params.pop(k) for k in list(params) if k.startswith("eye.")}
@@ -66,7 +66,7 @@ def _model_args(run: Run):
 
 def run_row(run: Run) -> dict:
     """Learn and follow the run's route; the row of the results table (see `spec.METRICS`)."""
-    from antarium.ant.experiments import train_and_follow
+    from antarium.ant.route_following import train_and_follow
 
     row = {"run_id": run.run_id, "condition": run.condition, "world": run.world.name, "route_set": run.route_set,
            "route": run.route, "model": run.model, "lateral_cm": run.lateral_cm, "heading_deg": run.heading_deg,

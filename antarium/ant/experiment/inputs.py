@@ -242,7 +242,7 @@ def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
 
 def load_route(path: str | Path) -> RouteInput:
     """One route file (CSV/whitespace x_m, y_m[, heading_deg] or a trial log .h5). Raises RouteError naming it."""
-    from antarium.ant.experiments import route_from_log
+    from antarium.ant.route_following import route_from_log
 
     path = Path(path)
     if not path.is_file():
