@@ -96,3 +96,40 @@ def test_compiled_compass_fit_equals_the_straightforward_sums():
         assert total_lit == pytest.approx(total[on].sum(), rel=1e-12)
         np.testing.assert_allclose(m, (e * pol[:, None]).T @ e, rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(bright, total @ compass._dirs, rtol=1e-10, atol=1e-12)
+
+
+def _reference_flow(of, before, after):
+    """The straightforward numpy Lucas-Kanade (the pre-kernel `OpticFlow.flow`)."""
+    i0 = before[of.pixels].sum(axis=1, dtype=np.float64) * of._scale
+    i1 = after[of.pixels].sum(axis=1, dtype=np.float64) * of._scale
+    mean = 0.5 * (i0 + i1)
+    grad = np.einsum("mjk,mk->mj", of._pinv, mean[of._nb] - mean[:, None])
+    dt = i1 - i0
+    g = np.concatenate([grad[:, None, :], grad[of._nb]], axis=1)
+    t = np.concatenate([dt[:, None], dt[of._nb]], axis=1)
+    gtg = np.einsum("mki,mkj->mij", g, g) + 1e-9 * np.eye(2)
+    gtt = np.einsum("mki,mk->mi", g, t)
+    return -np.linalg.solve(gtg, gtt[..., None])[..., 0]
+
+
+def test_compiled_flow_equals_the_straightforward_lucas_kanade():
+    from antarium.ant.optic_flow import OpticFlow
+    from antarium.geometry import load_dome
+
+    dome = load_dome()
+    of = OpticFlow.from_dome(dome)
+    d = np.asarray(dome.directions, np.float64)
+    az, el = np.arctan2(d[:, 1], d[:, 0]), np.arcsin(d[:, 2] / np.linalg.norm(d, axis=1))
+
+    def frame(shift):  # a smooth pattern turned by `shift` rad
+        v = 0.5 + 0.4 * np.sin(5 * (az - shift)) * np.cos(3 * el)
+        return np.repeat((v * 30000).astype(np.uint16)[:, None], 2, axis=1)
+
+    before, after = frame(0.0), frame(0.02)
+    ref = _reference_flow(of, before, after)
+    np.testing.assert_allclose(of.flow(before, after), ref, rtol=1e-7, atol=1e-9 * np.abs(ref).max())
+    need = np.zeros(of.pixels.size, bool)
+    need[::7] = True
+    part = of.flow(before, after, need)
+    np.testing.assert_allclose(part[need], ref[need], rtol=1e-7, atol=1e-9 * np.abs(ref).max())
+    assert not part[~need].any()

@@ -77,39 +77,32 @@ class OpticFlow:
     def from_dome(cls, dome, params: FlowParams | None = None) -> OpticFlow:
         return cls(dome.directions, dome.is_uv, dome.gain, params)
 
-    def intensity(self, leds: np.ndarray) -> np.ndarray:
-        leds = np.asarray(leds)
-        if leds.shape != (self.n_leds, 2):
-            raise ValueError(f"LED values must have shape ({self.n_leds}, 2), got {leds.shape}")
-        return leds[self.pixels].sum(axis=1, dtype=np.float64) * self._scale
+    def flow(self, before: np.ndarray, after: np.ndarray, need: np.ndarray | None = None) -> np.ndarray:
+        """(M, 2) flow (east, north; rad per frame) of the band's pixels between two (N, 2) LED frames: Lucas-Kanade
+        over each pixel and its neighbours (compiled, `flow_kernels`); with `need` (M,) bool, only those pixels'
+        (zero elsewhere)."""
+        from antarium.ant.flow_kernels import lucas_kanade
 
-    def flow(self, before: np.ndarray, after: np.ndarray) -> np.ndarray:
-        """(M, 2) flow (east, north; rad per frame) of the band's pixels between two (N, 2) LED frames."""
-        i0, i1 = self.intensity(before), self.intensity(after)
-        mean = 0.5 * (i0 + i1)
-        grad = np.einsum("mjk,mk->mj", self._pinv, mean[self._nb] - mean[:, None])   # (M, 2)
-        dt = i1 - i0
-        # Lucas-Kanade over each pixel and its neighbours
-        g = np.concatenate([grad[:, None, :], grad[self._nb]], axis=1)              # (M, k + 1, 2)
-        t = np.concatenate([dt[:, None], dt[self._nb]], axis=1)                     # (M, k + 1)
-        gtg = np.einsum("mki,mkj->mij", g, g) + 1e-9 * np.eye(2)
-        gtt = np.einsum("mki,mk->mi", g, t)
-        return -np.linalg.solve(gtg, gtt[..., None])[..., 0]
+        before, after = np.asarray(before), np.asarray(after)
+        for leds in (before, after):
+            if leds.shape != (self.n_leds, 2):
+                raise ValueError(f"LED values must have shape ({self.n_leds}, 2), got {leds.shape}")
+        need = np.ones(self.pixels.size, bool) if need is None else np.asarray(need, bool)
+        return lucas_kanade(before, after, self.pixels, self._scale, self._nb, self._pinv, need)
 
     def avoid(self, before: np.ndarray, after: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict]:
         """The turn (rad, > 0 left) away from the nearer side for an ant facing dome azimuth `yaw` that walked
         `travelled` m between the frames, and a trace. A pixel's nearness (1/m) is its flow over the flow of a
         unit-distance translation, divided by the distance walked."""
         p = self.params
-        flow = self.flow(before, after)
         rel = np.remainder(self.azimuth - yaw + math.pi, math.tau) - math.pi
         front = np.abs(rel) <= math.radians(p.frontal_deg)
         forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-        expected3 = -(forward - (self.directions @ forward)[:, None] * self.directions)
-        expected = np.stack([np.einsum("mj,mj->m", expected3, self.east),
-                             np.einsum("mj,mj->m", expected3, self.north)], axis=1)
+        # -(f - (f.d) d) on the tangent plane: east and north are normal to d, so its components are -f.east, -f.north
+        expected = -np.stack([self.east @ forward, self.north @ forward], axis=1)
         norm2 = (expected ** 2).sum(1)
         ok = front & (norm2 > 0.05)
+        flow = self.flow(before, after, ok)    # only the frontal pixels that count
         trace: dict[str, float] = {}
         if p.method == "filter":
             nearness = np.maximum((flow * expected).sum(1) / np.maximum(norm2, 1e-12), 0.0)

@@ -1,0 +1,69 @@
+"""Compiled Lucas-Kanade flow on the dome's pixel lattice (numba), for `optic_flow.OpticFlow`: intensities of the
+band's pixels, their tangent-plane gradients from the precomputed neighbour tables, and the flow solved only for
+the pixels asked for. Cached per machine; imported lazily (so `import antarium` stays free of numba)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def lucas_kanade(before, after, pixels, scale, nb, pinv, need):
+    """(M, 2) flow (east, north; rad per frame) of the band's M pixels between two (N, 2) LED frames, zero where
+    `need` (M,) bool is False.
+
+    pixels (M,) LED rows; scale (M,) 1 / (65535 gain); nb (M, k) neighbour places in the band; pinv (M, 2, k) the
+    least-squares gradient from the neighbours' differences. Per needed pixel: gradient g of the mean of the two
+    frames, time difference t, flow = -(sum g g^T + 1e-9 I)^-1 sum g t over the pixel and its neighbours."""
+    m, k = nb.shape
+    i0 = np.empty(m)
+    dt = np.empty(m)
+    mean = np.empty(m)
+    for i in range(m):
+        row = pixels[i]
+        a = (np.float64(before[row, 0]) + np.float64(before[row, 1])) * scale[i]
+        b = (np.float64(after[row, 0]) + np.float64(after[row, 1])) * scale[i]
+        i0[i] = a
+        dt[i] = b - a
+        mean[i] = 0.5 * (a + b)
+    # gradients where a needed pixel or one of its neighbours needs them
+    want = np.zeros(m, np.bool_)
+    for i in range(m):
+        if need[i]:
+            want[i] = True
+            for j in range(k):
+                want[nb[i, j]] = True
+    grad = np.zeros((m, 2))
+    for i in range(m):
+        if want[i]:
+            ge = 0.0
+            gn = 0.0
+            for j in range(k):
+                diff = mean[nb[i, j]] - mean[i]
+                ge += pinv[i, 0, j] * diff
+                gn += pinv[i, 1, j] * diff
+            grad[i, 0] = ge
+            grad[i, 1] = gn
+    flow = np.zeros((m, 2))
+    for i in range(m):
+        if not need[i]:
+            continue
+        a00 = grad[i, 0] * grad[i, 0]
+        a01 = grad[i, 0] * grad[i, 1]
+        a11 = grad[i, 1] * grad[i, 1]
+        b0 = grad[i, 0] * dt[i]
+        b1 = grad[i, 1] * dt[i]
+        for j in range(k):
+            n = nb[i, j]
+            a00 += grad[n, 0] * grad[n, 0]
+            a01 += grad[n, 0] * grad[n, 1]
+            a11 += grad[n, 1] * grad[n, 1]
+            b0 += grad[n, 0] * dt[n]
+            b1 += grad[n, 1] * dt[n]
+        a00 += 1e-9
+        a11 += 1e-9
+        det = a00 * a11 - a01 * a01
+        flow[i, 0] = -(a11 * b0 - a01 * b1) / det
+        flow[i, 1] = -(a00 * b1 - a01 * b0) / det
+    return flow
