@@ -133,3 +133,37 @@ def test_compiled_flow_equals_the_straightforward_lucas_kanade():
     part = of.flow(before, after, need)
     np.testing.assert_allclose(part[need], ref[need], rtol=1e-7, atol=1e-9 * np.abs(ref).max())
     assert not part[~need].any()
+
+
+@pytest.mark.parametrize("yaw", [0.0, 1.0, -2.5])
+def test_compiled_filter_turn_equals_the_numpy_formula(yaw):
+    from antarium.ant.optic_flow import FlowParams, OpticFlow
+    from antarium.geometry import load_dome
+
+    dome = load_dome()
+    p = FlowParams(react_distance=100.0)
+    of = OpticFlow.from_dome(dome, p)
+    d = np.asarray(dome.directions, np.float64)
+    az, el = np.arctan2(d[:, 1], d[:, 0]), np.arcsin(d[:, 2] / np.linalg.norm(d, axis=1))
+
+    def frame(shift):  # a pattern brighter towards azimuth 0.3, turned by `shift` rad
+        v = 0.5 + 0.4 * np.sin(5 * (az - shift)) * np.cos(3 * el) * (1 + 0.5 * np.cos(az - 0.3))
+        return np.repeat((v * 30000).astype(np.uint16)[:, None], 2, axis=1)
+
+    before, after = frame(0.0), frame(0.01)
+    flow = of.flow(before, after)
+    rel = np.remainder(of.azimuth - yaw + math.pi, math.tau) - math.pi
+    forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    e3 = -(forward - (of.directions @ forward)[:, None] * of.directions)
+    expected = np.stack([(e3 * of.east).sum(1), (e3 * of.north).sum(1)], axis=1)
+    norm2 = (expected ** 2).sum(1)
+    ok = (np.abs(rel) <= math.radians(p.frontal_deg)) & (norm2 > 0.05)
+    near = np.maximum((flow * expected).sum(1) / norm2, 0.0) / 0.01
+    near = np.where(near > 1.0 / p.react_distance, near, 0.0)
+    left, right = near[ok & (rel > 0)].sum(), near[ok & (rel < 0)].sum()
+    turn, trace = of.avoid(before, after, yaw, 0.01)
+    assert left + right > 0
+    assert trace["flow_left"] == pytest.approx(left, rel=1e-9)
+    assert trace["flow_right"] == pytest.approx(right, rel=1e-9)
+    assert turn == pytest.approx(np.clip(-p.gain * (left - right) / (left + right + p.half_nearness),
+                                         -p.max_turn, p.max_turn), rel=1e-9, abs=1e-12)

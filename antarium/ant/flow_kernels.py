@@ -67,3 +67,47 @@ def lucas_kanade(before, after, pixels, scale, nb, pinv, need):
         flow[i, 0] = -(a11 * b0 - a01 * b1) / det
         flow[i, 1] = -(a00 * b1 - a01 * b0) / det
     return flow
+
+
+@njit(cache=True)
+def frontal_field(azimuth, east, north, yaw, frontal):
+    """For an ant facing dome azimuth `yaw` (rad): each band pixel's body azimuth rel (M,) in [-pi, pi), the
+    expected flow (M, 2) of a unit forward translation (-f projected on east, north: both normal to the pixel
+    direction), its squared norm (M,) and whether the pixel counts (M,) bool: |rel| <= `frontal` rad and
+    norm^2 > 0.05."""
+    m = azimuth.shape[0]
+    rel = np.empty(m)
+    expected = np.empty((m, 2))
+    norm2 = np.empty(m)
+    ok = np.empty(m, np.bool_)
+    fx, fy = np.cos(yaw), np.sin(yaw)
+    for i in range(m):
+        r = (azimuth[i] - yaw + np.pi) % (2 * np.pi) - np.pi
+        e = -(east[i, 0] * fx + east[i, 1] * fy)
+        n = -(north[i, 0] * fx + north[i, 1] * fy)
+        rel[i] = r
+        expected[i, 0] = e
+        expected[i, 1] = n
+        norm2[i] = e * e + n * n
+        ok[i] = abs(r) <= frontal and norm2[i] > 0.05
+    return rel, expected, norm2, ok
+
+
+@njit(cache=True)
+def filter_sides(flow, expected, norm2, rel, ok, travelled, react_distance):
+    """(left, right) summed nearness (1/m) of the counting pixels: the flow's projection on the expected flow over
+    its squared norm, divided by `travelled` m, kept where above 1 / `react_distance`; left: rel > 0."""
+    left = 0.0
+    right = 0.0
+    for i in range(flow.shape[0]):
+        if not ok[i]:
+            continue
+        near = max((flow[i, 0] * expected[i, 0] + flow[i, 1] * expected[i, 1]) / max(norm2[i], 1e-12), 0.0)
+        near = near / max(travelled, 1e-6)
+        if near <= 1.0 / react_distance:
+            continue
+        if rel[i] > 0.0:
+            left += near
+        elif rel[i] < 0.0:
+            right += near
+    return left, right

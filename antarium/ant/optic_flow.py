@@ -94,30 +94,25 @@ class OpticFlow:
         """The turn (rad, > 0 left) away from the nearer side for an ant facing dome azimuth `yaw` that walked
         `travelled` m between the frames, and a trace. A pixel's nearness (1/m) is its flow over the flow of a
         unit-distance translation, divided by the distance walked."""
+        from antarium.ant.flow_kernels import filter_sides, frontal_field
+
         p = self.params
-        rel = np.remainder(self.azimuth - yaw + math.pi, math.tau) - math.pi
-        front = np.abs(rel) <= math.radians(p.frontal_deg)
-        forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-        # -(f - (f.d) d) on the tangent plane: east and north are normal to d, so its components are -f.east, -f.north
-        expected = -np.stack([self.east @ forward, self.north @ forward], axis=1)
-        norm2 = (expected ** 2).sum(1)
-        ok = front & (norm2 > 0.05)
+        rel, expected, norm2, ok = frontal_field(self.azimuth, self.east, self.north, float(yaw),
+                                                 math.radians(p.frontal_deg))
         flow = self.flow(before, after, ok)    # only the frontal pixels that count
         trace: dict[str, float] = {}
         if p.method == "filter":
-            nearness = np.maximum((flow * expected).sum(1) / np.maximum(norm2, 1e-12), 0.0)
-            centre = 0.0
+            left, right = filter_sides(flow, expected, norm2, rel, ok, float(travelled), p.react_distance)
         else:
             x, y = rel[ok], self.elevation[ok]
             u, v = flow[ok, 0], flow[ok, 1]  # east: azimuth grows to the left
             foe, *_ = np.linalg.lstsq(np.stack([u, v], axis=1), x * v - y * u, rcond=None)
             centre = float(np.clip(foe[0], -math.radians(p.frontal_deg), math.radians(p.frontal_deg)))
             trace["foe_azimuth"] = centre
-            nearness = np.sqrt((flow ** 2).sum(1) / np.maximum(norm2, 1e-12))
-        nearness = nearness / max(travelled, 1e-6)
-        nearness = np.where(nearness > 1.0 / p.react_distance, nearness, 0.0)
-        left = float(nearness[ok & (rel > centre)].sum())
-        right = float(nearness[ok & (rel < centre)].sum())
+            nearness = np.sqrt((flow ** 2).sum(1) / np.maximum(norm2, 1e-12)) / max(travelled, 1e-6)
+            nearness = np.where(nearness > 1.0 / p.react_distance, nearness, 0.0)
+            left = float(nearness[ok & (rel > centre)].sum())
+            right = float(nearness[ok & (rel < centre)].sum())
         trace.update(flow_left=left, flow_right=right)
         turn = -p.gain * (left - right) / (left + right + p.half_nearness)
         turn = float(np.clip(turn, -p.max_turn, p.max_turn))
