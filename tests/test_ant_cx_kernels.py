@@ -167,3 +167,25 @@ def test_compiled_filter_turn_equals_the_numpy_formula(yaw):
     assert trace["flow_right"] == pytest.approx(right, rel=1e-9)
     assert turn == pytest.approx(np.clip(-p.gain * (left - right) / (left + right + p.half_nearness),
                                          -p.max_turn, p.max_turn), rel=1e-9, abs=1e-12)
+
+
+def test_sparse_mbon_read_equals_novelty():
+    from antarium.ant.navigation import CXMBModel, CXMBParams
+
+    class FakeView:  # the lowest seam: a view's PN vector
+        def __init__(self, pn):
+            self.pn = pn
+
+        def pns(self, angles):
+            return self.pn[None, :]
+
+    rng = np.random.default_rng(4)
+    model = CXMBModel(800, CXMBParams(n_kc=2000))
+    for j in range(N_COLUMNS):
+        model.mbons[f"tb1_{j}"].learn(model.kc.active(rng.uniform(0, 1, (j + 1, 800))))
+    view = FakeView(rng.uniform(0, 1, 800).astype(np.float32))
+    active = model.kc.active(view.pns((0.0,)))
+    expected = [model.mbons[f"tb1_{j}"].novelty(active)[0] for j in range(N_COLUMNS)]
+    got = model.responses(view)
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+    assert 0 < got.min() < got.max() <= 1
