@@ -11,8 +11,10 @@ if TYPE_CHECKING:  # plots sit below the ant: they draw its records, never impor
     from antarium.ant.homing import Trip
 
 
-def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str) -> Path:
-    """Outbound (thin grey) and homeward paths (colour) of several trips from the nest at the origin; PNG."""
+def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str,
+               marks: dict[str, tuple[float, float]] | None = None) -> Path:
+    """Outbound (thin grey) and homeward paths (colour) of several trips from the nest at the origin, and labelled
+    places `marks` (label -> (x, y) m, e.g. the fictive nest of a displaced ant) as crosses; PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -24,6 +26,8 @@ def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str
         ax.plot(*home.xy.T, color=f"C{i % 10}", lw=1.0, label=label)
         ax.plot(*out.xy[-1], "s", color=f"C{i % 10}", ms=4)
     ax.plot(0, 0, "*", color="k", ms=14, label="nest")
+    for label, (x, y) in (marks or {}).items():
+        ax.plot(x, y, "X", color="k", mfc="w", ms=11, label=label)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
