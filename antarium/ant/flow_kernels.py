@@ -9,24 +9,25 @@ from numba import njit
 
 
 @njit(cache=True)
-def lucas_kanade(before, after, pixels, scale, nb, pinv, need):
-    """(M, 2) flow (east, north; rad per frame) of the band's M pixels between two (N, 2) LED frames, zero where
-    `need` (M,) bool is False.
+def band_intensity(leds, pixels, scale):
+    """(M,) intensity (green + blue, 1 = the farthest LED at full) of the band's pixels in an (N, 2) LED frame."""
+    out = np.empty(pixels.shape[0])
+    for i in range(pixels.shape[0]):
+        out[i] = (np.float64(leds[pixels[i], 0]) + np.float64(leds[pixels[i], 1])) * scale[i]
+    return out
 
-    pixels (M,) LED rows; scale (M,) 1 / (65535 gain); nb (M, k) neighbour places in the band; pinv (M, 2, k) the
-    least-squares gradient from the neighbours' differences. Per needed pixel: gradient g of the mean of the two
-    frames, time difference t, flow = -(sum g g^T + 1e-9 I)^-1 sum g t over the pixel and its neighbours."""
+
+@njit(cache=True)
+def lucas_kanade(i0, i1, nb, pinv, need):
+    """(M, 2) flow (east, north; rad per frame) of the band's M pixels between two intensity vectors (M,), zero
+    where `need` (M,) bool is False.
+
+    nb (M, k) neighbour places in the band; pinv (M, 2, k) the least-squares gradient from the neighbours'
+    differences. Per needed pixel: gradient g of the mean of the two frames, time difference t, flow =
+    -(sum g g^T + 1e-9 I)^-1 sum g t over the pixel and its neighbours."""
     m, k = nb.shape
-    i0 = np.empty(m)
-    dt = np.empty(m)
-    mean = np.empty(m)
-    for i in range(m):
-        row = pixels[i]
-        a = (np.float64(before[row, 0]) + np.float64(before[row, 1])) * scale[i]
-        b = (np.float64(after[row, 0]) + np.float64(after[row, 1])) * scale[i]
-        i0[i] = a
-        dt[i] = b - a
-        mean[i] = 0.5 * (a + b)
+    dt = i1 - i0
+    mean = 0.5 * (i0 + i1)
     # gradients where a needed pixel or one of its neighbours needs them
     want = np.zeros(m, np.bool_)
     for i in range(m):

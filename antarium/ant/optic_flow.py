@@ -77,29 +77,42 @@ class OpticFlow:
     def from_dome(cls, dome, params: FlowParams | None = None) -> OpticFlow:
         return cls(dome.directions, dome.is_uv, dome.gain, params)
 
+    def intensity(self, leds: np.ndarray) -> np.ndarray:
+        """(M,) intensity of the band's pixels (green + blue over the full scale and the gain) in an (N, 2) frame."""
+        from antarium.ant.flow_kernels import band_intensity
+
+        leds = np.asarray(leds)
+        if leds.shape != (self.n_leds, 2):
+            raise ValueError(f"LED values must have shape ({self.n_leds}, 2), got {leds.shape}")
+        return band_intensity(leds, self.pixels, self._scale)
+
     def flow(self, before: np.ndarray, after: np.ndarray, need: np.ndarray | None = None) -> np.ndarray:
         """(M, 2) flow (east, north; rad per frame) of the band's pixels between two (N, 2) LED frames: Lucas-Kanade
         over each pixel and its neighbours (compiled, `flow_kernels`); with `need` (M,) bool, only those pixels'
         (zero elsewhere)."""
+        return self.flow_of(self.intensity(before), self.intensity(after), need)
+
+    def flow_of(self, i0: np.ndarray, i1: np.ndarray, need: np.ndarray | None = None) -> np.ndarray:
+        """`flow` from the two frames' band intensities (M,) (`intensity`)."""
         from antarium.ant.flow_kernels import lucas_kanade
 
-        before, after = np.asarray(before), np.asarray(after)
-        for leds in (before, after):
-            if leds.shape != (self.n_leds, 2):
-                raise ValueError(f"LED values must have shape ({self.n_leds}, 2), got {leds.shape}")
         need = np.ones(self.pixels.size, bool) if need is None else np.asarray(need, bool)
-        return lucas_kanade(before, after, self.pixels, self._scale, self._nb, self._pinv, need)
+        return lucas_kanade(i0, i1, self._nb, self._pinv, need)
 
     def avoid(self, before: np.ndarray, after: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict]:
         """The turn (rad, > 0 left) away from the nearer side for an ant facing dome azimuth `yaw` that walked
         `travelled` m between the frames, and a trace. A pixel's nearness (1/m) is its flow over the flow of a
         unit-distance translation, divided by the distance walked."""
+        return self.avoid_of(self.intensity(before), self.intensity(after), yaw, travelled)
+
+    def avoid_of(self, i0: np.ndarray, i1: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict]:
+        """`avoid` from the two frames' band intensities (M,) (`intensity`)."""
         from antarium.ant.flow_kernels import filter_sides, frontal_field
 
         p = self.params
         rel, expected, norm2, ok = frontal_field(self.azimuth, self.east, self.north, float(yaw),
                                                  math.radians(p.frontal_deg))
-        flow = self.flow(before, after, ok)    # only the frontal pixels that count
+        flow = self.flow_of(i0, i1, ok)        # only the frontal pixels that count
         trace: dict[str, float] = {}
         if p.method == "filter":
             left, right = filter_sides(flow, expected, norm2, rel, ok, float(travelled), p.react_distance)
@@ -131,8 +144,8 @@ class CollisionAvoidance:
         self._last = None
 
     def turn(self, leds: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict[str, float]]:
-        leds = np.array(leds, copy=True)
-        last, self._last = self._last, leds
+        now = self.flow.intensity(leds)            # each frame's band read once (a new array: no copy of the frame)
+        last, self._last = self._last, now
         if last is None or travelled <= 0:
             return 0.0, {"flow_turn": 0.0}
-        return self.flow.avoid(last, leds, yaw, travelled)
+        return self.flow.avoid_of(last, now, yaw, travelled)
