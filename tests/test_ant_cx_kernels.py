@@ -189,3 +189,14 @@ def test_sparse_mbon_read_equals_novelty():
     got = model.responses(view)
     np.testing.assert_allclose(got, expected, rtol=1e-12)
     assert 0 < got.min() < got.max() <= 1
+
+
+def test_compiled_frontal_field_equals_numpy_remainder():
+    from antarium.ant.flow_kernels import frontal_field
+
+    az = np.linspace(-math.pi, math.pi, 2001)
+    east = np.stack([-np.sin(az), np.cos(az), np.zeros_like(az)], axis=1)
+    north = np.tile([0.0, 0.0, 1.0], (az.size, 1))
+    for yaw in (0.0, 1.0, -2.5, 7.0, -13.0, math.pi, -math.pi):
+        rel, *_ = frontal_field(az, east, north, yaw, math.pi / 2)
+        np.testing.assert_array_equal(rel, np.remainder(az - yaw + math.pi, math.tau) - math.pi)

@@ -71,6 +71,20 @@ def lucas_kanade(i0, i1, nb, pinv, need):
 
 
 @njit(cache=True)
+def _wrap(x):
+    """x % tau, bit for bit as numpy's remainder (fmod, then + tau for a negative rest), without fmod (slow) in the
+    one-period cases: exact subtractions there (Sterbenz)."""
+    tau = 2 * np.pi
+    if 0.0 <= x < tau:
+        return x
+    if tau <= x < 2 * tau:
+        return x - tau
+    if -tau < x < 0.0:
+        return x + tau
+    return x % tau
+
+
+@njit(cache=True)
 def frontal_field(azimuth, east, north, yaw, frontal):
     """For an ant facing dome azimuth `yaw` (rad): each band pixel's body azimuth rel (M,) in [-pi, pi), the
     expected flow (M, 2) of a unit forward translation (-f projected on east, north: both normal to the pixel
@@ -83,7 +97,7 @@ def frontal_field(azimuth, east, north, yaw, frontal):
     ok = np.empty(m, np.bool_)
     fx, fy = np.cos(yaw), np.sin(yaw)
     for i in range(m):
-        r = (azimuth[i] - yaw + np.pi) % (2 * np.pi) - np.pi
+        r = _wrap(azimuth[i] - yaw + np.pi) - np.pi
         e = -(east[i, 0] * fx + east[i, 1] * fy)
         n = -(north[i, 0] * fx + north[i, 1] * fy)
         rel[i] = r
