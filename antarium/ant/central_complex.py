@@ -16,6 +16,7 @@ CPU4[1] at -45 deg (right).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, fields
 
@@ -73,6 +74,14 @@ _CPU4_TO_CPU1 = np.concatenate([8 + (np.arange(8) - 1) % 8, (np.arange(8) + 1) %
 _BLOCK = 4096                     # noise values drawn at once (the same stream as drawing them one rate at a time)
 
 
+@functools.cache
+def _kernels():
+    """The compiled loops (numba), imported on first use."""
+    from antarium.ant import cx_kernels
+
+    return cx_kernels
+
+
 def param_vector(params: CXParams) -> np.ndarray:
     """The `CXParams` fields, in declaration order, as float64 (the compiled kernels' parameter layout)."""
     return np.array([float(getattr(params, f.name)) for f in fields(params)])
@@ -85,9 +94,6 @@ class CentralComplex:
     (`cx_kernels`) on preallocated arrays, the noise drawn from `rng` in blocks in the order of the rates."""
 
     def __init__(self, params: CXParams | None = None) -> None:
-        from antarium.ant import cx_kernels
-
-        self._k = cx_kernels
         self.params = params or CXParams()
         self.rng = np.random.default_rng(self.params.seed)
         self._prm = param_vector(self.params)
@@ -115,13 +121,13 @@ class CentralComplex:
     def compass(self, heading: float) -> np.ndarray:
         """TL2 -> CL1 -> TB1 for a heading (rad); updates and returns TB1 (8,). TL2 = rate(cos(heading - pref)),
         CL1 = rate(-TL2), TB1 = rate(prop_cl1 (CL1 left + right) - (1 - prop_cl1) W_TB1_TB1 TB1)."""
-        self._k.cx_compass(float(heading), self.tb1, _W_TB1_TB1, PREFS, self._prm, self._draw(5 * N_COLUMNS))
+        _kernels().cx_compass(float(heading), self.tb1, _W_TB1_TB1, PREFS, self._prm, self._draw(5 * N_COLUMNS))
         return self.tb1
 
     def integrate(self, speed: float) -> None:
         """CPU4 memory update for forward speed `speed` (0..1 of full speed) along the current TB1 heading:
         TN2 = clip(speed cos 45 deg + noise), CPU4 += gain clip(TN2 - TB1, 0, 1) - decay_bias gain, leak, clip."""
-        self._k.cx_integrate(float(speed), self.tb1, self.cpu4, self._prm, self._draw(2))
+        _kernels().cx_integrate(float(speed), self.tb1, self.cpu4, self._prm, self._draw(2))
 
     def steering(self, extra: np.ndarray | None = None, k: float = 1.0) -> np.ndarray:
         """CPU1 (16,) from the memory and TB1; `extra` (16,), laid out as CPU4, joins the CPU4 input with weight
@@ -129,7 +135,7 @@ class CentralComplex:
         CPU1 = rate(0.5 CPU4out (shifted) - 0.5 Pontine - TB1), CPU4out = rate(CPU4), Pontine = rate(CPU4out)."""
         use = extra is not None
         e = np.asarray(extra, np.float64) if use else self._no_extra
-        self._k.cx_steering(self.tb1, self.cpu4, self.cpu1, e, float(k), use, _CPU4_TO_CPU1, _PONTINE, self._prm,
+        _kernels().cx_steering(self.tb1, self.cpu4, self.cpu1, e, float(k), use, _CPU4_TO_CPU1, _PONTINE, self._prm,
                             self._draw(6 * N_COLUMNS))
         return self.cpu1
 
@@ -156,4 +162,4 @@ class CentralComplex:
     def home_vector(self) -> tuple[float, float]:
         """(direction rad, strength) of the memory's population vector (shifted CPU4 halves): it points from the
         nest to the ant (the outbound vector); home lies opposite."""
-        return self._k.cx_home_vector(self.cpu4, PREFS)
+        return _kernels().cx_home_vector(self.cpu4, PREFS)
