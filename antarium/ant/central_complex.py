@@ -16,11 +16,11 @@ CPU4[1] at -45 deg (right).
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
-from scipy.special import expit
 
 N_COLUMNS = 8
 PREFS = np.arange(N_COLUMNS) * (math.tau / N_COLUMNS)
@@ -71,12 +71,36 @@ _PONTINE = np.concatenate([8 + (np.arange(8) + 3) % 8, (np.arange(8) + 5) % 8])
 _CPU4_TO_CPU1 = np.concatenate([8 + (np.arange(8) - 1) % 8, (np.arange(8) + 1) % 8])
 
 
+_BLOCK = 4096                     # noise values drawn at once (the same stream as drawing them one rate at a time)
+
+
+@functools.cache
+def _kernels():
+    """The compiled loops (numba), imported on first use."""
+    from antarium.ant import cx_kernels
+
+    return cx_kernels
+
+
+def param_vector(params: CXParams) -> np.ndarray:
+    """The `CXParams` fields, in declaration order, as float64 (the compiled kernels' parameter layout)."""
+    return np.array([float(getattr(params, f.name)) for f in fields(params)])
+
+
 class CentralComplex:
-    """One CX: `step(heading, speed)` updates TB1 and CPU4 and returns the motor output (> 0: turn left)."""
+    """One CX: `step(heading, speed)` updates TB1 and CPU4 and returns the motor output (> 0: turn left).
+
+    Every rate is clip(sigmoid(v * slope - bias) + N(0, noise), 0, 1); the steps run as compiled kernels
+    (`cx_kernels`) on preallocated arrays, the noise drawn from `rng` in blocks in the order of the rates."""
 
     def __init__(self, params: CXParams | None = None) -> None:
         self.params = params or CXParams()
         self.rng = np.random.default_rng(self.params.seed)
+        self._prm = param_vector(self.params)
+        self._noise = np.empty(0)
+        self._at = 0
+        self._zeros = np.zeros(3 * 2 * N_COLUMNS)
+        self._no_extra = np.zeros(2 * N_COLUMNS)
         self.reset()
 
     def reset(self) -> None:
@@ -84,44 +108,35 @@ class CentralComplex:
         self.cpu4 = np.full(2 * N_COLUMNS, 0.5)     # the memory (CPU4 "calcium"), not its sigmoid output
         self.cpu1 = np.zeros(2 * N_COLUMNS)
 
-    def _sig(self, v: np.ndarray, slope: float, bias: float) -> np.ndarray:
-        out = expit(v * slope - bias)
-        if self.params.noise > 0:
-            out = out + self.rng.normal(0.0, self.params.noise, out.shape)
-        return np.clip(out, 0.0, 1.0)
+    def _draw(self, n: int) -> np.ndarray:
+        """The next n noise values (zeros without noise)."""
+        if self.params.noise <= 0:
+            return self._zeros[:n]
+        if self._at + n > self._noise.size:
+            self._noise = np.concatenate([self._noise[self._at:], self.rng.normal(0.0, self.params.noise, _BLOCK)])
+            self._at = 0
+        self._at += n
+        return self._noise[self._at - n:self._at]
 
     def compass(self, heading: float) -> np.ndarray:
-        """TL2 -> CL1 -> TB1 for a heading (rad); updates and returns TB1 (8,)."""
-        p = self.params
-        tl2 = self._sig(np.cos(heading - np.tile(PREFS, 2)), p.tl2_slope, p.tl2_bias)
-        cl1 = self._sig(-tl2, p.cl1_slope, p.cl1_bias)
-        drive = p.prop_cl1 * (cl1[:N_COLUMNS] + cl1[N_COLUMNS:]) - (1 - p.prop_cl1) * _W_TB1_TB1 @ self.tb1
-        self.tb1 = self._sig(drive, p.tb1_slope, p.tb1_bias)
+        """TL2 -> CL1 -> TB1 for a heading (rad); updates and returns TB1 (8,). TL2 = rate(cos(heading - pref)),
+        CL1 = rate(-TL2), TB1 = rate(prop_cl1 (CL1 left + right) - (1 - prop_cl1) W_TB1_TB1 TB1)."""
+        _kernels().cx_compass(float(heading), self.tb1, _W_TB1_TB1, PREFS, self._prm, self._draw(5 * N_COLUMNS))
         return self.tb1
 
     def integrate(self, speed: float) -> None:
-        """CPU4 memory update for forward speed `speed` (0..1 of full speed) along the current TB1 heading."""
-        p = self.params
-        tn2 = np.full(2, speed * math.cos(math.pi / 4))
-        if p.noise > 0:
-            tn2 = tn2 + self.rng.normal(0.0, p.noise, 2)
-        tn2 = np.clip(tn2, 0.0, 1.0)
-        update = np.clip(np.repeat(tn2, N_COLUMNS) - np.tile(self.tb1, 2), 0.0, 1.0) * p.cpu4_gain
-        mem = self.cpu4 + update - p.cpu4_decay_bias * p.cpu4_gain
-        mem -= p.leak * (mem - 0.5)
-        self.cpu4 = np.clip(mem, 0.0, 1.0)
+        """CPU4 memory update for forward speed `speed` (0..1 of full speed) along the current TB1 heading:
+        TN2 = clip(speed cos 45 deg + noise), CPU4 += gain clip(TN2 - TB1, 0, 1) - decay_bias gain, leak, clip."""
+        _kernels().cx_integrate(float(speed), self.tb1, self.cpu4, self._prm, self._draw(2))
 
     def steering(self, extra: np.ndarray | None = None, k: float = 1.0) -> np.ndarray:
         """CPU1 (16,) from the memory and TB1; `extra` (16,), laid out as CPU4, joins the CPU4 input with weight
-        1 - k, CPU4 with weight k (Zhang's CXMB, Mitchell 2019 eq. 4); no extra: Stone's CX."""
-        p = self.params
-        cpu4 = self._sig(self.cpu4, p.cpu4_slope, p.cpu4_bias)
-        pontine = self._sig(cpu4, p.pontine_slope, p.pontine_bias)
-        memory = 0.5 * cpu4[_CPU4_TO_CPU1]
-        if extra is not None:
-            memory = k * memory + (1.0 - k) * 0.5 * np.asarray(extra, np.float64)[_CPU4_TO_CPU1]
-        drive = memory - 0.5 * pontine[_PONTINE] - np.tile(self.tb1, 2)
-        self.cpu1 = self._sig(drive, p.cpu1_slope, p.cpu1_bias)
+        1 - k, CPU4 with weight k (Zhang's CXMB, Mitchell 2019 eq. 4); no extra: Stone's CX.
+        CPU1 = rate(0.5 CPU4out (shifted) - 0.5 Pontine - TB1), CPU4out = rate(CPU4), Pontine = rate(CPU4out)."""
+        use = extra is not None
+        e = np.asarray(extra, np.float64) if use else self._no_extra
+        _kernels().cx_steering(self.tb1, self.cpu4, self.cpu1, e, float(k), use, _CPU4_TO_CPU1, _PONTINE, self._prm,
+                            self._draw(6 * N_COLUMNS))
         return self.cpu1
 
     def motor(self) -> float:
@@ -147,7 +162,4 @@ class CentralComplex:
     def home_vector(self) -> tuple[float, float]:
         """(direction rad, strength) of the memory's population vector (shifted CPU4 halves): it points from the
         nest to the ant (the outbound vector); home lies opposite."""
-        left = np.roll(self.cpu4[:N_COLUMNS], 1)
-        right = np.roll(self.cpu4[N_COLUMNS:], -1)
-        z = ((left + right) * np.exp(1j * PREFS)).sum()
-        return float(np.angle(z)), float(abs(z))
+        return _kernels().cx_home_vector(self.cpu4, PREFS)

@@ -101,6 +101,14 @@ class SkyCompass:
         self._axes = np.asarray(panel_axes, np.float64)[np.asarray(panel)[self.pixels]]
         gain = np.ones(self.n_leds) if gain is None else np.asarray(gain, np.float64)
         self._scale = 1.0 / (_FULL_SCALE * gain[self.pixels])
+        # the e-vector is linear in the polariser's (cos a, sin a): e ~ cos a px + sin a py, px / py the panel's
+        # x / y axes projected normal to the pixel direction (precomputed once; normalised per frame)
+        d = self._dirs
+        self._px = self._axes[:, 0] - np.einsum("ij,ij->i", self._axes[:, 0], d)[:, None] * d
+        self._py = self._axes[:, 1] - np.einsum("ij,ij->i", self._axes[:, 1], d)[:, None] * d
+        from antarium.ant.cx_kernels import compass_fit
+
+        self._fit = compass_fit
 
     @classmethod
     def from_dome(cls, dome, params: CompassParams | None = None) -> SkyCompass:
@@ -116,24 +124,19 @@ class SkyCompass:
         angles = np.asarray(polariser_angles, np.float64).reshape(-1)
         if angles.size != self.n_uv:
             raise ValueError(f"polariser angles must hold {self.n_uv} values (55 x 9), got {angles.size}")
-        drive = led_values[self.pixels].astype(np.float64) * self._scale[:, None]
-        pol = drive[:, 1]
-        total = drive[:, 0] + pol
-        lit = total > p.min_intensity
-        if lit.sum() < p.min_pixels:
-            return CompassReading(math.nan, False, why=f"dorsal sky dark ({int(lit.sum())} lit UV pixels)")
-        degree = float(pol[lit].sum() / total[lit].sum())
+        lit, pol_lit, total_lit, m, bright = self._fit(led_values, self.pixels, self._scale, self._uv_slot, angles,
+                                                       self._px, self._py, self._dirs, p.min_intensity)
+        if lit < p.min_pixels:
+            return CompassReading(math.nan, False, why=f"dorsal sky dark ({lit} lit UV pixels)")
+        degree = pol_lit / total_lit
         if degree < p.min_degree:
             return CompassReading(math.nan, False, degree, why=f"dorsal sky depolarised (degree {degree:.3f})")
-        e = e_vectors_from_polarisers(self._dirs, angles[self._uv_slot], self._axes)
-        m = (e * pol[:, None]).T @ e
         w, v = np.linalg.eigh(m)
         residual = float(w[0] / max(w[1], 1e-12))
         if residual > p.max_residual:
             return CompassReading(math.nan, False, degree, residual, why=f"e-vectors fit no sun (residual "
                                                                          f"{residual:.2f})")
         sun = v[:, 0]
-        bright = total @ self._dirs
         if sun[:2] @ bright[:2] < 0:
             sun = -sun
         solar_azimuth = math.atan2(sun[1], sun[0])

@@ -302,6 +302,7 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
         left = np.array([-math.sin(h), math.cos(h)])
         start = np.array([fx, fy]) + lateral * left
         fictive = lateral * left
+        result["fictive_nest_xy_m"] = [float(fictive[0]), float(fictive[1])]
         for k in ks:
             ant.place(float(start[0]), float(start[1]), h)
             ant.frame()
@@ -322,5 +323,6 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
         (path / f"displacement_{compass}.json").write_text(json.dumps(result, indent=2, default=float))
         pictures = {name: (out, trip) for name, trip in trips.items()}
         result["png"] = str(plot_trips(path / f"displacement_{compass}.png", pictures,
-                                       f"displaced {lateral} m left of the feeder: PI vs visual memory"))
+                                       f"displaced {lateral} m left of the feeder: PI vs visual memory",
+                                       {"fictive nest (where PI points)": tuple(result["fictive_nest_xy_m"])}))
     return result

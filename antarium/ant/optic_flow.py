@@ -78,53 +78,54 @@ class OpticFlow:
         return cls(dome.directions, dome.is_uv, dome.gain, params)
 
     def intensity(self, leds: np.ndarray) -> np.ndarray:
+        """(M,) intensity of the band's pixels (green + blue over the full scale and the gain) in an (N, 2) frame."""
+        from antarium.ant.flow_kernels import band_intensity
+
         leds = np.asarray(leds)
         if leds.shape != (self.n_leds, 2):
             raise ValueError(f"LED values must have shape ({self.n_leds}, 2), got {leds.shape}")
-        return leds[self.pixels].sum(axis=1, dtype=np.float64) * self._scale
+        return band_intensity(leds, self.pixels, self._scale)
 
-    def flow(self, before: np.ndarray, after: np.ndarray) -> np.ndarray:
-        """(M, 2) flow (east, north; rad per frame) of the band's pixels between two (N, 2) LED frames."""
-        i0, i1 = self.intensity(before), self.intensity(after)
-        mean = 0.5 * (i0 + i1)
-        grad = np.einsum("mjk,mk->mj", self._pinv, mean[self._nb] - mean[:, None])   # (M, 2)
-        dt = i1 - i0
-        # Lucas-Kanade over each pixel and its neighbours
-        g = np.concatenate([grad[:, None, :], grad[self._nb]], axis=1)              # (M, k + 1, 2)
-        t = np.concatenate([dt[:, None], dt[self._nb]], axis=1)                     # (M, k + 1)
-        gtg = np.einsum("mki,mkj->mij", g, g) + 1e-9 * np.eye(2)
-        gtt = np.einsum("mki,mk->mi", g, t)
-        return -np.linalg.solve(gtg, gtt[..., None])[..., 0]
+    def flow(self, before: np.ndarray, after: np.ndarray, need: np.ndarray | None = None) -> np.ndarray:
+        """(M, 2) flow (east, north; rad per frame) of the band's pixels between two (N, 2) LED frames: Lucas-Kanade
+        over each pixel and its neighbours (compiled, `flow_kernels`); with `need` (M,) bool, only those pixels'
+        (zero elsewhere)."""
+        return self.flow_of(self.intensity(before), self.intensity(after), need)
+
+    def flow_of(self, i0: np.ndarray, i1: np.ndarray, need: np.ndarray | None = None) -> np.ndarray:
+        """`flow` from the two frames' band intensities (M,) (`intensity`)."""
+        from antarium.ant.flow_kernels import lucas_kanade
+
+        need = np.ones(self.pixels.size, bool) if need is None else np.asarray(need, bool)
+        return lucas_kanade(i0, i1, self._nb, self._pinv, need)
 
     def avoid(self, before: np.ndarray, after: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict]:
         """The turn (rad, > 0 left) away from the nearer side for an ant facing dome azimuth `yaw` that walked
         `travelled` m between the frames, and a trace. A pixel's nearness (1/m) is its flow over the flow of a
         unit-distance translation, divided by the distance walked."""
+        return self.avoid_of(self.intensity(before), self.intensity(after), yaw, travelled)
+
+    def avoid_of(self, i0: np.ndarray, i1: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict]:
+        """`avoid` from the two frames' band intensities (M,) (`intensity`)."""
+        from antarium.ant.flow_kernels import filter_sides, frontal_field
+
         p = self.params
-        flow = self.flow(before, after)
-        rel = np.remainder(self.azimuth - yaw + math.pi, math.tau) - math.pi
-        front = np.abs(rel) <= math.radians(p.frontal_deg)
-        forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-        expected3 = -(forward - (self.directions @ forward)[:, None] * self.directions)
-        expected = np.stack([np.einsum("mj,mj->m", expected3, self.east),
-                             np.einsum("mj,mj->m", expected3, self.north)], axis=1)
-        norm2 = (expected ** 2).sum(1)
-        ok = front & (norm2 > 0.05)
+        rel, expected, norm2, ok = frontal_field(self.azimuth, self.east, self.north, float(yaw),
+                                                 math.radians(p.frontal_deg))
+        flow = self.flow_of(i0, i1, ok)        # only the frontal pixels that count
         trace: dict[str, float] = {}
         if p.method == "filter":
-            nearness = np.maximum((flow * expected).sum(1) / np.maximum(norm2, 1e-12), 0.0)
-            centre = 0.0
+            left, right = filter_sides(flow, expected, norm2, rel, ok, float(travelled), p.react_distance)
         else:
             x, y = rel[ok], self.elevation[ok]
             u, v = flow[ok, 0], flow[ok, 1]  # east: azimuth grows to the left
             foe, *_ = np.linalg.lstsq(np.stack([u, v], axis=1), x * v - y * u, rcond=None)
             centre = float(np.clip(foe[0], -math.radians(p.frontal_deg), math.radians(p.frontal_deg)))
             trace["foe_azimuth"] = centre
-            nearness = np.sqrt((flow ** 2).sum(1) / np.maximum(norm2, 1e-12))
-        nearness = nearness / max(travelled, 1e-6)
-        nearness = np.where(nearness > 1.0 / p.react_distance, nearness, 0.0)
-        left = float(nearness[ok & (rel > centre)].sum())
-        right = float(nearness[ok & (rel < centre)].sum())
+            nearness = np.sqrt((flow ** 2).sum(1) / np.maximum(norm2, 1e-12)) / max(travelled, 1e-6)
+            nearness = np.where(nearness > 1.0 / p.react_distance, nearness, 0.0)
+            left = float(nearness[ok & (rel > centre)].sum())
+            right = float(nearness[ok & (rel < centre)].sum())
         trace.update(flow_left=left, flow_right=right)
         turn = -p.gain * (left - right) / (left + right + p.half_nearness)
         turn = float(np.clip(turn, -p.max_turn, p.max_turn))
@@ -143,8 +144,8 @@ class CollisionAvoidance:
         self._last = None
 
     def turn(self, leds: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict[str, float]]:
-        leds = np.array(leds, copy=True)
-        last, self._last = self._last, leds
+        now = self.flow.intensity(leds)            # each frame's band read once (a new array: no copy of the frame)
+        last, self._last = self._last, now
         if last is None or travelled <= 0:
             return 0.0, {"flow_turn": 0.0}
-        return self.flow.avoid(last, leds, yaw, travelled)
+        return self.flow.avoid_of(last, now, yaw, travelled)

@@ -28,13 +28,17 @@ def _map(path: str | Path, title: str, draw) -> Path:
     return style.save(fig, path)
 
 
-def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str) -> Path:
-    """Outbound routes (grey), homeward trips (one colour each) and where each turned home (squares); PNG."""
+def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str,
+               marks: dict[str, tuple[float, float]] | None = None) -> Path:
+    """Outbound routes (grey), homeward trips (one colour each), where each turned home (squares), and labelled
+    places `marks` (label -> (x, y) m, e.g. the fictive nest of a displaced ant) as crosses; PNG."""
     def draw(ax) -> None:
         for i, (label, (out, home)) in enumerate(trips.items()):
             ax.plot(*out.xy.T, color="0.6", lw=0.8, label="outbound" if i == 0 else None)
             ax.plot(*home.xy.T, color=f"C{i % 10}", lw=1.0, label=label)
             ax.plot(*out.xy[-1], "s", color=f"C{i % 10}", ms=4)
+        for label, (x, y) in (marks or {}).items():
+            ax.plot(x, y, "X", color="k", mfc="w", ms=11, label=label)
 
     return _map(path, title, draw)
 
