@@ -31,7 +31,7 @@ name = "texamples"
 [bus]
 listen = ["{bus.free_tcp_endpoint()}"]
 [render]
-face_size = 64
+face_size_px = 64
 [link]
 interface = "virtual"
 [log]

@@ -192,6 +192,7 @@ def served_ant(model, config: str | Path | dict[str, Any], eye_params: EyeParams
         stack.callback(dome.stop)
         session = stack.enter_context(bus.open_session(cfg.bus, role="client"))
         rig = stack.enter_context(Rig(name, config=cfg, session=session, timeout_s=timeout_s))
+        _wait_for_link(rig, timeout_s)
         publisher = bus.locomotion_publisher(session, name)
         stack.callback(publisher.undeclare)
         events = bus.events_key(name)
@@ -208,6 +209,19 @@ def served_ant(model, config: str | Path | dict[str, Any], eye_params: EyeParams
         loop = ServedLoop(rig, legs, clock, loop_cfg.rate_hz, loop_cfg.tether, loop_cfg.pose_every_frames,
                           timeout_s, on_event=publish)
         yield VirtualAnt(eye, model, loop, legs, dome.led_values, frames_per_decision)
+
+
+def _wait_for_link(rig, timeout_s: float) -> None:
+    """Wait until the server's loop has heard the ant's dome answer (its status says the link is up), so that the
+    ant walks, and its trials are logged, only while the server knows its frames arrive."""
+    from antarium.client import RigError
+
+    deadline = time.monotonic() + timeout_s
+    while not (status := rig.status()).get("link_ok"):
+        if time.monotonic() >= deadline:
+            alarms = "; ".join(status.get("alarms", [])) or "no alarm"
+            raise RigError(f"the server of rig {rig.name!r} has not heard the ant's dome in {timeout_s:g} s ({alarms})")
+        time.sleep(0.02)
 
 
 def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out: str | Path,
