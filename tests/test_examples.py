@@ -32,6 +32,7 @@ name = "texamples"
 listen = ["{bus.free_tcp_endpoint()}"]
 [render]
 face_size_px = 64
+far_layer = "off"  # the scripts, not the far layer (test_server_scene_swap): a load replies at once
 [link]
 interface = "virtual"
 [log]
