@@ -236,7 +236,7 @@ def _fmt(p: dict | None) -> str:
 def _print(r: dict[str, Any]) -> None:
     period_ms = 1e3 / r["target_rate_hz"]
     print(f"loop bench: {r['frames']} frames over {r['seconds']:.1f} s (first {WARMUP_S:g} s excluded), "
-          f"scene {r['config']['render']['scene']!r}, face size {r['config']['render']['face_size'] or 'default'}")
+          f"scene {r['config']['render']['scene']!r}, face size {r['config']['render']['face_size_px'] or 'default'}")
     print(f"  frame rate      {r['achieved_rate_hz']:.1f} / {r['target_rate_hz']:.0f} Hz = {r['rate_ratio']:.3f} x "
           f"target")
     print(f"  late frames     {r['late_frames']} ({r['late_full_render']} of them drawn in full)   skipped slots "
