@@ -16,3 +16,20 @@ def test_loop_bench_reports_and_writes_its_figures(tmp_path, capsys, monkeypatch
     assert result["frames"] > 0 and result["target_rate_hz"] == 190 and result["link_outages"] == 0
     assert {"render", "sample", "send"} <= set(result["stages"])
     assert f"{result['achieved_rate_hz']:.1f} / 190 Hz" in text
+
+
+def test_a_command_cut_short_by_the_runs_end_is_no_error_and_no_reply_time():
+    import numpy as np
+
+    from antarium.bench.loop import ScriptedCommands
+
+    script = ScriptedCommands(None, "habitat", None, None, None)  # no schedule: no thread, records given here
+    script.every = {"load_scene": 5.0}
+    script.records = [("load_scene", 5.0, 7.0, ""),
+                      ("load_scene", 10.0, 12.5, "load_scene: the server is not running"),
+                      ("load_scene", 3.0, 4.0, "load_scene: scene 'x' failed to load")]
+    t = np.arange(0.0, 12.0, 0.5)
+    summary = script.summary({"t_start": t, "late": (t == 6.0).astype(np.uint8)})["load_scene"]
+    assert summary["sent"] == 2 and summary["cut_by_the_end"] == 1
+    assert summary["errors"] == ["load_scene: scene 'x' failed to load"]
+    assert summary["reply"]["max_ms"] == 2000.0 and summary["late_frames_around"] == 1

@@ -206,13 +206,16 @@ class ScriptedCommands:
         """Per kind: how many were sent, refused, their reply times, and the late frames around them."""
         out: dict[str, Any] = {}
         t, late = frames["t_start"], frames["late"].astype(bool)
+        end = t[-1] if len(t) else -np.inf
         for kind in self.every:
-            rows = [r for r in self.records if r[0] == kind]
+            done = [r for r in self.records if r[0] == kind]
+            rows = [r for r in done if not (r[3] and r[2] > end)]  # not those the run's end cut short
             replies = np.array([r[2] - r[1] for r in rows])
             around = np.zeros(len(t), dtype=bool)
             for _, sent, replied, _ in rows:
                 around |= (t >= sent) & (t <= replied + AFTER_REPLY_S)
-            out[kind] = {"sent": len(rows), "errors": [r[3] for r in rows if r[3]][:3],
+            out[kind] = {"sent": len(rows), "cut_by_the_end": len(done) - len(rows),
+                         "errors": [r[3] for r in rows if r[3]][:3],
                          "reply": _pct(replies) if len(rows) else None,
                          "late_frames_around": int((late & around).sum()), "frames_around": int(around.sum())}
         return out
@@ -255,6 +258,7 @@ def _print(r: dict[str, Any]) -> None:
     print(f"  pacing error    {_fmt(r['pacing_error'])}")
     for kind, c in (r.get("commands") or {}).items():
         errors = f"; ERRORS: {' | '.join(c['errors'])}" if c["errors"] else ""
+        errors += f"; {c['cut_by_the_end']} more cut short by the run's end" if c["cut_by_the_end"] else ""
         print(f"  {kind:<14}  {c['sent']} sent, reply {_fmt(c['reply'])}; {c['late_frames_around']} late of the "
               f"{c['frames_around']} frames from sending to {AFTER_REPLY_S:g} s after the reply{errors}")
     m = r.get("machine")
