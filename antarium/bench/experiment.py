@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     length = args.seconds or 2.0
     r = measure(n, length)
     print(f"antarium ant experiment: {n} runs of Ardin's MB on {length:g} m curved routes in the habitat "
-          f"(shared machine: noisy)")
+          f"(--frames runs, --seconds m)")
     for key in ("serial", "workers_1", "workers_2"):
         m = r[key]
         print(f"  {key:10s}: {m['runs_per_hour']:8.0f} runs/hour ({m['wall_s']:.1f} s in all, "
