@@ -231,3 +231,13 @@ def test_a_panorama_world_has_no_extent_and_any_route_fits(tmp_path):
     world = WorldSpec(str(tmp_path / "pano.png"), eye_height_m=0.02)
     assert world_geometry(world).extent is None
     assert eye_z(world, Route([(100.0, 0.0), (101.0, 0.0)])) == pytest.approx(0.02)
+
+
+def test_local_workers_share_the_cores_among_their_software_rasterisers(monkeypatch):
+    from antarium.ant.experiment import runner
+
+    monkeypatch.delenv("LP_NUM_THREADS", raising=False)
+    monkeypatch.setattr(runner.os, "cpu_count", lambda: 16)
+    assert runner.worker_env(4) == {"LP_NUM_THREADS": "4"} and runner.worker_env(32) == {"LP_NUM_THREADS": "1"}
+    monkeypatch.setenv("LP_NUM_THREADS", "0")  # the user's choice is kept (inherited by the workers)
+    assert runner.worker_env(4) == {}

@@ -66,7 +66,7 @@ class PageWatcher(threading.Thread):
             self.stop_event.wait()
             m = driver.execute_script(
                 "const M = window.antariumMonitor; return {drawn: M.drawn, latencies: M.latencies, "
-                "first_draw_ms: M.firstDrawMs, updates: M.updates, "
+                "first_draw_ms: M.firstDrawMs, updates: M.updates, draw_ms: M.drawMs, "
                 "paint: performance.getEntriesByName('first-contentful-paint').map(p => p.startTime)}")
             seconds = time.monotonic() - t0
             lat = np.asarray(m["latencies"]) * 1e3
@@ -76,6 +76,9 @@ class PageWatcher(threading.Thread):
                            "frame_to_screen_ms": {"p50": float(np.percentile(lat, 50)),
                                                   "p99": float(np.percentile(lat, 99)), "max": float(lat.max()),
                                                   "n": int(lat.size)} if lat.size else None}
+            draw = np.asarray(m["draw_ms"], dtype=float).reshape(-1, 2)
+            if len(draw):  # the page's own drawing of one LED frame: the map (2D canvas), the 3D view (WebGL)
+                self.result["draw_ms_p50"] = {"map": float(np.median(draw[:, 0])), "3d": float(np.median(draw[:, 1]))}
         finally:
             driver.quit()
 
@@ -123,6 +126,9 @@ def run(args: argparse.Namespace) -> int:
         if f2s:
             print(f"  frame -> screen p50 {f2s['p50']:.1f}  p99 {f2s['p99']:.1f}  max {f2s['max']:.1f} ms "
                   f"({f2s['n']} frames)")
+        if "draw_ms_p50" in page:
+            d = page["draw_ms_p50"]
+            print(f"  page's drawing of one frame, p50: map {d['map']:.1f} ms, 3D view {d['3d']:.1f} ms")
     for mode in ("off", "monitor", "page"):
         r = results[mode]["loop"]
         lat = r["latency"]
