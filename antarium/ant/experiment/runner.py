@@ -117,9 +117,8 @@ def run_experiment(runs: list[Run], out: str | Path, scheduler: str | None = Non
 
 def worker_env(n_workers: int) -> dict[str, str]:
     """The environment of `n_workers` local workers: a software GL driver (llvmpipe) in each rasterises on its
-    share of the cores, not on all of them (measured on 2 cores, Ardin on 10 m routes: 2 workers ran 1.71x one
-    with a raster thread per core in each, 1.90x with one each); no effect on a GPU driver. A value the user set
-    is kept."""
+    share of the cores, not with a thread on every core in every worker; no effect on a GPU driver. A value the
+    user set is kept."""
     if "LP_NUM_THREADS" in os.environ:
         return {}
     return {"LP_NUM_THREADS": str(max(1, (os.cpu_count() or 1) // n_workers))}
