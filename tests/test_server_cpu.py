@@ -155,7 +155,7 @@ def test_real_time_goes_to_the_loop_and_its_helper_the_emulator_below_the_rest_o
         emulator = server.emulator.pid
         assert _policy(emulator) == (os.SCHED_FIFO, p - 2)
         builder = server.renderer.far_layer_status()["pid"]
-        children = realtime._descendants(os.getpid())
+        children = realtime.descendants()
         assert builder in children and len(children) >= 3
         # the rig's own processes (`python -m antarium...`); a browser an earlier test drove may still be ending
         others = {c: _policy(c) for c in children if c != emulator and _alive(c) and "-m antarium" in _cmdline(c)}
@@ -168,3 +168,75 @@ def test_real_time_goes_to_the_loop_and_its_helper_the_emulator_below_the_rest_o
     still = {t: (pol, _comm(t)) for t, pol in _thread_policies().items()
              if pol[0] in (os.SCHED_FIFO, os.SCHED_RR) and pol[1] > 1}
     assert not still, still
+
+
+def _in_loop_thread(placement, body):
+    """body() in a thread placed as the frame loop's (real-time, its own CPU); placement released after."""
+    out = {}
+
+    def loop():
+        placement.before_building()
+        placement.before_frames()
+        try:
+            out["result"] = body()
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the test's thread
+            out["error"] = exc
+        finally:
+            placement.release()
+
+    thread = threading.Thread(target=loop)
+    thread.start()
+    thread.join()
+    if "error" in out:
+        raise out["error"]
+    return out["result"]
+
+
+@pytest.mark.skipif(not _realtime_allowed(), reason="needs permission for SCHED_FIFO (CAP_SYS_NICE or rtprio)")
+def test_work_beside_the_loop_and_the_processes_it_starts_have_the_loops_cpu_until_it_ends():
+    from antarium.server.placement import LoopPlacement
+
+    placement = LoopPlacement(resolve({"loop": {"realtime_priority": 5, "cpu": "auto"}}).loop, echo=print)
+    cpu = max(os.sched_getaffinity(0))
+    caller = threading.get_ident()
+    seen = {}
+
+    def prepare(tag):
+        child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+        placement.place_threads()  # the status thread's tick while the work runs: it leaves the child there
+        seen.update(tag=tag, thread=threading.get_ident(), cpus=os.sched_getaffinity(0),
+                    child=child, child_cpus=os.sched_getaffinity(child.pid))
+        return "prepared"
+
+    def body():
+        others = os.sched_getaffinity(0)
+        result = placement.beside_loop(prepare, "scene")
+        with pytest.raises(ValueError, match="bad scene"):  # raised in the helper thread, reaches the caller
+            placement.beside_loop(lambda: (_ for _ in ()).throw(ValueError("bad scene")))
+        return result, others, os.sched_getaffinity(seen["child"].pid)
+
+    try:
+        result, others, child_after = _in_loop_thread(placement, body)
+        assert result == "prepared" and seen["tag"] == "scene" and seen["thread"] != caller
+        assert seen["cpus"] == {cpu} and seen["child_cpus"] == {cpu}
+        assert others == {cpu}                                       # the caller was the loop's thread
+        assert child_after == os.sched_getaffinity(0) - {cpu}         # once the work ended: the other CPUs
+    finally:
+        if "child" in seen:
+            seen["child"].kill()
+            seen["child"].wait()
+
+
+def test_work_beside_an_ordinary_loop_runs_in_the_callers_thread_and_its_errors_reach_the_caller():
+    from antarium.server.placement import LoopPlacement
+
+    placement = LoopPlacement(resolve({"loop": {"realtime_priority": 0, "cpu": "auto"}}).loop, echo=print)
+
+    def body():
+        me = threading.get_ident()
+        assert placement.beside_loop(threading.get_ident) == me   # an ordinary loop would share its CPU with it
+        with pytest.raises(ValueError, match="bad scene"):
+            placement.beside_loop(lambda: (_ for _ in ()).throw(ValueError("bad scene")))
+        return True
+
+    assert _in_loop_thread(placement, body)

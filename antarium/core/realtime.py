@@ -5,7 +5,9 @@ On a small machine the frame loop shares its cores with the emulator, the far-la
 log writer. Giving the loop's thread a CPU of its own (`[loop] cpu`) keeps their bursts out of its frames:
 `Isolation.apply` moves every other thread of this process and every process it started (and theirs) to the
 remaining CPUs. Threads and processes started later inherit the mask of the thread that starts them, so
-the server applies it again once a second.
+the server applies it again once a second. Work that may only have the loop's idle time (a scene being
+prepared, and the processes it starts) is placed beside the loop on its CPU: a real-time loop always comes
+first there, and the rest of the rig keeps the other CPUs to itself.
 
 `set_realtime` makes the calling thread SCHED_FIFO with SCHED_RESET_ON_FORK: the threads and processes it
 starts begin ordinary, so that none of them can hold off a real-time thread of the same priority, and a
@@ -17,6 +19,7 @@ priorities below the loop.
 from __future__ import annotations
 
 import os
+from collections.abc import Collection
 from pathlib import Path
 
 
@@ -59,9 +62,9 @@ def _children(pid: int) -> list[int]:
     return kids
 
 
-def _descendants(pid: int) -> list[int]:
-    """Process ids of every descendant of `pid`."""
-    found, frontier = [], [pid]
+def descendants(pid: int | None = None) -> list[int]:
+    """Process ids of every descendant of `pid` (None: this process)."""
+    found, frontier = [], [os.getpid() if pid is None else pid]
     while frontier:
         kids = _children(frontier.pop())
         found += kids
@@ -95,19 +98,21 @@ class Isolation:
         if not self.others:
             raise ValueError(f"[loop] cpu {cpu} is the only CPU this process may use: nothing to keep off it")
 
-    def apply(self, loop_thread_id: int) -> None:
-        """Pin thread `loop_thread_id` (a native thread id of this process) to the loop's CPU, every other
-        thread of this process and every descendant process to the others."""
-        self._place(lambda tid: {self.cpu} if tid == loop_thread_id else self.others, self.others)
+    def apply(self, loop_thread_id: int, beside: Collection[int] = (), spare: Collection[int] = ()) -> None:
+        """Pin thread `loop_thread_id` (a native thread id of this process) and the threads `beside` it (work
+        that may only have the loop's idle time) to the loop's CPU, every other thread of this process and every
+        descendant process but those in `spare` (left where they are) to the others."""
+        self._place(lambda tid: {self.cpu} if tid == loop_thread_id or tid in beside else self.others,
+                    self.others, spare)
 
     def release(self) -> None:
         """Every thread of this process and every descendant back on all the CPUs it could use before."""
         self._place(lambda tid: self.usable, self.usable)
 
     @staticmethod
-    def _place(thread_cpus, process_cpus: set) -> None:
+    def _place(thread_cpus, process_cpus: set, spare: Collection[int] = ()) -> None:
         for task in Path("/proc/self/task").iterdir():
             _place(int(task.name), thread_cpus(int(task.name)))
-        for pid in _descendants(os.getpid()):
+        for pid in set(descendants()) - set(spare):
             for task in Path(f"/proc/{pid}/task").glob("*"):  # every thread of it (a GL driver's among them)
                 _place(int(task.name), process_cpus)

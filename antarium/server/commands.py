@@ -41,8 +41,8 @@ class Param:
 class Command:
     """params: name -> declaration; handler(server, checked params) -> result (None: the rig's state);
     in_loop: run in the frame loop's thread between two frames (anything that changes what the dome shows);
-    prepare(server, checked params): the slow part of an in-loop command, run before it in the caller's thread
-    (never holding a frame); its result reaches the handler as parameter "prepared"."""
+    prepare(server, checked params): the slow part of an in-loop command, run before it and beside the loop
+    (`LoopPlacement.beside_loop`: never holding a frame); its result reaches the handler as parameter "prepared"."""
 
     params: dict[str, Param]
     handler: Callable[[Server, dict[str, Any]], Any]

@@ -253,7 +253,7 @@ class Server:
             raise RuntimeError(f"{name}: the server is not running")
         if command.prepare is not None:
             try:
-                checked["prepared"] = command.prepare(self, checked)
+                checked["prepared"] = self.placement.beside_loop(command.prepare, self, checked)
             except (CommandError, ValueError, RuntimeError, OSError) as exc:
                 self._log_command(name, params, {"error": str(exc)}, False)
                 raise
