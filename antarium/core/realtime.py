@@ -98,21 +98,24 @@ class Isolation:
         if not self.others:
             raise ValueError(f"[loop] cpu {cpu} is the only CPU this process may use: nothing to keep off it")
 
-    def apply(self, loop_thread_id: int, beside: Collection[int] = (), spare: Collection[int] = ()) -> None:
+    def apply(self, loop_thread_id: int, beside: Collection[int] = (),
+              processes: Collection[int] | None = None) -> None:
         """Pin thread `loop_thread_id` (a native thread id of this process) and the threads `beside` it (work
         that may only have the loop's idle time) to the loop's CPU, every other thread of this process and every
-        descendant process but those in `spare` (left where they are) to the others."""
+        descendant process (only those in `processes` when given; the others stay where they are) to the others."""
         self._place(lambda tid: {self.cpu} if tid == loop_thread_id or tid in beside else self.others,
-                    self.others, spare)
+                    self.others, processes)
 
     def release(self) -> None:
         """Every thread of this process and every descendant back on all the CPUs it could use before."""
         self._place(lambda tid: self.usable, self.usable)
 
     @staticmethod
-    def _place(thread_cpus, process_cpus: set, spare: Collection[int] = ()) -> None:
+    def _place(thread_cpus, process_cpus: set, processes: Collection[int] | None = None) -> None:
         for task in Path("/proc/self/task").iterdir():
             _place(int(task.name), thread_cpus(int(task.name)))
-        for pid in set(descendants()) - set(spare):
+        for pid in descendants():
+            if processes is not None and pid not in processes:
+                continue
             for task in Path(f"/proc/{pid}/task").glob("*"):  # every thread of it (a GL driver's among them)
                 _place(int(task.name), process_cpus)

@@ -44,7 +44,7 @@ class LoopPlacement:
         self._loop_tid = 0
         self._switch_interval: float | None = None
         self._beside: set[int] = set()      # threads running `beside_loop` work
-        self._spare: set[int] = set()       # processes that were not there when such work began
+        self._before: set[int] = set()      # our processes when that work began (those it starts stay with it)
         self._beside_lock = threading.Lock()
 
     def before_building(self) -> None:
@@ -89,8 +89,8 @@ class LoopPlacement:
         if isolation is not None:
             with self._beside_lock:
                 beside = set(self._beside)
-                spare = set(realtime.descendants()) - self._spare if beside else ()
-            isolation.apply(self._loop_tid, beside, spare)
+                processes = set(self._before) if beside else None
+            isolation.apply(self._loop_tid, beside, processes)
 
     def beside_loop(self, fn: Callable[..., T], *args: Any) -> T:
         """fn(*args) in a thread on the loop's own CPU, with the processes it starts, while the loop is real-time
@@ -106,7 +106,7 @@ class LoopPlacement:
             tid = threading.get_native_id()
             with self._beside_lock:
                 if not self._beside:
-                    self._spare = set(realtime.descendants())
+                    self._before = set(realtime.descendants())
                 self._beside.add(tid)
             try:
                 os.sched_setaffinity(0, {isolation.cpu})
