@@ -93,3 +93,50 @@ def test_central_complex_models_round_trip_through_model_files(kind, tmp_path):
     back, _, _ = load_model(path)
     assert back.kind == kind and back.params == model.params
     assert np.array_equal(back.cx.memory(), model.cx.memory())
+
+
+def test_a_trip_ends_where_a_tall_object_hides_the_sky_and_keeps_what_it_walked():
+    """Home through a 20 m tower: inside it the dorsal rim sees no sky, so the compass has no cue. The trip stops
+    there and says so; its metrics cover the decisions walked until then."""
+    from antarium.ant.clutter import Clutter, clutter_scene
+    from antarium.ant.eye import EyeParams
+    from antarium.ant.homing import walk_home, walk_outbound
+    from antarium.ant.models import make_model
+    from antarium.ant.world import virtual_rig
+
+    tower = Clutter(np.array([[0.45, 0.2]]), np.array([0.15]), height=20.0)
+    model = make_model("cx", EyeParams().n_pn, compass="sky", noise=0.0)
+    with virtual_rig(model, scene=clutter_scene(tower), renderer_kwargs={"face_size": 64}) as ant:
+        for _ in range(40):
+            ant.frame()
+        turns = np.zeros(150)
+        turns[0], turns[50] = math.pi / 2, -math.pi / 2  # 0.5 m north, then 1 m east: the tower lies on the way home
+        out = walk_outbound(ant, turns, 0.01)
+        home = walk_home(ant, 150)
+    assert out.lost_cue is None and len(out.xy) == 149
+    assert home.lost_cue is not None and "no cue" in home.lost_cue and "depolarised" in home.lost_cue
+    assert 0 < len(home.xy) == len(home.traces) < 150
+    assert home.lost_cue.startswith(f"decision {len(home.xy)}:")
+    assert tower.clearance(home.xy[-1])[0] < 0.011  # it stopped inside the tower or within a 1 cm step of it
+    m = homing_metrics(out, home)
+    assert m["closest_approach_m"] == pytest.approx(np.hypot(*home.xy.T).min())
+
+
+def test_arena_and_foraging_runs_go_on_after_a_trip_without_a_compass_cue(tmp_path):
+    """A depolarised sky: every outbound loses its cue at once. Each seed is recorded with why, and the run goes
+    on to the next seed and writes strict JSON (null for what was not measured)."""
+    import json
+
+    from antarium.ant.homing import cluttered_arena
+
+    summary = cluttered_arena(tmp_path, seeds=[0, 1], n_outbound=10, sky={"dop_max": 0.0},
+                              model_params={"n_kc": 2000}, arena={"n": 4, "arena_radius": 1.0})
+    assert summary["runs"] == 2
+    assert set(summary["trips_without_cue"]) == {"seed 0", "seed 1"}
+    assert all("depolarised" in lost["outbound"] for lost in summary["trips_without_cue"].values())
+    record = json.loads((tmp_path / "arena_sky.json").read_text())
+    assert record["summary"]["closest_cxmb_share_median"] is None
+    assert (tmp_path / "arena_sky_seed01.png").stat().st_size > 10_000
+    homing = pi_homing(tmp_path, seeds=[0, 1], n_outbound=10, scene={"scene": "sky", "dop_max": 0.0})
+    assert homing["runs"] == 2 and set(homing["runs_without_cue"]) == {"seed 0", "seed 1"}
+    assert math.isnan(homing["closest_approach_share_median"])

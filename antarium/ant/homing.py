@@ -7,6 +7,10 @@ by its CX for `n_inbound` decisions. Metrics (Stone 2017): closest approach to t
 path length; tortuosity of the homeward path (path length until the closest approach / the straight
 feeder-to-nest distance); the search around the nest (median distance from the nest after the closest approach,
 as a share of the outbound path).
+
+A trip on which the compass loses its cue (the sky compass reads no polarised sky, e.g. with the ant inside or
+against a cylinder that hides the dorsal rim) ends there: `Trip.lost_cue` says at which decision and why, its
+metrics cover the decisions walked until then, and the experiment goes on with its next trip or seed.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from antarium.ant.compass import NoSkyCueError
 from antarium.ant.eye import EyeParams
 from antarium.ant.metrics import median_mad
 from antarium.plots.homing import plot_arena, plot_distance, plot_trips
@@ -30,6 +35,20 @@ OUTBOUND_TURN_MEMORY = 0.9
 #: the foraging task's scene: the dome's sky (the sun, the polarised UV pixels) and nothing else
 PI_SCENE = "sky"
 FACE_SIZE = 64
+
+
+def write_json(path: Path, record: Any) -> None:
+    """`record` as strict JSON (NaN, e.g. the metrics of a run that never reached the feeder, written as null)."""
+    def strict(v):
+        if isinstance(v, dict):
+            return {k: strict(x) for k, x in v.items()}
+        if isinstance(v, list | tuple):
+            return [strict(x) for x in v]
+        if isinstance(v, float | np.floating):
+            return float(v) if math.isfinite(v) else None
+        return v
+
+    path.write_text(json.dumps(strict(record), indent=2, allow_nan=False, default=float))
 
 
 def outbound_turns(seed: int, n: int) -> np.ndarray:
@@ -46,11 +65,17 @@ def outbound_turns(seed: int, n: int) -> np.ndarray:
 
 @dataclass
 class Trip:
-    """Positions (world, m) and model traces of one trip."""
+    """Positions xy (n, 2) (world, m), headings (n,) rad and model traces of one trip's decisions; lost_cue: why
+    the trip ended early ("decision k: ..." when the compass lost its cue), None when it walked every decision."""
 
     xy: np.ndarray
     heading: np.ndarray
     traces: list[dict[str, float]]
+    lost_cue: str | None = None
+
+    @classmethod
+    def walked(cls, xy: list, heading: list, traces: list, lost_cue: str | None = None) -> Trip:
+        return cls(np.asarray(xy, np.float64).reshape(-1, 2), np.asarray(heading, np.float64), traces, lost_cue)
 
 
 @dataclass
@@ -65,6 +90,7 @@ class HomingOutcome:
     tortuosity: float
     search_median_share: float
     decisions_per_s: float
+    lost_cue: str | None = None
 
 
 def _record(ant, xy: list, heading: list) -> None:
@@ -78,32 +104,45 @@ def walk_outbound(ant, turns: np.ndarray, step: float) -> Trip:
     xy, heading, traces = [], [], []
     ant.frame()
     ant.sense()  # the baseline of the distance walked
-    for turn in turns[1:]:
-        ant.act(step, float(turn))
-        ant.frame()
-        traces.append(ant.model.observe(ant.sense()))
-        _record(ant, xy, heading)
-    return Trip(np.asarray(xy), np.asarray(heading), traces)
+    try:
+        for turn in turns[1:]:
+            ant.act(step, float(turn))
+            ant.frame()
+            traces.append(ant.model.observe(ant.sense()))
+            _record(ant, xy, heading)
+    except NoSkyCueError as e:
+        return Trip.walked(xy, heading, traces, f"decision {len(traces)}: {e}")
+    return Trip.walked(xy, heading, traces)
 
 
 def walk_home(ant, n: int) -> Trip:
     """Let the model steer for `n` decisions."""
     xy, heading, traces = [], [], []
-    for _ in range(n):
-        cmd = ant.decide()
-        traces.append(cmd.trace)
-        _record(ant, xy, heading)
-    return Trip(np.asarray(xy), np.asarray(heading), traces)
+    try:
+        for _ in range(n):
+            cmd = ant.decide()
+            traces.append(cmd.trace)
+            _record(ant, xy, heading)
+    except NoSkyCueError as e:
+        return Trip.walked(xy, heading, traces, f"decision {len(traces)}: {e}")
+    return Trip.walked(xy, heading, traces)
+
+
+def path_length(xy: np.ndarray, start=(0.0, 0.0)) -> float:
+    """Length (m) of the path from `start` through the positions xy (n, 2) m."""
+    return float(np.linalg.norm(np.diff(np.vstack([start, xy]), axis=0), axis=1).sum())
 
 
 def homing_metrics(outbound: Trip, inbound: Trip, nest=(0.0, 0.0)) -> dict[str, float]:
-    """Closest approach (m, share of the outbound length), tortuosity and search spread of a homeward trip."""
-    length = float(np.linalg.norm(np.diff(np.vstack([nest, outbound.xy]), axis=0), axis=1).sum())
+    """Closest approach (m, share of the outbound length), tortuosity and search spread of a homeward trip, over
+    the feeder and the decisions it walked (a trip that lost its cue at once stays at the feeder's distance)."""
+    length = path_length(outbound.xy, nest)
     start = outbound.xy[-1]
     feeder = float(np.hypot(*(start - nest)))
-    dist = np.hypot(*(inbound.xy - nest).T)
+    path = np.vstack([start, inbound.xy])
+    dist = np.hypot(*(path - nest).T)
     k = int(np.argmin(dist))
-    path = np.vstack([start, inbound.xy[:k + 1]])
+    path = path[:k + 1]
     homeward = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
     return {"outbound_length_m": length, "feeder_distance_m": feeder, "closest_approach_m": float(dist[k]),
             "closest_approach_share": float(dist[k] / length), "tortuosity": homeward / max(feeder - dist[k], 1e-9),
@@ -111,11 +150,18 @@ def homing_metrics(outbound: Trip, inbound: Trip, nest=(0.0, 0.0)) -> dict[str, 
 
 
 def pi_trial(ant, seed: int, n_outbound: int, n_inbound: int) -> tuple[dict[str, float], Trip, Trip]:
-    """One foraging trip: fresh CX memory, outbound, homing; (metrics, outbound, inbound)."""
+    """One foraging trip: fresh CX memory, outbound, homing; (metrics, outbound, inbound). The metrics carry
+    `lost_cue` ("outbound/inbound, decision k: why") when the compass lost its cue; after an outbound that lost it
+    the ant does not home (metrics NaN)."""
     ant.model.cx.reset()
     outbound = walk_outbound(ant, outbound_turns(seed, n_outbound), ant.model.params.step)
+    if outbound.lost_cue is not None:
+        nan = dict.fromkeys(("outbound_length_m", "feeder_distance_m", "closest_approach_m", "closest_approach_share",
+                             "tortuosity", "search_median_share"), math.nan)
+        return {**nan, "lost_cue": f"outbound, {outbound.lost_cue}"}, outbound, Trip.walked([], [], [])
     inbound = walk_home(ant, n_inbound)
-    return homing_metrics(outbound, inbound), outbound, inbound
+    lost = None if inbound.lost_cue is None else f"inbound, {inbound.lost_cue}"
+    return {**homing_metrics(outbound, inbound), "lost_cue": lost}, outbound, inbound
 
 
 def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 1500, n_inbound: int | None = None,
@@ -141,15 +187,16 @@ def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 150
             outcomes.append(HomingOutcome(seed, compass, "cx", decisions_per_s=rate, **metrics))
             trips[f"seed {seed}"] = (out, home)
             if echo is not None:
+                lost = f"; ended without a compass cue: {metrics['lost_cue']}" if metrics["lost_cue"] else ""
                 echo(f"seed {seed} ({compass} compass): closest approach {100 * metrics['closest_approach_share']:.2f}"
-                     f" % of {metrics['outbound_length_m']:.1f} m, tortuosity {metrics['tortuosity']:.2f}")
+                     f" % of {metrics['outbound_length_m']:.1f} m, tortuosity {metrics['tortuosity']:.2f}{lost}")
     summary = summarise(outcomes)
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        (out / f"pi_homing_{compass}.json").write_text(json.dumps(
-            {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
-             "n_inbound": n_inbound, "scene": str(scene)}, indent=2, default=float))
+        write_json(out / f"pi_homing_{compass}.json",
+                   {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
+                    "n_inbound": n_inbound, "scene": str(scene)})
         title = f"CX path integration, {compass} compass ({len(outcomes)} routes of {n_outbound} steps)"
         summary["paths_png"] = str(plot_trips(out / f"pi_homing_{compass}_paths.png", trips, title))
         summary["distance_png"] = str(plot_distance(out / f"pi_homing_{compass}_distance.png", trips, title))
@@ -157,13 +204,15 @@ def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 150
 
 
 def summarise(outcomes: list[HomingOutcome]) -> dict[str, Any]:
+    """Medians over the runs that reached the feeder (NaN metrics left out); the runs whose compass lost its cue."""
     share = median_mad([o.closest_approach_share for o in outcomes])
     return {"runs": len(outcomes), "compass": outcomes[0].compass if outcomes else None,
             "closest_approach_share_median": share[0], "closest_approach_share_mad": share[1],
             "within_5_percent": sum(o.closest_approach_share <= 0.05 for o in outcomes),
-            "tortuosity_median": float(np.median([o.tortuosity for o in outcomes])),
-            "search_median_share": float(np.median([o.search_median_share for o in outcomes])),
-            "decisions_per_s_closed_loop": float(np.median([o.decisions_per_s for o in outcomes]))}
+            "tortuosity_median": median_mad([o.tortuosity for o in outcomes])[0],
+            "search_median_share": median_mad([o.search_median_share for o in outcomes])[0],
+            "decisions_per_s_closed_loop": float(np.median([o.decisions_per_s for o in outcomes])),
+            "runs_without_cue": {f"seed {o.seed}": o.lost_cue for o in outcomes if o.lost_cue}}
 
 
 def walk_outbound_avoiding(ant, turns: np.ndarray, step: float) -> Trip:
@@ -172,15 +221,22 @@ def walk_outbound_avoiding(ant, turns: np.ndarray, step: float) -> Trip:
     xy, heading, traces = [], [], []
     ant.frame()
     ant.sense()
-    for turn in turns[1:]:
-        ant.frame()
-        senses = ant.sense()
-        trace = ant.model.observe(senses)
-        flow_turn, flow_trace = ant.model.avoidance(senses)
-        traces.append({**trace, **flow_trace})
-        _record(ant, xy, heading)
-        ant.act(step, float(np.clip(turn + flow_turn, -ant.model.params.max_turn, ant.model.params.max_turn)))
-    return Trip(np.asarray(xy), np.asarray(heading), traces)
+    try:
+        for turn in turns[1:]:
+            ant.frame()
+            senses = ant.sense()
+            trace = ant.model.observe(senses)
+            flow_turn, flow_trace = ant.model.avoidance(senses)
+            traces.append({**trace, **flow_trace})
+            _record(ant, xy, heading)
+            ant.act(step, float(np.clip(turn + flow_turn, -ant.model.params.max_turn, ant.model.params.max_turn)))
+    except NoSkyCueError as e:
+        return Trip.walked(xy, heading, traces, f"decision {len(traces)}: {e}")
+    return Trip.walked(xy, heading, traces)
+
+
+#: the arena's homeward trips: (name, the MBONs learn, steer with the MBONs), in the order they are walked
+ARENA_HOME_TRIPS = (("cx", True, False), ("cxmb", False, True), ("cx_again", False, False))
 
 
 @dataclass
@@ -196,41 +252,59 @@ class ArenaOutcome:
     closest_cxmb_share: float
     closest_cx_again_share: float
     learned_views: int
+    lost_cue: dict[str, str]      # trip name -> why it ended early (no compass cue); empty when none did
 
 
 def arena_trial(ant, clutter, seed: int, n_outbound: int, n_inbound: int):
     """Mitchell 2019's seed task with a CXMB ant (avoiding by optic flow throughout): outbound through the clutter;
     home by the CX while the MBONs learn (trip 1); back at the feeder with the outbound memory restored, home by
-    CXMB (trip 2); and again by the CX alone (trip 2, comparison). Returns (ArenaOutcome, trips)."""
+    CXMB (trip 2); and again by the CX alone (trip 2, comparison). An outbound trip that lost its compass cue ends
+    the seed (no feeder to home from: NaN shares). Returns (ArenaOutcome, trips)."""
     model = ant.model
     model.cx.reset()
     out = walk_outbound_avoiding(ant, outbound_turns(seed, n_outbound), model.params.step)
-    memory = model.home_memory()
-    feeder, feeder_heading = out.xy[-1], float(out.heading[-1])
     trips = {"outbound": out}
-    for name, learning, use_mbons in (("cx", True, False), ("cxmb", False, True), ("cx_again", False, False)):
-        if name != "cx":
-            ant.place(float(feeder[0]), float(feeder[1]), feeder_heading)
-            ant.frame()
-            ant.sense()
-            model.restore(memory)
-        model.learning, model.use_mbons = learning, use_mbons
-        trips[name] = walk_home(ant, n_inbound)
-    model.learning = False
-    length = homing_metrics(out, trips["cx"])["outbound_length_m"]
-    close = {k: homing_metrics(out, trips[k])["closest_approach_share"] for k in ("cx", "cxmb", "cx_again")}
-    outcome = ArenaOutcome(seed, model.params.compass, length, clutter.collisions(out.xy),
-                           clutter.collisions(trips["cx"].xy), clutter.collisions(trips["cxmb"].xy),
-                           clutter.collisions(trips["cx_again"].xy), close["cx"], close["cxmb"], close["cx_again"],
-                           model.learned_views)
+    if out.lost_cue is None:
+        memory = model.home_memory()
+        feeder, feeder_heading = out.xy[-1], float(out.heading[-1])
+        for name, learning, use_mbons in ARENA_HOME_TRIPS:
+            if name != "cx":
+                ant.place(float(feeder[0]), float(feeder[1]), feeder_heading)
+                ant.frame()
+                ant.sense()
+                model.restore(memory)
+            model.learning, model.use_mbons = learning, use_mbons
+            trips[name] = walk_home(ant, n_inbound)
+        model.learning = False
+    home = [name for name, _, _ in ARENA_HOME_TRIPS]
+    close = {k: homing_metrics(out, trips[k])["closest_approach_share"] if k in trips else math.nan for k in home}
+    length = path_length(out.xy)
+    hits = {k: clutter.collisions(trips[k].xy) if k in trips else 0 for k in ("outbound", *home)}
+    outcome = ArenaOutcome(seed, model.params.compass, length, hits["outbound"], hits["cx"], hits["cxmb"],
+                           hits["cx_again"], close["cx"], close["cxmb"], close["cx_again"], model.learned_views,
+                           {k: t.lost_cue for k, t in trips.items() if t.lost_cue is not None})
     return outcome, trips
+
+
+def summarise_arena(outcomes: list[ArenaOutcome], compass: str) -> dict[str, Any]:
+    """Medians of the closest approaches (over the seeds that reached the feeder), runs without a collision, and
+    the trips that ended without a compass cue."""
+    return {
+        "runs": len(outcomes), "compass": compass,
+        **{f"closest_{name}_share_median": median_mad([getattr(o, f"closest_{name}_share") for o in outcomes])[0]
+           for name, _, _ in ARENA_HOME_TRIPS},
+        "runs_without_collision": sum(o.collisions_outbound + o.collisions_cx + o.collisions_cxmb
+                                      + o.collisions_cx_again == 0 for o in outcomes),
+        "trips_without_cue": {f"seed {o.seed}": o.lost_cue for o in outcomes if o.lost_cue},
+    }
 
 
 def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound: int | None = None,
                     compass: str = "sky", kind: str = "cxmb", model_params: dict | None = None, echo=None,
-                    arena: dict | None = None) -> dict[str, Any]:
+                    arena: dict | None = None, sky: dict | None = None) -> dict[str, Any]:
     """The seed's cluttered-arena task for each seed (a fresh arena and a fresh model per seed); writes
-    `arena_<compass>.json` and one picture per seed into `out_dir` (when given); returns the summary."""
+    `arena_<compass>.json` and one picture per seed into `out_dir` (when given); returns the summary.
+    arena: `make_clutter` parameters; sky: the "sky" scene's parameters (default: the default sky)."""
     from antarium.ant.clutter import clutter_scene, make_clutter
     from antarium.ant.models import make_model
     from antarium.ant.world import virtual_rig
@@ -244,7 +318,7 @@ def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound:
         clutter = make_clutter(seed, **(arena or {}))
         model = make_model(kind, EyeParams().n_pn, **{"compass": compass, "avoid": True, "seed": seed,
                                                       **(model_params or {})})
-        with virtual_rig(model, scene=clutter_scene(clutter), renderer_kwargs={"face_size": FACE_SIZE},
+        with virtual_rig(model, scene=clutter_scene(clutter, sky), renderer_kwargs={"face_size": FACE_SIZE},
                          compass=compass) as ant:
             for _ in range(40):
                 ant.frame()
@@ -254,22 +328,17 @@ def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound:
             plot_arena(out / f"arena_{compass}_seed{seed:02d}.png", clutter, trips,
                        f"cluttered arena, seed {seed} ({compass} compass)")
         if echo is not None:
-            echo(f"arena seed {seed}: closest CX {100 * outcome.closest_cx_share:.2f} %, CXMB "
+            lost = "".join(f"; {name} trip ended without a compass cue at {why}"
+                           for name, why in outcome.lost_cue.items())
+            echo(f"arena seed {seed}: closest CX {100 * outcome.closest_cx_share:.2f} %, {kind} "
                  f"{100 * outcome.closest_cxmb_share:.2f} %, CX again {100 * outcome.closest_cx_again_share:.2f} %; "
-                 f"collisions out {outcome.collisions_outbound}, CX {outcome.collisions_cx}, CXMB "
-                 f"{outcome.collisions_cxmb}")
-    summary = {
-        "runs": len(outcomes), "compass": compass,
-        "closest_cx_share_median": float(np.median([o.closest_cx_share for o in outcomes])),
-        "closest_cxmb_share_median": float(np.median([o.closest_cxmb_share for o in outcomes])),
-        "closest_cx_again_share_median": float(np.median([o.closest_cx_again_share for o in outcomes])),
-        "runs_without_collision": sum(o.collisions_outbound + o.collisions_cx + o.collisions_cxmb
-                                      + o.collisions_cx_again == 0 for o in outcomes),
-    }
+                 f"collisions out {outcome.collisions_outbound}, CX {outcome.collisions_cx}, {kind} "
+                 f"{outcome.collisions_cxmb}{lost}")
+    summary = summarise_arena(outcomes, compass)
     if out is not None:
-        (out / f"arena_{compass}.json").write_text(json.dumps(
-            {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
-             "n_inbound": n_inbound}, indent=2, default=float))
+        write_json(out / f"arena_{compass}.json",
+                   {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
+                    "n_inbound": n_inbound, "model": kind})
     return summary
 
 
@@ -320,7 +389,7 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
     if out_dir is not None:
         path = Path(out_dir)
         path.mkdir(parents=True, exist_ok=True)
-        (path / f"displacement_{compass}.json").write_text(json.dumps(result, indent=2, default=float))
+        write_json(path / f"displacement_{compass}.json", result)
         pictures = {name: (out, trip) for name, trip in trips.items()}
         result["png"] = str(plot_trips(path / f"displacement_{compass}.png", pictures,
                                        f"displaced {lateral} m left of the feeder: PI vs visual memory",

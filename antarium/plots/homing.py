@@ -17,6 +17,13 @@ ARENA_TRIPS = {"outbound": ("0.6", "outbound (random walk + optic flow)"), "cx":
                "cxmb": ("C3", "home 2: CXMB (memory restored)"), "cx_again": ("C2", "home 2: CX alone (restored)")}
 
 
+def _mark_lost_cue(ax, *trips: Trip) -> None:
+    """A black cross where a trip ended because the compass lost its cue."""
+    for trip in trips:
+        if trip.lost_cue is not None and len(trip.xy):
+            ax.plot(*trip.xy[-1], "x", color="k", ms=9, mew=2, label="no compass cue: trip ended")
+
+
 def _map(path: str | Path, title: str, draw) -> Path:
     """A top view in metres with the nest marked; `draw(ax)` adds the trips."""
     fig, ax = style.figure((7.5, 7.0))
@@ -36,7 +43,9 @@ def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str
         for i, (label, (out, home)) in enumerate(trips.items()):
             ax.plot(*out.xy.T, color="0.6", lw=0.8, label="outbound" if i == 0 else None)
             ax.plot(*home.xy.T, color=f"C{i % 10}", lw=1.0, label=label)
-            ax.plot(*out.xy[-1], "s", color=f"C{i % 10}", ms=4)
+            if len(out.xy):
+                ax.plot(*out.xy[-1], "s", color=f"C{i % 10}", ms=4)
+            _mark_lost_cue(ax, out, home)
         for label, (x, y) in (marks or {}).items():
             ax.plot(x, y, "X", color="k", mfc="w", ms=11, label=label)
 
@@ -65,5 +74,6 @@ def plot_arena(path: str | Path, clutter, trips: dict[str, Trip], title: str) ->
         for name, trip in trips.items():
             colour, label = ARENA_TRIPS[name]
             ax.plot(*trip.xy.T, color=colour, lw=0.9, label=label)
+            _mark_lost_cue(ax, trip)
 
     return _map(path, title, draw)
