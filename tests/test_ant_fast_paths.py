@@ -114,3 +114,24 @@ def test_compiled_fine_sampling_equals_the_sparse_product():
     fast = sample(matrix, x)
     assert fast.dtype == np.float32 and fast.shape == (300,)
     np.testing.assert_allclose(fast, (matrix @ x).astype(np.float32), rtol=1e-6, atol=1e-7)
+
+
+def test_compiled_band_equals_the_dense_products_of_the_eye():
+    """The eye's band (fine sampling, elevation and circular azimuth blur) against the products it replaces."""
+    from antarium.ant.eye import Eye
+    from antarium.ant.eye_kernel import Band
+    from antarium.geometry import load_dome
+
+    eye = Eye.from_dome(load_dome())
+    rng = np.random.default_rng(8)
+    band = Band(eye._sample, eye._blur_el, eye._blur_az)
+    for _ in range(3):
+        x = rng.random(eye._sample.shape[1], dtype=np.float32)
+        ref = eye._blur_el @ (eye._sample @ x).astype(np.float32).reshape(eye._fine_shape) @ eye._blur_az
+        fast = band(x)
+        assert fast.dtype == np.float32 and fast.shape == ref.shape == (eye.params.rows, 300)
+        np.testing.assert_allclose(fast, ref, rtol=1e-5, atol=1e-6)  # float32 sums in another order
+    skewed = eye._blur_az.copy()
+    skewed[5, 7] += 0.01
+    with pytest.raises(ValueError, match="circulant"):
+        Band(eye._sample, eye._blur_el, skewed)

@@ -191,6 +191,7 @@ class Eye:
         # Stage 2 (dense): Gaussian acceptance, in elevation (selecting the eye's rows) and in azimuth (circular).
         self._blur_el = _gaussian_rows(self.elevations, fine_el, sigma, periodic=False).astype(np.float32)
         self._blur_az = _gaussian_rows(az, az, sigma, periodic=True).T.astype(np.float32)
+        self._band = None  # the compiled stages 1-2 (`eye_kernel.Band`), made on first look
 
     @classmethod
     def from_dome(cls, dome, params: EyeParams | None = None) -> Eye:
@@ -213,10 +214,11 @@ class Eye:
         """Like `look`, from the channel's intensities ((n_channel_pixels,) floats)."""
         if not math.isfinite(yaw):
             raise ValueError(f"yaw must be a finite angle in radians, got {yaw!r}")
-        from antarium.ant.eye_kernel import sample  # = (self._sample @ intensity).astype(np.float32)
+        if self._band is None:
+            from antarium.ant.eye_kernel import Band
 
-        fine = sample(self._sample, intensity).reshape(self._fine_shape)
-        band = self._blur_el @ fine @ self._blur_az
+            self._band = Band(self._sample, self._blur_el, self._blur_az)
+        band = self._band(intensity)  # = blur_el @ (sample @ intensity).reshape(fine shape) @ blur_az
         return View(band, self.params.fine_per_col, self.params.cols, yaw, self.params.row_gain)
 
     @property

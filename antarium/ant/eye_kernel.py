@@ -1,5 +1,7 @@
 """Compiled eye stages (numba): the panoramas of a scan and their Sobel edges in one pass, equal to the numpy
-stages of `antarium.ant.eye` (same float32 operations in the same order, no fastmath).
+stages of `antarium.ant.eye` (same float32 operations in the same order, no fastmath); the band of a view from
+the LED intensities (fine sampling, then the Gaussian acceptance as two sparse passes; float32 sums in another
+order than a dense product, so equal to it within rounding).
 
 Compiled on first use and cached on disk; single-threaded.
 """
@@ -66,3 +68,76 @@ def sample(matrix, x: np.ndarray) -> np.ndarray:
     out = np.empty(matrix.shape[0], np.float32)
     _sample(matrix.indptr, matrix.indices, matrix.data, np.ascontiguousarray(x, dtype=np.float32), out)
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+def _band(nb_idx, nb_w, x, el_ptr, el_idx, el_w, taps, fine, tmp, ext, out):
+    """The eye's band (rows, n_fine) float32 into `out` from intensities x (N,) float32, in three passes:
+    fine (fine rows * n_fine,) = each fine point's neighbours nb_idx (n, K) int32 weighted by nb_w (n, K) float32;
+    tmp = B_el fine (CSR B_el (rows, fine rows)); out = tmp circularly convolved along azimuth with `taps`
+    (2h + 1,) (B_az is circulant: out[r, c] = sum_k taps[k] tmp[r, (c + k - h) mod n_fine]). float32 sums."""
+    n, k_nb = nb_idx.shape
+    for i in range(n):
+        v = np.float32(0.0)
+        for j in range(k_nb):
+            v += nb_w[i, j] * x[nb_idx[i, j]]
+        fine[i] = v
+    rows, n_fine = out.shape
+    h = (taps.shape[0] - 1) // 2
+    for r in range(rows):
+        for c in range(n_fine):
+            tmp[r, c] = 0.0
+        for jj in range(el_ptr[r], el_ptr[r + 1]):
+            w = el_w[jj]
+            f0 = el_idx[jj] * n_fine
+            for c in range(n_fine):
+                tmp[r, c] += w * fine[f0 + c]
+        for c in range(h):
+            ext[c] = tmp[r, n_fine - h + c]
+            ext[h + n_fine + c] = tmp[r, c]
+        for c in range(n_fine):
+            ext[h + c] = tmp[r, c]
+            out[r, c] = 0.0
+        for k in range(taps.shape[0]):
+            g = taps[k]
+            for c in range(n_fine):
+                out[r, c] += g * ext[c + k]
+
+
+class Band:
+    """The eye's stage from LED intensities to its band, `blur_el @ (sample @ x).reshape(fine) @ blur_az`, compiled,
+    with its tables and work arrays made once. sample: CSR (fine rows * n_fine, N), the same number of neighbours
+    in every row; blur_el (rows, fine rows), mostly zeros; blur_az (n_fine, n_fine) circulant (a periodic blur on
+    a uniform grid)."""
+
+    def __init__(self, sample_matrix, blur_el: np.ndarray, blur_az: np.ndarray) -> None:
+        from scipy import sparse
+
+        counts = np.diff(sample_matrix.indptr)
+        if counts.size == 0 or np.any(counts != counts[0]):
+            raise ValueError("the eye's fine sampling must give every fine point the same number of neighbours")
+        small = sample_matrix.shape[1] < np.iinfo(np.int16).max  # half the bytes to stream per look
+        self._nb = (sample_matrix.indices.reshape(-1, counts[0]).astype(np.int16 if small else np.int32),
+                    sample_matrix.data.reshape(-1, counts[0]).astype(np.float32))
+        n_fine = blur_az.shape[0]
+        column = np.asarray(blur_az[:, 0], np.float32)
+        if blur_az.shape != (n_fine, n_fine) or not np.allclose(
+                blur_az, np.stack([np.roll(column, c) for c in range(n_fine)], axis=1), rtol=0, atol=1e-7):
+            raise ValueError("the eye's azimuth blur must be circulant")
+        support = np.flatnonzero(np.roll(column, n_fine // 2))  # taps centred on offset 0
+        h = int(max(n_fine // 2 - support.min(), support.max() - n_fine // 2))
+        # out[:, c] = sum_j tmp[:, j] column[(j - c) mod n] = sum_k taps[k] tmp[:, (c + k - h) mod n]
+        self._taps = np.ascontiguousarray(column[(np.arange(2 * h + 1) - h) % n_fine])
+        el = sparse.csr_matrix(blur_el)
+        self._el = (el.indptr, el.indices, el.data.astype(np.float32))
+        self._fine = np.empty(sample_matrix.shape[0], np.float32)
+        self._tmp = np.empty((blur_el.shape[0], n_fine), np.float32)
+        self._ext = np.empty(n_fine + 2 * h, np.float32)
+        self.shape = (blur_el.shape[0], n_fine)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """(rows, n_fine) float32 band (a new array) for intensities x (N,)."""
+        out = np.empty(self.shape, np.float32)
+        _band(*self._nb, np.ascontiguousarray(x, dtype=np.float32), *self._el, self._taps, self._fine, self._tmp,
+              self._ext, out)
+        return out

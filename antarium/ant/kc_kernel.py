@@ -49,6 +49,30 @@ def _excitation(pn_g, pn_index, ep_t, block_max):
             block_max[d, b] = top
 
 
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+def _excitation_one(pn, pn_index, ep, block_max):
+    """`_excitation` for one PN vector `pn` (n_pn,): EP into ep (1, n_kc), block maxima into block_max (1, n_blocks);
+    each EP summed in the same ascending PN order, so it equals the group's."""
+    n_kc, p = pn_index.shape
+    size = (n_kc + block_max.shape[1] - 1) // block_max.shape[1]
+    for b in range(block_max.shape[1]):
+        top = -np.inf
+        for c in range(b * size, min(n_kc, (b + 1) * size)):
+            v = np.float32(0.0)
+            for j in range(p):
+                v += pn[pn_index[c, j]]
+            ep[0, c] = v
+            top = max(top, v)
+        block_max[0, b] = top
+
+
+@njit(cache=True, nogil=True)
+def _novelty_one(pn, pn_index, k, ep, block_max, weights, out):
+    """novelty (1, n_out) into `out` for one PN vector (n_pn,) float32."""
+    _excitation_one(pn, pn_index, ep, block_max)
+    _select(ep, k, block_max, weights, out)
+
+
 @njit(cache=True, nogil=True)
 def _novelty(pn_groups, pn_index, k, ep_t, block_max, weights, out):
     """novelty (m, n_out) into `out` for PN vectors in groups (n_groups, n_pn, G) (the last one zero-padded),
@@ -132,8 +156,10 @@ def _select(ep_t, k, block_max, weights, out):
 
 
 def sorted_pn_index(pn_index: np.ndarray) -> np.ndarray:
-    """Each KC's PN indices (n_kc, pn_per_kc) in ascending order, int32 C-contiguous (the kernel's table)."""
-    return np.ascontiguousarray(np.sort(pn_index, axis=1), dtype=np.int32)
+    """Each KC's PN indices (n_kc, pn_per_kc) in ascending order, C-contiguous (the kernel's table): int16 when the
+    PNs allow (half the bytes to stream per view), else int32."""
+    small = pn_index.size == 0 or int(pn_index.max()) < np.iinfo(np.int16).max
+    return np.ascontiguousarray(np.sort(pn_index, axis=1), dtype=np.int16 if small else np.int32)
 
 
 class Workspace:
@@ -152,6 +178,12 @@ class Workspace:
         """lambda (m, n_out) float64 in [0, 1] (1 = novel) of n_out MBONs for PN vectors (m, n_pn) float32;
         weights: (n_out, n_kc) bool or uint8, True = undepressed synapse."""
         m = pn.shape[0]
+        out = np.empty((m, weights.shape[0]), np.float64)
+        weights = np.ascontiguousarray(weights, dtype=np.uint8)
+        if m == 1:  # one view (a CXMB decision): no group of 64 to fill
+            _novelty_one(np.ascontiguousarray(pn[0], np.float32), self.pn_index, self.k, self.ep_t[:1],
+                         self.block_max[:1], weights, out)
+            return out
         n_groups = -(-m // _GROUP)
         if self.groups.shape[0] < n_groups:
             self.groups = np.zeros((n_groups, self.groups.shape[1], _GROUP), np.float32)
@@ -160,7 +192,5 @@ class Workspace:
             part = pn[q * _GROUP:(q + 1) * _GROUP]
             groups[q, :, :part.shape[0]] = part.T
             groups[q, :, part.shape[0]:] = 0.0
-        out = np.empty((m, weights.shape[0]), np.float64)
-        _novelty(groups, self.pn_index, self.k, self.ep_t, self.block_max,
-                 np.ascontiguousarray(weights, dtype=np.uint8), out)
+        _novelty(groups, self.pn_index, self.k, self.ep_t, self.block_max, weights, out)
         return out

@@ -169,10 +169,8 @@ class CXMBModel(CXModel):
 
     def responses(self, view) -> np.ndarray:
         """The eight MBONs' responses M_i (novelty, 1 = novel) to `view`, in TB1 column order: each MBON's
-        undepressed share of the active KCs' synapses (`MBON.novelty`), read at the active KCs only."""
-        active = self.kc.active(view.pns((0.0,)))[0]
-        return np.array([np.count_nonzero(self.mbons[f"tb1_{j}"].weights[active])
-                         for j in range(N_COLUMNS)]) / active.size
+        undepressed share of the active KCs' synapses (`MBON.novelty`), in one compiled pass (`KenyonCells.novelty`)."""
+        return self.kc.novelty(view.pns((0.0,)), [self.mbons[f"tb1_{j}"] for j in range(N_COLUMNS)])[0]
 
     def mbon_input(self, view) -> tuple[np.ndarray, dict[str, float]]:
         """Equations 2-3 laid out as CPU4 (16,): the normalised inverse MBON responses. MBON column j says "head
