@@ -47,9 +47,10 @@ class ReferenceCX:
         cpu4 = self.sig(self.cpu4, p.cpu4_slope, p.cpu4_bias)
         pontine = self.sig(cpu4, p.pontine_slope, p.pontine_bias)
         memory = 0.5 * cpu4[_CPU4_TO_CPU1]
+        memory = memory - 0.5 * pontine[_PONTINE]
         if extra is not None:
             memory = k * memory + (1.0 - k) * 0.5 * extra[_CPU4_TO_CPU1]
-        self.cpu1 = self.sig(memory - 0.5 * pontine[_PONTINE] - np.tile(self.tb1, 2), p.cpu1_slope, p.cpu1_bias)
+        self.cpu1 = self.sig(memory - np.tile(self.tb1, 2), p.cpu1_slope, p.cpu1_bias)
 
     def home_vector(self):
         z = ((np.roll(self.cpu4[:8], 1) + np.roll(self.cpu4[8:], -1)) * np.exp(1j * PREFS)).sum()
@@ -200,3 +201,20 @@ def test_compiled_frontal_field_equals_numpy_remainder():
     for yaw in (0.0, 1.0, -2.5, 7.0, -13.0, math.pi, -math.pi):
         rel, *_ = frontal_field(az, east, north, yaw, math.pi / 2)
         np.testing.assert_array_equal(rel, np.remainder(az - yaw + math.pi, math.tau) - math.pi)
+
+
+def test_k_zero_leaves_the_whole_cpu4_pathway_out():
+    """k weighs all that CPU1 gets from CPU4, the Pontine cells' share too: with k = 0 two different memories
+    steer alike (the MBONs alone), with k = 1 the extra input has no effect (the CX alone)."""
+    extra = np.random.default_rng(2).uniform(0, 1, 16)
+    cpu1 = {}
+    for heading in (0.0, 2.0):
+        cx = CentralComplex(CXParams(noise=0.0))
+        for _ in range(300):
+            cx.step(heading, 0.8)
+        cx.tb1[:] = np.linspace(0.1, 0.9, N_COLUMNS)  # the same heading now: only the memories differ
+        cpu1[heading, 0.0] = cx.steering(extra, 0.0).copy()
+        cpu1[heading, 1.0] = cx.steering(extra, 1.0).copy()
+        assert np.array_equal(cpu1[heading, 1.0], cx.steering().copy())
+    np.testing.assert_allclose(cpu1[0.0, 0.0], cpu1[2.0, 0.0], rtol=0, atol=1e-12)
+    assert np.abs(cpu1[0.0, 1.0] - cpu1[2.0, 1.0]).max() > 0.05

@@ -130,9 +130,11 @@ class CentralComplex:
         _kernels().cx_integrate(float(speed), self.tb1, self.cpu4, self._prm, self._draw(2))
 
     def steering(self, extra: np.ndarray | None = None, k: float = 1.0) -> np.ndarray:
-        """CPU1 (16,) from the memory and TB1; `extra` (16,), laid out as CPU4, joins the CPU4 input with weight
-        1 - k, CPU4 with weight k (Zhang's CXMB, Mitchell 2019 eq. 4); no extra: Stone's CX.
-        CPU1 = rate(0.5 CPU4out (shifted) - 0.5 Pontine - TB1), CPU4out = rate(CPU4), Pontine = rate(CPU4out)."""
+        """CPU1 (16,) from the memory and TB1; `extra` (16,), laid out as CPU4, joins with weight 1 - k all that
+        CPU1 gets from CPU4 (directly and through the Pontine cells), which gets weight k (Zhang's CXMB, Mitchell
+        2019 eq. 4: k = 0 steers by `extra` alone); no extra: Stone's CX.
+        CPU1 = rate(k (0.5 CPU4out (shifted) - 0.5 Pontine) + (1 - k) 0.5 extra (shifted) - TB1),
+        CPU4out = rate(CPU4), Pontine = rate(CPU4out)."""
         use = extra is not None
         e = np.asarray(extra, np.float64) if use else self._no_extra
         _kernels().cx_steering(self.tb1, self.cpu4, self.cpu1, e, float(k), use, _CPU4_TO_CPU1, _PONTINE, self._prm,

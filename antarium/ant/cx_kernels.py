@@ -96,8 +96,9 @@ def cx_integrate(speed, tb1, cpu4, prm, z):
 
 @njit(cache=True)
 def cx_steering(tb1, cpu4, cpu1, extra, k, use_extra, to_cpu1, pontine_of, prm, z):
-    """CPU1 in place from the memory, TB1 and (use_extra) `extra` (16,) weighed 1 - k against CPU4 (weight k);
-    z (48,) noise: CPU4 output (16), Pontine (16), CPU1 (16)."""
+    """CPU1 in place from the memory, TB1 and (use_extra) `extra` (16,) weighed 1 - k against all that comes from
+    CPU4 (its direct input and the Pontine cells', weight k: k = 0 leaves CPU4 out); z (48,) noise: CPU4 output
+    (16), Pontine (16), CPU1 (16)."""
     n2 = cpu4.shape[0]
     n = n2 // 2
     out4 = np.empty(n2)
@@ -107,10 +108,10 @@ def cx_steering(tb1, cpu4, cpu1, extra, k, use_extra, to_cpu1, pontine_of, prm, 
     for i in range(n2):
         pontine[i] = _rate(out4[i], prm[13], prm[14], z[n2 + i])
     for i in range(n2):
-        memory = 0.5 * out4[to_cpu1[i]]
+        memory = 0.5 * out4[to_cpu1[i]] - 0.5 * pontine[pontine_of[i]]
         if use_extra:
             memory = k * memory + (1.0 - k) * 0.5 * extra[to_cpu1[i]]
-        drive = memory - 0.5 * pontine[pontine_of[i]] - tb1[i % n]
+        drive = memory - tb1[i % n]
         cpu1[i] = _rate(drive, prm[15], prm[16], z[2 * n2 + i])
 
 
