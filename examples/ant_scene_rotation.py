@@ -23,6 +23,11 @@ from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
 
 SCENES = {"habitat (structured)": "habitat", "horizon only": "horizon"}
+#: rotations per walk, decisions between rotation times, walked before the first and after the last
+ROTATIONS, SPACING, BEFORE, AFTER = 3, 40, 25, 35
+#: decisions over which the walking direction's turn after a rotation is measured
+TURN_WINDOW = 30
+MIN_DECISIONS = BEFORE + (ROTATIONS - 1) * SPACING + AFTER + 1
 
 
 def walk_with_rotations(scene: str, decisions: int, seed: int):
@@ -38,7 +43,7 @@ def walk_with_rotations(scene: str, decisions: int, seed: int):
         learning_walk(ant, route, 0.01)
         model.reset()
         ant.place(*route.start, float(route.at([0.0])[1][0]))
-        times = np.sort(rng.choice(np.arange(25, decisions - 35, 40), size=3, replace=False))
+        times = np.sort(rng.choice(np.arange(BEFORE, decisions - AFTER, SPACING), size=ROTATIONS, replace=False))
         angles = rng.choice([-math.pi / 2, math.pi / 2], size=len(times))
         ball_xy, ball_heading = [np.zeros(2)], []
         last = np.array(ant.position)
@@ -54,16 +59,19 @@ def walk_with_rotations(scene: str, decisions: int, seed: int):
             ball_heading.append(ant.legs.yaw)
             last = here
     heading = np.unwrap(np.asarray(ball_heading))
-    turned = np.array([heading[min(t + 30, decisions - 1)] - heading[t - 1] for t in times])
+    turned = np.array([heading[min(t + TURN_WINDOW, decisions - 1)] - heading[t - 1] for t in times])
     return np.asarray(ball_xy), times, angles, turned
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="ant-rotation", help="folder for scene_rotation.png")
     parser.add_argument("--decisions", type=int, default=160)
     parser.add_argument("--seed", type=int, default=3)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    if args.decisions < MIN_DECISIONS:
+        parser.error(f"--decisions must be >= {MIN_DECISIONS} ({ROTATIONS} rotations {SPACING} decisions apart, "
+                     f"{BEFORE} before the first, {AFTER} after the last), got {args.decisions}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 

@@ -190,3 +190,11 @@ def test_motivation_switches_say_where_the_ant_turned_back():
     assert switches[0][3] == pytest.approx(0.1) and switches[1][2] == pytest.approx(0.2)
     with pytest.raises(ValueError, match="one value per position"):
         motivation_switches(route, xy, [1, 1])
+
+
+def test_scene_rotation_example_refuses_too_few_decisions_in_one_line(capsys):
+    with pytest.raises(SystemExit) as stop:
+        _example("ant_scene_rotation").main(["--decisions", "40", "--out", "unused"])
+    assert stop.value.code == 2
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--decisions must be >= 141" in line and "got 40" in line
