@@ -103,19 +103,6 @@ def test_compiled_scan_edges_equal_the_numpy_stages():
         np.testing.assert_allclose(fast, ref, rtol=1e-6, atol=1e-6)
 
 
-def test_compiled_fine_sampling_equals_the_sparse_product():
-    from scipy import sparse
-
-    from antarium.ant.eye_kernel import sample
-
-    rng = np.random.default_rng(5)
-    matrix = sparse.random(300, 1000, density=0.004, random_state=6, format="csr")
-    x = rng.random(1000, dtype=np.float32)
-    fast = sample(matrix, x)
-    assert fast.dtype == np.float32 and fast.shape == (300,)
-    np.testing.assert_allclose(fast, (matrix @ x).astype(np.float32), rtol=1e-6, atol=1e-7)
-
-
 def test_compiled_band_equals_the_dense_products_of_the_eye():
     """The eye's band (fine sampling, elevation and circular azimuth blur) against the products it replaces."""
     from antarium.ant.eye import Eye

@@ -52,24 +52,6 @@ def scan_edges(band: np.ndarray, i0: np.ndarray, i1: np.ndarray, w: np.ndarray) 
     return out
 
 
-@njit(cache=True, nogil=True)
-def _sample(indptr, indices, data, x, out):
-    """out[i] = float32(sum_j data[j] * x[indices[j]]) over row i of a CSR matrix, summed in float64 in storage
-    order (what scipy's product followed by astype(float32) gives)."""
-    for i in range(out.shape[0]):
-        s = 0.0
-        for jj in range(indptr[i], indptr[i + 1]):
-            s += data[jj] * np.float64(x[indices[jj]])
-        out[i] = np.float32(s)
-
-
-def sample(matrix, x: np.ndarray) -> np.ndarray:
-    """`(matrix @ x).astype(np.float32)` for a float64 CSR `matrix` (n, N) and float32 `x` (N,): (n,) float32."""
-    out = np.empty(matrix.shape[0], np.float32)
-    _sample(matrix.indptr, matrix.indices, matrix.data, np.ascontiguousarray(x, dtype=np.float32), out)
-    return out
-
-
 @njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
 def _band(nb_idx, nb_w, x, el_ptr, el_idx, el_w, taps, fine, tmp, ext, out):
     """The eye's band (rows, n_fine) float32 into `out` from intensities x (N,) float32, in three passes:
@@ -116,8 +98,7 @@ class Band:
         counts = np.diff(sample_matrix.indptr)
         if counts.size == 0 or np.any(counts != counts[0]):
             raise ValueError("the eye's fine sampling must give every fine point the same number of neighbours")
-        small = sample_matrix.shape[1] < np.iinfo(np.int16).max  # half the bytes to stream per look
-        self._nb = (sample_matrix.indices.reshape(-1, counts[0]).astype(np.int16 if small else np.int32),
+        self._nb = (sample_matrix.indices.reshape(-1, counts[0]).astype(np.int32),
                     sample_matrix.data.reshape(-1, counts[0]).astype(np.float32))
         n_fine = blur_az.shape[0]
         column = np.asarray(blur_az[:, 0], np.float32)

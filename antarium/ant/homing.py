@@ -74,8 +74,10 @@ class Trip:
     lost_cue: str | None = None
 
     @classmethod
-    def walked(cls, xy: list, heading: list, traces: list, lost_cue: str | None = None) -> Trip:
-        return cls(np.asarray(xy, np.float64).reshape(-1, 2), np.asarray(heading, np.float64), traces, lost_cue)
+    def walked(cls, xy: list, heading: list, traces: list, lost: NoSkyCueError | None = None) -> Trip:
+        """The trip of the decisions recorded; `lost`: the error that ended it after len(traces) decisions."""
+        why = None if lost is None else f"decision {len(traces)}: {lost}"
+        return cls(np.asarray(xy, np.float64).reshape(-1, 2), np.asarray(heading, np.float64), traces, why)
 
 
 @dataclass
@@ -111,7 +113,7 @@ def walk_outbound(ant, turns: np.ndarray, step: float) -> Trip:
             traces.append(ant.model.observe(ant.sense()))
             _record(ant, xy, heading)
     except NoSkyCueError as e:
-        return Trip.walked(xy, heading, traces, f"decision {len(traces)}: {e}")
+        return Trip.walked(xy, heading, traces, e)
     return Trip.walked(xy, heading, traces)
 
 
@@ -124,7 +126,7 @@ def walk_home(ant, n: int) -> Trip:
             traces.append(cmd.trace)
             _record(ant, xy, heading)
     except NoSkyCueError as e:
-        return Trip.walked(xy, heading, traces, f"decision {len(traces)}: {e}")
+        return Trip.walked(xy, heading, traces, e)
     return Trip.walked(xy, heading, traces)
 
 
@@ -231,7 +233,7 @@ def walk_outbound_avoiding(ant, turns: np.ndarray, step: float) -> Trip:
             _record(ant, xy, heading)
             ant.act(step, float(np.clip(turn + flow_turn, -ant.model.params.max_turn, ant.model.params.max_turn)))
     except NoSkyCueError as e:
-        return Trip.walked(xy, heading, traces, f"decision {len(traces)}: {e}")
+        return Trip.walked(xy, heading, traces, e)
     return Trip.walked(xy, heading, traces)
 
 

@@ -156,10 +156,8 @@ def _select(ep_t, k, block_max, weights, out):
 
 
 def sorted_pn_index(pn_index: np.ndarray) -> np.ndarray:
-    """Each KC's PN indices (n_kc, pn_per_kc) in ascending order, C-contiguous (the kernel's table): int16 when the
-    PNs allow (half the bytes to stream per view), else int32."""
-    small = pn_index.size == 0 or int(pn_index.max()) < np.iinfo(np.int16).max
-    return np.ascontiguousarray(np.sort(pn_index, axis=1), dtype=np.int16 if small else np.int32)
+    """Each KC's PN indices (n_kc, pn_per_kc) in ascending order, int32 C-contiguous (the kernel's table)."""
+    return np.ascontiguousarray(np.sort(pn_index, axis=1), dtype=np.int32)
 
 
 class Workspace:
