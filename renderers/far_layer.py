@@ -155,13 +155,15 @@ class FarLayerBuilder:
 class FarLayer:
     """The current far layer of a renderer, kept up to date by a builder ("sync" or "async").
 
+    process: async only, the `ChildProcess` of a scene prepared in it (`renderers.prepared`), which has the
+    objects and far field already and becomes the builder (objects is then None); None: a new one is started.
     Call `edit` for every change of the scene's objects, then `current(eye)` each frame: it returns
     (layer table, near chunk mask) when a layer for the current objects is within the error bound of `eye`,
     else None (render the frame in full). near_chunks(eye, radius) gives the renderer's own chunk mask.
     """
 
-    def __init__(self, mode: str, ctx, objects: dict, far_field: FarFieldTable, radius: float, error: float,
-                 face_size: int, chunk_size: float, lod_angle: float, near_chunks):
+    def __init__(self, mode: str, ctx, objects: dict | None, far_field: FarFieldTable, radius: float,
+                 error: float, face_size: int, chunk_size: float, lod_angle: float, near_chunks, process=None):
         if mode not in ("sync", "async"):
             raise ValueError(f"far layer mode must be one of {', '.join(MODES)}, got {mode!r}")
         self.mode, self.radius = mode, float(radius)
@@ -190,7 +192,7 @@ class FarLayer:
             self._builder = FarLayerBuilder(ctx, objects, far_field, *args[1:])
             self._tables = [FarFieldTable(g, *_empty_tables(g))]
         else:
-            self._worker = _Worker(far_field, args)
+            self._worker = _Worker(far_field, args, process)
             self._tables = [FarFieldTable(g, gb, uv) for gb, uv in self._worker.tables]
 
     @property
@@ -344,9 +346,10 @@ def _empty_tables(grid: TableGrid, buffer=None) -> tuple[np.ndarray, np.ndarray]
 
 
 class _Worker:
-    """The async builder: a child interpreter with its own GL context, two table slots in shared memory."""
+    """The async builder: a child interpreter with its own GL context, two table slots in shared memory. A new
+    child gets the objects and far field pickled; a scene's own process (`process`) has them already."""
 
-    def __init__(self, far_field: FarFieldTable, args: tuple):
+    def __init__(self, far_field: FarFieldTable, args: tuple, process=None):
         import os
         from multiprocessing import shared_memory
 
@@ -357,17 +360,21 @@ class _Worker:
         for gb, uv in self.tables:
             gb[...] = 0
             uv[...] = 0
-        self._child = ChildProcess(__name__, connect=True)
+        self._child = ChildProcess(__name__, connect=True) if process is None else process
         self._conn = self._child.conn
         # below a real-time frame loop, nice 10: it still has most of the idle time of the loop's other CPU, but
         # yields it at once to the server's ordinary threads, which may hold the loop's GIL; beside an ordinary
         # loop, nice 5: a quarter of a core against it, enough for a layer every ~0.3 s (nice 10 starved it)
         realtime = hasattr(os, "sched_getscheduler") and \
             os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK in (os.SCHED_FIFO, os.SCHED_RR)
-        self._conn.send(([s.name for s in self._shm], far_field.table_gb, far_field.table_uv, g, args,
-                         10 if realtime else 5))
+        names, nice = [s.name for s in self._shm], 10 if realtime else 5
         self.busy = False
         self.error: str | None = None
+        try:
+            self._conn.send((names, nice) if process is not None else
+                            (names, nice, far_field.table_gb, far_field.table_uv, g, args))
+        except (OSError, EOFError) as exc:
+            self.error = f"far-layer process gone: {exc}"
 
     @property
     def pid(self) -> int:
@@ -414,14 +421,21 @@ class _Worker:
 
 
 def _serve(conn_arg: str) -> None:  # pragma: no cover - runs in the child process
-    """Child process: build layers on request into the shared tables until told to stop."""
+    """Child process: receive the objects and far field, then build layers on request."""
+    conn = connection_from_arg(conn_arg)
+    shm_names, nice, static_gb, static_uv, grid, args = conn.recv()
+    serve_layers(conn, shm_names, nice, FarFieldTable(grid, static_gb, static_uv), *args)
+
+
+def serve_layers(conn, shm_names: list[str], nice: int, far_field: FarFieldTable, objects: dict, radius: float,
+                 face_size: int, chunk_size: float, lod_angle: float) -> None:  # pragma: no cover - child process
+    """In the builder's process: build layers on request into the shared tables `shm_names` until told to stop
+    (or the connection ends); errors are reported to the renderer, which then renders every frame in full."""
     import os
     from multiprocessing import resource_tracker, shared_memory
 
     from .gl import create_context
 
-    conn = connection_from_arg(conn_arg)
-    shm_names, static_gb, static_uv, grid, (objects, radius, face_size, chunk_size, lod_angle), nice = conn.recv()
     try:  # the frame loop comes first: ordinary scheduling even if the loop's thread is real-time
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
         os.nice(nice)
@@ -430,10 +444,9 @@ def _serve(conn_arg: str) -> None:  # pragma: no cover - runs in the child proce
     shms = [shared_memory.SharedMemory(name=name) for name in shm_names]
     for s in shms:  # the renderer owns the tables: this interpreter's resource tracker must not unlink them
         resource_tracker.unregister(s._name, "shared_memory")
-    tables = [FarFieldTable(grid, *_empty_tables(grid, s.buf)) for s in shms]
+    tables = [FarFieldTable(far_field.grid, *_empty_tables(far_field.grid, s.buf)) for s in shms]
     try:
-        builder = FarLayerBuilder(create_context(), objects, FarFieldTable(grid, static_gb, static_uv), radius,
-                                  face_size, chunk_size, lod_angle)
+        builder = FarLayerBuilder(create_context(), objects, far_field, radius, face_size, chunk_size, lod_angle)
         while True:
             msg = conn.recv()
             if msg[0] == "stop":

@@ -173,16 +173,75 @@ def interleave(obj, local, colours, uv, tex_layer: float) -> np.ndarray:
     return v
 
 
+#: bytes a `StagedUpload.step` copies: well under a millisecond, so that a step fits the idle end of a frame
+UPLOAD_SLICE_BYTES = 2 << 20
+
+
+class StagedUpload:
+    """The vertex and index buffers of a `MeshArrays`, filled a slice at a time in the GL thread (`step`), so that
+    loading a large scene never holds a frame for its whole upload; `MeshBuffers` takes them (`finish`).
+
+    discard: where `discard()` hands it for release in the GL thread (it may be called from any thread).
+    """
+
+    def __init__(self, ctx, arrays: MeshArrays, discard=None):
+        self.ctx = ctx
+        self._data = [memoryview(np.ascontiguousarray(a)).cast("B") for a in (arrays.vertices, arrays.indices)]
+        self.buffers: list = []
+        self._part = self._offset = 0
+        self._discard = discard
+        self.discarded = False
+
+    @property
+    def done(self) -> bool:
+        return self._part == len(self._data)
+
+    def step(self, nbytes: int = UPLOAD_SLICE_BYTES) -> bool:
+        """Copy about `nbytes` more (the first step creates the buffers); True once everything is up. GL thread."""
+        if self.discarded or self.done:
+            return True
+        if not self.buffers:
+            self.buffers = [self.ctx.buffer(reserve=max(1, d.nbytes)) for d in self._data]
+            return False
+        data, buf = self._data[self._part], self.buffers[self._part]
+        end = min(data.nbytes, self._offset + nbytes)
+        if end > self._offset:
+            buf.write(data[self._offset:end], offset=self._offset)
+        self._offset = end
+        if end == data.nbytes:
+            self._part, self._offset = self._part + 1, 0
+        return self.done
+
+    def finish(self) -> list:
+        """The filled (vertex, index) buffers, copying what is left now. GL thread."""
+        while not self.step(1 << 62):
+            pass
+        return self.buffers
+
+    def discard(self) -> None:
+        """Not needed after all (any thread): released in the GL thread, or here when no one takes it."""
+        self.discarded = True
+        if self._discard is not None:
+            self._discard(self)
+        else:
+            self.release()
+
+    def release(self) -> None:
+        for buf in self.buffers:
+            buf.release()
+        self.buffers = []
+
+
 class MeshBuffers:
     """All objects of a scene on the GPU. Per frame, `draw` culls chunks per face and renders them.
 
     lod_angle: radians; a chunk at distance D uses level-of-detail cells up to lod_angle * D (0: no LOD).
     arrays: the objects' `MeshArrays`, made beforehand in another thread (default: made here); only the GL
-    uploads then run here.
+    uploads then run here, or only what is left of them when `upload` (a `StagedUpload` of those arrays) is given.
     """
 
     def __init__(self, ctx, prog, objects: dict, chunk_size: float = 2.0, lod_angle: float = 0.0,
-                 arrays: MeshArrays | None = None):
+                 arrays: MeshArrays | None = None, upload: StagedUpload | None = None):
         self.ctx, self.prog = ctx, prog
         self.lod_angle = float(lod_angle)
         self._resources = []
@@ -196,8 +255,9 @@ class MeshBuffers:
         self._arrays = a
         self._textures = self._texture_array(objects)
         self._ranges, self._centre, self._radius = a.ranges, a.centre, a.radius
-        self._vbo = ctx.buffer(a.vertices.tobytes())
-        self._ibo = ctx.buffer(a.indices.tobytes())
+        if upload is None:
+            upload = StagedUpload(ctx, a)
+        self._vbo, self._ibo = upload.finish()
         self._vao = ctx.vertex_array(prog, [(self._vbo, "3f 3f 2f 1f", "in_pos", "in_col", "in_uv", "in_layer")],
                                      self._ibo, index_element_size=4)
         self.n_chunks = a.n_chunks

@@ -1,9 +1,12 @@
-"""Scenes prepared off the frame loop: everything a scene load needs but its GL uploads, done in any thread.
+"""Scenes prepared off the frame loop: everything a scene load needs but its GL uploads, done in another process.
 
-`prepare_scene(renderer, spec, pose)` parses the scene (files included), builds its far-field table and its
-meshes' vertex arrays (`MeshArrays`) and, with an async far layer, starts the layer's process and waits until
-it has a layer for the eye at `pose()`; `Renderer.set_scene(prepared)` then only uploads the buffers and swaps
-everything in between two frames, so that the frame loop is never held by a load.
+`prepare_scene(renderer, spec, pose)` starts the scene's own process (a fresh interpreter), which parses the
+scene (files included), builds its far-field table and its meshes' vertex arrays (`MeshArrays`) and hands them
+over in shared memory (`antarium.core.handover`): the server's process only maps them, so no parsing, random
+draw, import or large copy ever holds the frame loop's interpreter lock. With an async far layer that process
+stays on as the layer's builder (it has the objects already) and `prepare_scene` waits until it has a layer
+for the eye at `pose()`; `Renderer.set_scene(prepared)` then only uploads the buffers and swaps everything in
+between two frames. A `Scene` object (made in this process already) is prepared in the calling thread.
 """
 
 from __future__ import annotations
@@ -13,6 +16,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
+from antarium.core.childproc import ChildProcess, connection_from_arg
+from antarium.core.handover import Handover, discard, dump, load
 from antarium.core.pose import Pose
 
 from .farfield import FarFieldTable
@@ -26,18 +33,74 @@ LAYER_WAIT_S = 60.0
 @dataclass
 class PreparedScene:
     """A scene ready for `Renderer.set_scene`: the scene, its far-field table (None: drawn from a cube texture),
-    its meshes' arrays (None: no objects) and its started async far layer (None: none, or made by the renderer)."""
+    its meshes' arrays (None: no objects), its started async far layer (None: none, or made by the renderer) and
+    the upload of its arrays begun in the GL thread (`Renderer.upload_step`; None: not begun)."""
 
     scene: Scene
     table: FarFieldTable | None
     arrays: MeshArrays | None
     layer: object | None = None
+    upload: object | None = None
 
     def release(self) -> None:
-        """Stop the far layer's process of a prepared scene that will not be shown."""
+        """Free what a prepared scene that will not be shown holds (any thread): its far layer's process, and its
+        upload's buffers (handed to the GL thread)."""
+        self.arrays = None  # nothing more to upload
         if self.layer is not None:
             self.layer.release()
             self.layer = None
+        if self.upload is not None:
+            self.upload.discard()
+            self.upload = None
+
+
+@dataclass(frozen=True)
+class SceneSettings:
+    """What preparing a scene needs of its renderer, as plain data (it crosses to the scene's process).
+
+    directions (P, 3) float64 LED directions; footprint_deg: LED acceptance FWHM; fast_far_field: far fields
+    that allow it come from a `FarFieldTable`; chunk_size (m); far_layer: "off", "sync" or "async", with
+    near_radius (m), layer_error (rad), layer_face_size (texels) and lod_texels as in `Renderer`.
+    """
+
+    directions: np.ndarray
+    footprint_deg: float
+    fast_far_field: bool
+    chunk_size: float
+    far_layer: str
+    near_radius: float
+    layer_error: float
+    layer_face_size: int
+    lod_texels: float
+
+    @classmethod
+    def of(cls, renderer) -> SceneSettings:
+        return cls(renderer._directions, renderer.footprint_deg, renderer.fast_far_field, renderer.chunk_size,
+                   renderer.far_layer_mode, renderer.near_radius, renderer.far_layer_error,
+                   renderer.layer_face_size, renderer.lod_texels)
+
+    def table_ok(self, scene: Scene) -> bool:
+        """Whether the far field comes from a `FarFieldTable` (static, or only turning about the vertical)."""
+        return self.fast_far_field and not scene.far_time_varying
+
+    def layer_args(self, scene: Scene, table: FarFieldTable | None) -> tuple | None:
+        """(near radius, error, face size, chunk size, LOD angle) of the scene's far layer; None when it has none
+        (layer off, no table, no objects, or a turning scene)."""
+        if self.far_layer == "off" or table is None or not scene.objects or scene.yaw_rate != 0:
+            return None
+        from . import cubemap
+
+        lod = math.radians(self.lod_texels * cubemap.largest_texel_deg(self.layer_face_size))
+        return self.near_radius, self.layer_error, self.layer_face_size, self.chunk_size, lod
+
+    def build(self, scene: Scene) -> PreparedScene:
+        """The scene's far-field table and mesh arrays (the CPU work of a load; no GL)."""
+        from .renderer import footprint_fwhm
+
+        table = FarFieldTable.of_scene(scene, self.directions, footprint_fwhm(self.footprint_deg, scene.lowpass_deg)) \
+            if self.table_ok(scene) else None
+        arrays = MeshArrays(scene.objects, self.chunk_size) if scene.objects else None
+        return PreparedScene(scene, table, arrays)
 
 
 def prepare_scene(renderer, spec, pose: Callable[[], Pose] | None = None,
@@ -45,25 +108,98 @@ def prepare_scene(renderer, spec, pose: Callable[[], Pose] | None = None,
     """The CPU half of `renderer.set_scene(spec)` (no GL; any thread). pose: the eye's pose now (called while
     waiting for the far layer; None: do not wait). Raises what `build_scene` raises."""
     from .far_layer import FarLayer
-    from .library import build_scene
 
-    scene = spec if isinstance(spec, Scene) else build_scene(spec)
-    fwhm = renderer.footprint_fwhm_for(scene.lowpass_deg)
-    table = FarFieldTable.of_scene(scene, renderer._directions, fwhm) if renderer._table_ok(scene) else None
-    arrays = MeshArrays(scene.objects, renderer.chunk_size) if scene.objects else None
-    prepared = PreparedScene(scene, table, arrays)
-    if renderer.far_layer_mode != "async" or table is None or not scene.objects or scene.yaw_rate != 0:
+    settings = SceneSettings.of(renderer)
+    if isinstance(spec, Scene):
+        prepared, process = settings.build(spec), None
+    else:
+        prepared, process = _prepare_in_process(spec, settings)
+    args = settings.layer_args(prepared.scene, prepared.table) if settings.far_layer == "async" else None
+    if process is not None and args is None:
+        _stop(process)
+    if args is None:
         return prepared
-    from . import cubemap
-
-    lod = math.radians(renderer.lod_texels * cubemap.largest_texel_deg(renderer.layer_face_size))
-    prepared.layer = FarLayer("async", None, dict(scene.objects), table, renderer.near_radius,
-                              renderer.far_layer_error, renderer.layer_face_size, renderer.chunk_size, lod,
-                              arrays.near_chunks)
+    radius, error, *rest = args
+    prepared.layer = FarLayer("async", None, None if process else dict(prepared.scene.objects), prepared.table,
+                              radius, error, *rest, prepared.arrays.near_chunks, process=process)
     if pose is not None:
         deadline = time.monotonic() + timeout_s
-        while prepared.layer.current(renderer._scene_eye(scene, pose())) is None:
+        while prepared.layer.current(renderer._scene_eye(prepared.scene, pose())) is None:
             if prepared.layer.error or time.monotonic() > deadline:
                 break  # shown anyway: its frames are drawn in full until a layer is in, as at start-up
             time.sleep(0.005)
     return prepared
+
+
+def _prepare_in_process(spec, settings: SceneSettings) -> tuple[PreparedScene, ChildProcess]:
+    """Build `spec` in the scene's process: (the prepared scene, that process, waiting for "stop" or its layer's
+    tables). Raises what `build_scene` raised there (RuntimeError when the process itself failed)."""
+    process = ChildProcess(__name__, connect=True, idle=True)  # preparing never takes a CPU from the frame loop
+    try:
+        process.conn.send(("prepare", spec, settings))
+        while not process.conn.poll(0.05):  # waits without the interpreter lock
+            if not process.running and not process.conn.poll():
+                raise RuntimeError(f"the scene's process ended (exit code {process.exitcode}) before answering: "
+                                   f"{process.output(300).strip() or 'no output'}")
+        kind, payload = process.conn.recv()
+        if kind == "error":
+            raise payload
+        scene, table, arrays = load(payload)
+    except BaseException:
+        _stop(process)
+        raise
+    return PreparedScene(scene, table, arrays), process
+
+
+def _stop(process: ChildProcess) -> None:
+    try:
+        process.conn.send(("stop",))
+    except (OSError, EOFError):
+        pass
+    if not process.wait(5.0):
+        process.kill()
+    process.close()
+
+
+def _serve(conn_arg: str) -> None:  # pragma: no cover - runs in the scene's process
+    """The scene's process: prepare the scene asked for, hand it over, then stop or build its far layers (at the
+    builder's priority: `serve_layers` leaves SCHED_IDLE, which an unprivileged process may do)."""
+    import pickle
+
+    from .far_layer import serve_layers
+    from .library import build_scene
+
+    conn = connection_from_arg(conn_arg)
+    handover: Handover | None = None
+    try:
+        _, spec, settings = conn.recv()
+        try:
+            prepared = settings.build(build_scene(spec))
+            handover = dump((prepared.scene, prepared.table, prepared.arrays))
+        except Exception as exc:  # the load's error, raised again in the server's process
+            try:
+                conn.send(("error", pickle.loads(pickle.dumps(exc))))
+            except Exception:
+                conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+            return
+        # from here this process reads the very pages it handed over: one copy of the scene in memory
+        scene, table, _ = load(handover, unlink=False)
+        del prepared
+        conn.send(("prepared", handover))
+        msg = conn.recv()
+        if msg[0] == "stop":
+            return
+        shm_names, nice = msg
+        radius, _, face_size, chunk_size, lod = settings.layer_args(scene, table)
+        serve_layers(conn, shm_names, nice, table, dict(scene.objects), radius, face_size, chunk_size, lod)
+    except (EOFError, KeyboardInterrupt):
+        pass
+    finally:
+        if handover is not None:
+            discard(handover)
+
+
+if __name__ == "__main__":  # pragma: no cover - the scene's process
+    import sys
+
+    _serve(sys.argv[1])

@@ -10,6 +10,7 @@ world-aligned cube texture sampled by the background pass. Scenes without meshes
 
 from __future__ import annotations
 
+import collections
 import functools
 import math
 import os
@@ -57,6 +58,13 @@ def lowpass_fwhm(cutoff_deg: float) -> float:
     """FWHM (rad) of the Gaussian whose response is 1/2 at spatial period `cutoff_deg`."""
     sigma = math.sqrt(math.log(2.0) / 2.0) / math.pi * math.radians(cutoff_deg)
     return sigma * math.sqrt(8.0 * math.log(2.0))
+
+
+def footprint_fwhm(footprint_deg: float, lowpass_deg: float | None) -> float:
+    """FWHM (rad) of an LED acceptance of `footprint_deg` widened by an angular low-pass of `lowpass_deg` (None:
+    none)."""
+    fwhm = math.radians(footprint_deg)
+    return fwhm if lowpass_deg is None else math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
 
 
 def _gl_current(method):
@@ -191,6 +199,8 @@ class Renderer:
         self._table = None
         self._layer = None
         self._helper = None
+        #: uploads of prepared scenes that will not be shown, discarded in other threads; released in the GL one
+        self._discarded: collections.deque = collections.deque()
         #: frames drawn with the far layer, and in full (no usable layer: start-up, edits, a jump of the eye)
         self.layer_frames = self.full_frames = 0
         #: whether the last frame drew every mesh (no far layer in use): the slow path
@@ -240,8 +250,7 @@ class Renderer:
 
     def footprint_fwhm_for(self, lowpass_deg) -> float:
         """FWHM (rad) of the LED acceptance widened by an angular low-pass of `lowpass_deg` (None: none)."""
-        fwhm = math.radians(self.footprint_deg)
-        return fwhm if lowpass_deg is None else math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
+        return footprint_fwhm(self.footprint_deg, lowpass_deg)
 
     def _set_footprint(self, lowpass_deg) -> None:
         """The LED acceptance, widened by an angular low-pass; its sampling matrix is made when first needed."""
@@ -281,22 +290,23 @@ class Renderer:
         """Load a `Scene`, a scene name, a spec dict, a file path, or a `PreparedScene` (`prepare_scene`, made in
         another thread: only the GL uploads run here). On any error the previous scene stays."""
         from .library import build_scene
-        from .prepared import PreparedScene
+        from .prepared import PreparedScene, SceneSettings
 
+        self._release_discarded()
         prepared = scene if isinstance(scene, PreparedScene) else None
-        new = prepared.scene if prepared else scene if isinstance(scene, Scene) else build_scene(scene)
-        far_tex = meshes = table = None
+        far_tex = meshes = None
         try:
+            if prepared is None:
+                prepared = SceneSettings.of(self).build(scene if isinstance(scene, Scene) else build_scene(scene))
+            new, table = prepared.scene, prepared.table
             self._set_footprint(new.lowpass_deg)
-            if prepared is not None and prepared.table is not None:
-                table = prepared.table
-            elif self._table_ok(new):
-                table = FarFieldTable.of_scene(new, self._directions, self._fwhm)
-            else:
+            if table is None:
                 far_tex = self._make_far_texture(new)
             if new.objects:
                 meshes = MeshBuffers(self.ctx, self._mesh_prog, new.objects, self.chunk_size, self.lod_angle,
-                                     arrays=prepared.arrays if prepared else None)
+                                     arrays=prepared.arrays, upload=prepared.upload)
+                prepared.upload = None  # the meshes own its buffers now
+            prepared.arrays = None
         except BaseException:
             for res in (far_tex, meshes, prepared):
                 if res is not None:
@@ -320,6 +330,25 @@ class Renderer:
             self._restart_layer()
         return new
 
+    @_gl_current
+    def upload_step(self, prepared) -> bool:
+        """Upload one slice of a prepared scene's meshes (`meshbuffers.UPLOAD_SLICE_BYTES`), so that `set_scene`
+        has only what is left; True once nothing is (or the scene was shown or released meanwhile). GL thread:
+        call it in the idle end of frames (`FrameLoop.when_idle`)."""
+        from .meshbuffers import StagedUpload
+
+        self._release_discarded()
+        if prepared.arrays is None:
+            return True
+        if prepared.upload is None:
+            prepared.upload = StagedUpload(self.ctx, prepared.arrays, discard=self._discarded.append)
+        return prepared.upload.step()
+
+    def _release_discarded(self) -> None:
+        """Release the GL buffers of uploads discarded by other threads (in this, the GL thread)."""
+        while self._discarded:
+            self._discarded.popleft().release()
+
     def use_clock(self, clock) -> None:
         """Render on `clock` from now on, its current time the scene's start (a renderer reused for a new run)."""
         self.clock = clock
@@ -335,17 +364,16 @@ class Renderer:
     def _restart_layer(self) -> None:
         """A new far layer for the current scene and footprint (none when off, or nothing to split)."""
         from .far_layer import FarLayer
+        from .prepared import SceneSettings
 
         if self._layer is not None:
             self._layer.release()
             self._layer = None
         scene = self.scene
-        if self.far_layer_mode == "off" or self._table is None or not scene.objects or scene.yaw_rate != 0:
-            return
-        lod = math.radians(self.lod_texels * cubemap.largest_texel_deg(self.layer_face_size))
-        self._layer = FarLayer(self.far_layer_mode, self.ctx, dict(scene.objects), self._table, self.near_radius,
-                               self.far_layer_error, self.layer_face_size, self.chunk_size, lod,
-                               lambda eye, radius: self._meshes.near_chunks(eye, radius))
+        args = SceneSettings.of(self).layer_args(scene, self._table)
+        if args is not None:
+            self._layer = FarLayer(self.far_layer_mode, self.ctx, dict(scene.objects), self._table, *args,
+                                   lambda eye, radius: self._meshes.near_chunks(eye, radius))
 
     @_gl_current
     def wait_far_layer(self, pose, timeout_s: float = 60.0) -> bool:
@@ -388,10 +416,6 @@ class Renderer:
     def _layer_edit(self, edit: tuple) -> None:
         if self._layer is not None:
             self._layer.edit(edit)
-
-    def _table_ok(self, scene: Scene) -> bool:
-        """Whether the far field comes from a `FarFieldTable` (static, or only turning about the vertical)."""
-        return self.fast_far_field and not scene.far_time_varying
 
     def _ensure_far_texture(self) -> None:
         """The far field as a cube texture, for a scene whose frames use the table (a cube-map picture)."""
@@ -735,6 +759,7 @@ class Renderer:
             self._helper.shutdown()
             self._helper = None
         with self.ctx:
+            self._release_discarded()
             if self._layer is not None:
                 self._layer.release()
                 self._layer = None

@@ -1,16 +1,18 @@
 """Scene loads, displacements and object edits are prepared off the frame loop and swapped in between two frames
-(issue 20, point 1): the scene is parsed and built in the command's thread while frames go on, and the reply comes
-when the new scene is on the dome with its far layer; a displacement (an object edit) waits for the far layer at
-its target (with the edit). No frame is drawn in full for any of them. Real renderer (EGL), async far layer."""
+(issue 20, point 1): the scene is parsed and built in its own process while frames go on, handed over in shared
+memory, its meshes uploaded a slice per frame, and the reply comes when the new scene is on the dome with its far
+layer; a displacement (an object edit) waits for the far layer at its target (with the edit). No frame is drawn in full for any of them. Real renderer (EGL), async far layer."""
 
+import mmap
 import threading
 
+import numpy as np
 import pytest
 from conftest import wait_for
 
 from antarium.config import resolve
-from antarium.renderers import library
-from antarium.renderers.habitat import habitat_scene
+from antarium.renderers import library, meshbuffers
+from antarium.renderers.prepared import SceneSettings
 from antarium.server import Server
 
 FRAMES_DURING_BUILD = 10
@@ -74,22 +76,39 @@ def test_an_object_edit_waits_for_the_far_layer_with_it(habitat_server):
     assert name not in habitat_server.renderer.scene.objects
 
 
-def test_a_scene_is_built_while_frames_go_on_and_shown_with_its_far_layer(server, monkeypatch):
-    seen = {}
+def _buffer_owner(array):
+    """The object that owns an array's memory (following views)."""
+    while isinstance(array, np.ndarray) and array.base is not None:
+        array = array.base
+    return array.obj if isinstance(array, memoryview) else array
 
-    def watched(params):
-        """A habitat whose building waits until the loop has run frames meanwhile (it never does if the loop
-        itself is building it)."""
-        seen["thread"] = threading.current_thread()
-        start = server.loop.frame
-        seen["frames_went_on"] = wait_for(lambda: server.loop.frame >= start + FRAMES_DURING_BUILD, 10.0)
-        return habitat_scene(n_tussocks=60, n_stones=20, n_bushes=3, n_trees=2)
 
-    monkeypatch.setitem(library.SCENES, "watched", watched)
+def test_a_scene_is_built_in_its_own_process_while_frames_go_on_and_shown_with_its_far_layer(server, monkeypatch):
+    def not_here(*args, **kwargs):
+        raise AssertionError("the scene was built in the server's process")
+
+    monkeypatch.setattr(library, "build_scene", not_here)
+    monkeypatch.setattr(SceneSettings, "build", not_here)
+    steps = []  # (thread, frame) of each slice of the meshes' upload
+    upload_step = server.renderer.upload_step
+
+    def recorded(prepared):
+        steps.append((threading.current_thread(), server.loop.frame))
+        return upload_step(prepared)
+
+    monkeypatch.setattr(server.renderer, "upload_step", recorded)
+    monkeypatch.setattr(meshbuffers, "UPLOAD_SLICE_BYTES", 64 << 10)
     full_before = server.renderer.far_layer_status()["full_frames"]
-    server.command("load_scene", {"scene": "watched"})
-    assert seen["thread"] is not server._loop_thread and seen["frames_went_on"]
-    assert server.scene_name == "watched" and server.renderer.scene.objects
+    start = server.loop.frame
+    server.command("load_scene", {"scene": SMALL_HABITAT})
+    assert server.loop.frame >= start + FRAMES_DURING_BUILD  # frames went on while it was prepared
+    objects = server.renderer.scene.objects
+    assert server.scene_name.startswith('{"n_bushes": 3') and objects
+    # handed over, not copied: the meshes are views of the scene process's shared mapping
+    assert all(isinstance(_buffer_owner(o.mesh.vertices), mmap.mmap) for o in objects.values())
+    # uploaded a slice per frame, in the loop's thread, before the swap
+    assert len(steps) >= 3 and {t for t, _ in steps} == {server._loop_thread}
+    assert len({f for _, f in steps}) == len(steps)
     frames = server.loop.frame
     assert wait_for(lambda: server.loop.frame >= frames + 5, 10.0)
     status = server.renderer.far_layer_status()

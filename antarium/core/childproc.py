@@ -13,6 +13,7 @@ output goes to a temporary file, never to a pipe that could fill and block it; `
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import tempfile
@@ -21,9 +22,10 @@ from collections.abc import Sequence
 
 class ChildProcess:
     """`python -m module *args` started at once. conn: the parent's end of the connection (None unless
-    `connect`); proc: the `subprocess.Popen`."""
+    `connect`); proc: the `subprocess.Popen`. idle: run it under SCHED_IDLE (Linux), so that it has only CPU time
+    nothing else wants from its first instruction on; it may leave that class itself (`os.sched_setscheduler`)."""
 
-    def __init__(self, module: str, args: Sequence[str] = (), *, connect: bool = False) -> None:
+    def __init__(self, module: str, args: Sequence[str] = (), *, connect: bool = False, idle: bool = False) -> None:
         from multiprocessing import Pipe
 
         argv = [sys.executable, "-m", module]
@@ -39,6 +41,11 @@ class ChildProcess:
         finally:
             if child_end is not None:
                 child_end.close()
+        if idle and hasattr(os, "SCHED_IDLE"):
+            try:
+                os.sched_setscheduler(self.proc.pid, os.SCHED_IDLE, os.sched_param(0))
+            except OSError:  # refused, or already gone: it runs ordinary
+                pass
 
     @property
     def pid(self) -> int:

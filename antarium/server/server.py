@@ -35,6 +35,9 @@ if TYPE_CHECKING:
 #: events that are also printed on stderr: an operator must notice them
 ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "frame_rejected")
 COMMAND_TIMEOUT_S = 60.0
+#: how long a scene load waits for the loop to run one slice of its meshes' upload before leaving the rest to
+#: the swap itself (s)
+UPLOAD_STEP_WAIT_S = 1.0
 
 
 class ServerError(RuntimeError):
@@ -295,16 +298,26 @@ class Server:
         return self.renderer
 
     def prepare_scene(self, scene: str | dict):
-        """The CPU work of loading `scene` (parsing, buffers, far field, far layer), in the calling thread while
-        frames go on; None for a renderer that cannot prepare (it then loads in `load_scene`)."""
+        """The work of loading `scene` while frames go on: parsing, buffers, far field and far layer (in the scene's
+        own process), then the meshes' upload a slice per frame in the loop's idle time; None for a renderer that
+        cannot prepare (it then loads in `load_scene`)."""
         renderer = self.require_renderer("load_scene")
         if not hasattr(renderer, "prepare_scene"):
             return None
         loop = self.loop
         try:
-            return renderer.prepare_scene(scene, pose=lambda: loop.pose)
+            prepared = renderer.prepare_scene(scene, pose=lambda: loop.pose)
         except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
             raise self._scene_failed(scene, exc) from None
+        try:
+            while not loop.when_idle(renderer.upload_step, prepared).result(UPLOAD_STEP_WAIT_S):
+                pass
+        except TimeoutError:  # the loop is held up or stopped: `load_scene` uploads what is left
+            pass
+        except Exception as exc:  # the GL driver refused the upload: nothing of the scene is kept
+            prepared.release()
+            raise self._scene_failed(scene, exc) from None
+        return prepared
 
     def load_scene(self, scene: str | dict, prepared=None) -> None:
         """Load a scene (name, file path or spec; `prepared` by `prepare_scene`: only swapped in here) into the

@@ -1,0 +1,78 @@
+"""Scenes prepared off the frame loop (`renderers.prepared`): built in the scene's own process, handed over in
+shared memory, their meshes uploaded a slice at a time in the GL thread; what the dome then shows is exactly what
+a scene loaded in one piece shows. Real renderer (EGL)."""
+
+import threading
+
+import numpy as np
+import pytest
+
+from antarium.core.pose import Pose
+from antarium.renderers.library import build_scene
+from antarium.renderers.meshbuffers import MeshArrays, StagedUpload
+from antarium.renderers.renderer import Renderer
+
+SMALL_HABITAT = {"scene": "habitat", "n_tussocks": 40, "n_stones": 10, "n_bushes": 2, "n_trees": 1}
+POSES = (Pose(0.0, 0.0, 0.01, 0.0), Pose(0.7, -0.4, 0.01, 1.1))
+
+
+@pytest.fixture(scope="module")
+def renderers():
+    pair = [Renderer(face_size=64, far_layer="off") for _ in range(2)]
+    yield pair
+    for r in pair:
+        r.release()
+
+
+def test_a_prepared_scene_uploaded_in_slices_shows_what_a_scene_loaded_at_once_does(renderers):
+    staged, direct = renderers
+    prepared = staged.prepare_scene(SMALL_HABITAT)
+    assert prepared.layer is None and prepared.arrays is not None  # far layer off: the scene's process has ended
+    steps = 1
+    while not staged.upload_step(prepared):
+        steps += 1
+    size = prepared.arrays.vertices.nbytes + prepared.arrays.indices.nbytes
+    assert steps >= 2 + size // (2 << 20)  # buffers made, then one slice a step
+    staged.set_scene(prepared)
+    assert prepared.upload is None and prepared.arrays is None  # the meshes own the buffers now
+    direct.set_scene(SMALL_HABITAT)
+    for pose in POSES:
+        np.testing.assert_array_equal(staged.render(pose), direct.render(pose))
+
+
+def test_slices_fill_the_buffers_with_the_arrays_bytes(renderers):
+    r = renderers[0]
+    arrays = MeshArrays(build_scene(dict(SMALL_HABITAT)).objects, r.chunk_size)
+    with r.ctx:
+        upload = StagedUpload(r.ctx, arrays)
+        n = 1
+        while not upload.step(5000):
+            n += 1
+        expected = 1 + -(-arrays.vertices.nbytes // 5000) + -(-arrays.indices.nbytes // 5000)
+        assert n == expected
+        vbo, ibo = upload.finish()
+        assert vbo.read() == arrays.vertices.tobytes() and ibo.read() == arrays.indices.tobytes()
+        upload.release()
+
+
+def test_an_upload_discarded_in_another_thread_is_released_in_the_gl_thread(renderers):
+    r = renderers[0]
+    prepared = r.prepare_scene(SMALL_HABITAT)
+    r.upload_step(prepared)
+    r.upload_step(prepared)
+    buffers = list(prepared.upload.buffers)
+    assert buffers
+    worker = threading.Thread(target=prepared.release)
+    worker.start()
+    worker.join()
+    assert prepared.upload is None and all(type(b.mglo).__name__ != "InvalidObject" for b in buffers)
+    assert r.upload_step(prepared)  # nothing left to upload; the discarded buffers go here, in the GL thread
+    assert all(type(b.mglo).__name__ == "InvalidObject" for b in buffers)
+
+
+def test_a_scene_that_fails_in_its_process_raises_its_own_error_here(renderers, tmp_path):
+    r = renderers[0]
+    with pytest.raises(FileNotFoundError, match="missing.obj"):
+        r.prepare_scene(str(tmp_path / "missing.obj"))
+    with pytest.raises(ValueError, match="period_deg must be a number of degrees"):
+        r.prepare_scene({"scene": "grating", "period_deg": "wide"})
