@@ -25,6 +25,7 @@ tables over in shared memory (double-buffered); frames never wait for it.
 from __future__ import annotations
 
 import math
+import os
 import time
 
 import numpy as np
@@ -40,6 +41,16 @@ MODES = ("off", "sync", "async")
 REFRESH_FRACTION = 0.25
 #: weight of the newest frame in the eye's velocity estimate (an exponential average over ~20 frames)
 VELOCITY_SMOOTHING = 0.05
+
+
+def builder_nice() -> int:
+    """Nice value for an async layer builder beside the frame loop, which is the calling thread: below a real-time
+    loop, 10 (it still has most of the idle time of the loop's other CPU, but yields it at once to the server's
+    ordinary threads, which may hold the loop's GIL); beside an ordinary loop, 5 (a quarter of a core against it,
+    enough for a layer every ~0.3 s; 10 starved it)."""
+    realtime = hasattr(os, "sched_getscheduler") and \
+        os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK in (os.SCHED_FIFO, os.SCHED_RR)
+    return 10 if realtime else 5
 
 
 def allowed_displacement(radius: float, error: float) -> float:
@@ -157,13 +168,15 @@ class FarLayer:
 
     process: async only, the `ChildProcess` of a scene prepared in it (`renderers.prepared`), which has the
     objects and far field already and becomes the builder (objects is then None); None: a new one is started.
+    nice: the async builder's (default: `builder_nice()` of the calling thread).
     Call `edit` for every change of the scene's objects, then `current(eye)` each frame: it returns
     (layer table, near chunk mask) when a layer for the current objects is within the error bound of `eye`,
     else None (render the frame in full). near_chunks(eye, radius) gives the renderer's own chunk mask.
     """
 
     def __init__(self, mode: str, ctx, objects: dict | None, far_field: FarFieldTable, radius: float,
-                 error: float, face_size: int, chunk_size: float, lod_angle: float, near_chunks, process=None):
+                 error: float, face_size: int, chunk_size: float, lod_angle: float, near_chunks, process=None,
+                 nice: int | None = None):
         if mode not in ("sync", "async"):
             raise ValueError(f"far layer mode must be one of {', '.join(MODES)}, got {mode!r}")
         self.mode, self.radius = mode, float(radius)
@@ -192,7 +205,7 @@ class FarLayer:
             self._builder = FarLayerBuilder(ctx, objects, far_field, *args[1:])
             self._tables = [FarFieldTable(g, *_empty_tables(g))]
         else:
-            self._worker = _Worker(far_field, args, process)
+            self._worker = _Worker(far_field, args, builder_nice() if nice is None else nice, process)
             self._tables = [FarFieldTable(g, gb, uv) for gb, uv in self._worker.tables]
 
     @property
@@ -349,8 +362,7 @@ class _Worker:
     """The async builder: a child interpreter with its own GL context, two table slots in shared memory. A new
     child gets the objects and far field pickled; a scene's own process (`process`) has them already."""
 
-    def __init__(self, far_field: FarFieldTable, args: tuple, process=None):
-        import os
+    def __init__(self, far_field: FarFieldTable, args: tuple, nice: int, process=None):
         from multiprocessing import shared_memory
 
         g = far_field.grid
@@ -362,12 +374,7 @@ class _Worker:
             uv[...] = 0
         self._child = ChildProcess(__name__, connect=True) if process is None else process
         self._conn = self._child.conn
-        # below a real-time frame loop, nice 10: it still has most of the idle time of the loop's other CPU, but
-        # yields it at once to the server's ordinary threads, which may hold the loop's GIL; beside an ordinary
-        # loop, nice 5: a quarter of a core against it, enough for a layer every ~0.3 s (nice 10 starved it)
-        realtime = hasattr(os, "sched_getscheduler") and \
-            os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK in (os.SCHED_FIFO, os.SCHED_RR)
-        names, nice = [s.name for s in self._shm], 10 if realtime else 5
+        names = [s.name for s in self._shm]
         self.busy = False
         self.error: str | None = None
         try:

@@ -60,7 +60,8 @@ class SceneSettings:
 
     directions (P, 3) float64 LED directions; footprint_deg: LED acceptance FWHM; fast_far_field: far fields
     that allow it come from a `FarFieldTable`; chunk_size (m); far_layer: "off", "sync" or "async", with
-    near_radius (m), layer_error (rad), layer_face_size (texels) and lod_texels as in `Renderer`.
+    near_radius (m), layer_error (rad), layer_face_size (texels), lod_texels and the async builder's nice value as
+    in `Renderer`.
     """
 
     directions: np.ndarray
@@ -72,12 +73,13 @@ class SceneSettings:
     layer_error: float
     layer_face_size: int
     lod_texels: float
+    builder_nice: int
 
     @classmethod
     def of(cls, renderer) -> SceneSettings:
         return cls(renderer._directions, renderer.footprint_deg, renderer.fast_far_field, renderer.chunk_size,
                    renderer.far_layer_mode, renderer.near_radius, renderer.far_layer_error,
-                   renderer.layer_face_size, renderer.lod_texels)
+                   renderer.layer_face_size, renderer.lod_texels, renderer.builder_nice)
 
     def table_ok(self, scene: Scene) -> bool:
         """Whether the far field comes from a `FarFieldTable` (static, or only turning about the vertical)."""
@@ -121,7 +123,8 @@ def prepare_scene(renderer, spec, pose: Callable[[], Pose] | None = None,
         return prepared
     radius, error, *rest = args
     prepared.layer = FarLayer("async", None, None if process else dict(prepared.scene.objects), prepared.table,
-                              radius, error, *rest, prepared.arrays.near_chunks, process=process)
+                              radius, error, *rest, prepared.arrays.near_chunks, process=process,
+                              nice=settings.builder_nice)
     if pose is not None:
         deadline = time.monotonic() + timeout_s
         while prepared.layer.current(renderer._scene_eye(prepared.scene, pose())) is None:

@@ -23,6 +23,7 @@ from antarium.core.pose import Pose
 from antarium.geometry.constants import N_PANELS, N_PIXELS, UV_PER_PANEL
 
 from . import cubemap, footprint, shaders
+from .far_layer import builder_nice
 from .farfield import FarFieldTable
 from .gl import create_context, describe
 from .gpu_path import ATLAS, FAR_ONLY, OVER_FAR, GpuFramePath, check_path, default_path
@@ -158,6 +159,8 @@ class Renderer:
             raise ValueError(f"lod_texels must be a non-negative number, got {lod_texels!r}")
         #: level-of-detail error bound (rad): a fraction of the largest texel
         self.lod_texels = float(lod_texels)
+        #: the async far-layer builders' nice value, set by this (the frame loop's) thread's scheduling
+        self.builder_nice = builder_nice()
         self.lod_angle = math.radians(lod_texels * cubemap.largest_texel_deg(self.face_size))
         if clock is None:
             from antarium.core.clock import MonotonicClock
@@ -373,7 +376,7 @@ class Renderer:
         args = SceneSettings.of(self).layer_args(scene, self._table)
         if args is not None:
             self._layer = FarLayer(self.far_layer_mode, self.ctx, dict(scene.objects), self._table, *args,
-                                   lambda eye, radius: self._meshes.near_chunks(eye, radius))
+                                   lambda eye, radius: self._meshes.near_chunks(eye, radius), nice=self.builder_nice)
 
     @_gl_current
     def wait_far_layer(self, pose, timeout_s: float = 60.0) -> bool:

@@ -2,6 +2,7 @@
 shared memory, their meshes uploaded a slice at a time in the GL thread; what the dome then shows is exactly what
 a scene loaded in one piece shows. Real renderer (EGL)."""
 
+import os
 import threading
 
 import numpy as np
@@ -76,3 +77,17 @@ def test_a_scene_that_fails_in_its_process_raises_its_own_error_here(renderers, 
         r.prepare_scene(str(tmp_path / "missing.obj"))
     with pytest.raises(ValueError, match="period_deg must be a number of degrees"):
         r.prepare_scene({"scene": "grating", "period_deg": "wide"})
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="Linux scheduling classes")
+def test_the_scene_process_prepares_idle_then_builds_layers_at_the_loops_builder_priority():
+    r = Renderer(face_size=64, layer_face_size=64, far_layer="async")
+    try:
+        r.builder_nice = 7  # what the frame loop's thread chose (5 beside an ordinary loop, 10 below a real-time one)
+        prepared = r.prepare_scene(SMALL_HABITAT, pose=lambda: POSES[0])
+        pid = prepared.layer.pid
+        assert prepared.layer.builds == 1 and not prepared.layer.error  # it has built the first layer
+        assert os.sched_getscheduler(pid) == os.SCHED_OTHER and os.getpriority(os.PRIO_PROCESS, pid) == 7
+        prepared.release()
+    finally:
+        r.release()

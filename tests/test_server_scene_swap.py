@@ -1,7 +1,8 @@
 """Scene loads, displacements and object edits are prepared off the frame loop and swapped in between two frames
 (issue 20, point 1): the scene is parsed and built in its own process while frames go on, handed over in shared
 memory, its meshes uploaded a slice per frame, and the reply comes when the new scene is on the dome with its far
-layer; a displacement (an object edit) waits for the far layer at its target (with the edit). No frame is drawn in full for any of them. Real renderer (EGL), async far layer."""
+layer; a displacement (an object edit) waits for the far layer at its target (with the edit). No frame is drawn
+in full for any of them. Real renderer (EGL), async far layer."""
 
 import mmap
 import threading
