@@ -192,14 +192,17 @@ class FarLayer:
         #: seconds from asking for a layer to using it: the latest and the largest
         self.latency = self.max_latency = 0.0
         self._asked = 0.0
-        self._last = None  # (eye, time) of the previous frame, and the eye's smoothed velocity (m/s)
-        self._velocity = np.zeros(3)
+        self._velocity = EyeVelocity(self.max_shift)
         #: async: a layer asked for ahead of a jump of the eye (`prefetch`): its eye, then (eye, generation, index)
         #: once built; held in the spare table until a frame's eye is within its range
         self._ahead_eye = None
         self._ahead = None
-        #: async: an edit sent to the builder ahead of the renderer's (`edit_ahead`), until the renderer makes it
+        #: async: an edit asked for ahead of the renderer's (`edit_ahead`), until the renderer makes it; whether the
+        #: builder has it yet (it gets it with the layer built for it); whether the frames' own layer was renewed
+        #: while a layer asked for ahead waited
         self._ahead_edit = None
+        self._edit_sent = False
+        self._renewed = False
         args = (objects, radius, face_size, chunk_size, lod_angle)
         if mode == "sync":
             self._builder = FarLayerBuilder(ctx, objects, far_field, *args[1:])
@@ -218,13 +221,20 @@ class FarLayer:
         """Process id of the async builder (None when sync)."""
         return None if self.mode == "sync" else self._worker.pid
 
+    @property
+    def building(self) -> bool:
+        """Whether the async builder is building a layer now (False when sync)."""
+        return self.mode == "async" and self._worker.busy
+
     def edit(self, edit: tuple) -> None:
         """Apply a scene edit (see `FarLayerBuilder.apply`); the layer is unusable until rebuilt, unless the
         edit was sent ahead (`edit_ahead`): its layer is then used from the next frame."""
-        if self._ahead_edit is not None and _same_edit(edit, self._ahead_edit):
+        if self._ahead_edit is not None and _same_edit(edit, self._ahead_edit) and self._edit_sent:
             self._ahead_edit = None
             self.generation += 1
             return
+        if self._ahead_edit is not None and not self._edit_sent:  # its layer not begun: renewed as any other
+            self._ahead_eye = None
         self._ahead_edit = None
         self.generation += 1
         if self.mode == "sync":
@@ -246,10 +256,7 @@ class FarLayer:
                 self._adopt(eye, self.generation, 0)
         else:
             now = time.perf_counter()
-            if self._last is not None and now > self._last[1]:
-                step = (eye - self._last[0]) / (now - self._last[1])
-                self._velocity += VELOCITY_SMOOTHING * (step - self._velocity)
-            self._last = (eye, now)
+            self._velocity.update(eye, now)
             for eye_built, gen, index in self._worker.results():
                 if self._ahead_eye is not None and np.array_equal(eye_built, self._ahead_eye):
                     self._ahead, self._ahead_eye = (eye_built, gen, index), None
@@ -262,39 +269,52 @@ class FarLayer:
                 self._adopt(*ahead)
             elif ahead is not None and ahead[1] < self.generation:
                 self._ahead = None
-            if self._ahead_eye is not None and not self._worker.busy:  # a prefetch waiting for the builder
-                self._send_build(self._ahead_eye)
-            stale = (self._eye is None or self._gen_ready != self.generation
-                     or np.linalg.norm(eye - self._eye) > REFRESH_FRACTION * self.max_shift)
-            if stale and not self._worker.busy and self._ahead is None and self._ahead_eye is None:
-                # for where the eye will be when the layer is in: ahead by the last build's latency (at most
-                # half the allowed shift), so that a walking ant stays near the middle of the layer's range
-                lead = self._velocity * self.latency
-                norm = float(np.linalg.norm(lead))
-                if norm > 0.5 * self.max_shift:
-                    lead *= 0.5 * self.max_shift / norm
-                self._asked = now
-                self._send_build(eye + lead)
+            self._dispatch(eye, now)
         if not self._usable(eye):
             return None
         return self._tables[self._index], self._near
 
+    def fresh(self, eye: np.ndarray) -> bool:
+        """Whether the layer in use is for the current edits and within the refresh distance of `eye` (m): an async
+        layer asks for no new one yet."""
+        return (self._eye is not None and self._gen_ready == self.generation
+                and float(np.linalg.norm(eye - self._eye)) <= REFRESH_FRACTION * self.max_shift)
+
+    def _dispatch(self, eye: np.ndarray, now: float) -> None:
+        """Async: the idle builder's next layer. The frames' own comes first when it is due (the eye moved a
+        `REFRESH_FRACTION` of its range, or an edit), once per layer asked for ahead, so that a builder that cannot
+        keep up still gets to that; then the layer asked for ahead (`prefetch`, `edit_ahead`), whose edit reaches
+        the builder only with it, so that a renewal before it is built without the edit."""
+        if self._worker.busy or self.error:
+            return
+        waiting = self._ahead_eye is not None
+        if not self.fresh(eye) and self._ahead is None and not (waiting and self._renewed):
+            # for where the eye will be when the layer is in: ahead by the last build's latency (at most half the
+            # allowed shift), so that a walking ant stays near the middle of the layer's range
+            self._renewed = waiting
+            self._asked = now
+            self._send_build(eye + self._velocity.lead(self.latency, 0.5 * self.max_shift))
+        elif waiting:
+            self._renewed = False
+            self._asked = now
+            if self._ahead_edit is not None and not self._edit_sent:
+                self._worker.send(("edit", self._ahead_edit))
+                self._edit_sent = True
+            self._send_build(self._ahead_eye)
+
     def _send_build(self, eye: np.ndarray) -> None:
-        generation = self.generation + (self._ahead_edit is not None)
+        generation = self.generation + (self._ahead_edit is not None and self._edit_sent)
         self._worker.send(("build", eye, generation, 1 - self._index if self._eye is not None else 0))
 
     def edit_ahead(self, edit: tuple, eye: np.ndarray) -> bool:
-        """Async: send `edit` to the builder now and have its layer built for `eye` (m) into the spare table while
-        frames go on with the current layer; the renderer's own `edit(edit)` then switches to it. False (nothing
-        done) when sync, or another edit is ahead already."""
+        """Async: have the layer with `edit` built into the spare table, for where the eye (at `eye` now, m) will
+        be when it is in, while frames go on with the current layer (see `_dispatch`); the renderer's own
+        `edit(edit)` then switches to it. False (nothing done) when sync, or another edit is ahead already."""
         if self.mode != "async" or self._ahead_edit is not None or self.error:
             return False
-        self._worker.send(("edit", edit))
-        self._ahead_edit = edit
-        self._ahead, self._ahead_eye = None, np.array(eye, dtype=np.float64)
-        self._asked = time.perf_counter()
-        if not self._worker.busy:
-            self._send_build(self._ahead_eye)
+        self._ahead_edit, self._edit_sent = edit, False
+        lead = self._velocity.lead(self.latency, 0.5 * self.max_shift)
+        self._ahead, self._ahead_eye = None, np.asarray(eye, dtype=np.float64) + lead
         return True
 
     def edit_ready(self, eye: np.ndarray) -> bool:
@@ -307,13 +327,11 @@ class FarLayer:
 
     def prefetch(self, eye: np.ndarray) -> None:
         """Async: build a layer for `eye` (m), where the eye is about to jump, into the spare table, while frames
-        go on with the current one; the first frame whose eye is in its range uses it (`ready_at`)."""
+        go on with the current one (see `_dispatch`); the first frame whose eye is in its range uses it
+        (`ready_at`)."""
         if self.mode != "async" or self.ready_at(eye):
             return
         self._ahead, self._ahead_eye = None, np.array(eye, dtype=np.float64)
-        self._asked = time.perf_counter()
-        if not self._worker.busy:
-            self._send_build(self._ahead_eye)
 
     def ready_at(self, eye: np.ndarray) -> bool:
         """Whether a frame at `eye` (m) would find a layer (the current one, or one prefetched); any thread."""
@@ -338,6 +356,32 @@ class FarLayer:
             self._builder.release()
         else:
             self._worker.close()
+
+
+class EyeVelocity:
+    """The eye's velocity (m/s), an exponential average over ~20 frames (`VELOCITY_SMOOTHING`). A step longer than
+    `max_step` (m) from one frame to the next is a jump (a displacement, a new origin), not walking: it is left out,
+    so that the layers built after a displacement are not led off along it."""
+
+    def __init__(self, max_step: float) -> None:
+        self.max_step = float(max_step)
+        self.value = np.zeros(3)
+        self._last: tuple[np.ndarray, float] | None = None
+
+    def update(self, eye: np.ndarray, now: float) -> None:
+        """A frame's eye (3,) float64 (m) at time `now` (s)."""
+        last, self._last = self._last, (eye, now)
+        if last is None or now <= last[1]:
+            return
+        step = eye - last[0]
+        if float(np.linalg.norm(step)) <= self.max_step:
+            self.value += VELOCITY_SMOOTHING * (step / (now - last[1]) - self.value)
+
+    def lead(self, seconds: float, limit: float) -> np.ndarray:
+        """Where the eye will be in `seconds` relative to now (3,) (m), at most `limit` (m) away."""
+        lead = self.value * seconds
+        norm = float(np.linalg.norm(lead))
+        return lead * (limit / norm) if norm > limit else lead
 
 
 def _same_edit(a: tuple, b: tuple) -> bool:

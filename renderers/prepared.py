@@ -126,12 +126,29 @@ def prepare_scene(renderer, spec, pose: Callable[[], Pose] | None = None,
                               radius, error, *rest, prepared.arrays.near_chunks, process=process,
                               nice=settings.builder_nice)
     if pose is not None:
-        deadline = time.monotonic() + timeout_s
-        while prepared.layer.current(renderer._scene_eye(prepared.scene, pose())) is None:
-            if prepared.layer.error or time.monotonic() > deadline:
-                break  # shown anyway: its frames are drawn in full until a layer is in, as at start-up
-            time.sleep(0.005)
+        await_layer(prepared, lambda: renderer._scene_eye(prepared.scene, pose()), timeout_s, fresh=False)
     return prepared
+
+
+def await_layer(prepared: PreparedScene, eye: Callable[[], np.ndarray], timeout_s: float = LAYER_WAIT_S,
+                fresh: bool = True) -> None:
+    """Wait until the prepared scene's far layer (if any) has a layer usable at `eye()` (scene coordinates, m);
+    fresh: one it would not rebuild yet (within the refresh distance) or else one asked for since this call, as
+    a scene about to be swapped in should have, so that its first frames do not outwalk it. Returns early when
+    the builder has stopped or after `timeout_s`: the scene is then shown anyway, its frames drawn in full until
+    a layer is in, as at start-up."""
+    layer = prepared.layer
+    if layer is None:
+        return
+    deadline = time.monotonic() + timeout_s
+    asked = layer.builds + layer.building  # a layer built after these was asked for during the wait
+    while True:
+        at = eye()
+        usable = layer.current(at) is not None
+        if usable and (not fresh or layer.fresh(at) or layer.builds > asked) \
+                or layer.error or time.monotonic() > deadline:
+            return
+        time.sleep(0.005)
 
 
 def _prepare_in_process(spec, settings: SceneSettings) -> tuple[PreparedScene, ChildProcess]:

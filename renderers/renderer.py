@@ -364,6 +364,14 @@ class Renderer:
 
         return prepare_scene(self, scene, pose, LAYER_WAIT_S if timeout_s is None else timeout_s)
 
+    def await_layer(self, prepared, pose, timeout_s: float | None = None) -> None:
+        """Wait until a prepared scene's far layer is fresh at the eye of `pose()` (see `prepared.await_layer`):
+        the last step before its swap, after the uploads. Any thread."""
+        from .prepared import LAYER_WAIT_S, await_layer
+
+        await_layer(prepared, lambda: self._scene_eye(prepared.scene, pose()),
+                    LAYER_WAIT_S if timeout_s is None else timeout_s)
+
     def _restart_layer(self) -> None:
         """A new far layer for the current scene and footprint (none when off, or nothing to split)."""
         from .far_layer import FarLayer

@@ -15,7 +15,7 @@ from conftest import wait_for
 from antarium.core.pose import Pose
 from antarium.geometry import load_dome
 from antarium.renderers import cubemap
-from antarium.renderers.far_layer import allowed_displacement, cube_taps
+from antarium.renderers.far_layer import EyeVelocity, allowed_displacement, cube_taps
 from antarium.renderers.habitat import habitat_scene
 from antarium.renderers.kernels import gather_bilinear
 from antarium.renderers.renderer import Renderer
@@ -85,6 +85,75 @@ def test_allowed_displacement_bounds_the_parallax():
     # content at the near radius seen from an eye moved by d: displacement d / (r - d) radians
     assert d / (r - d) == pytest.approx(math.tan(err), rel=1e-9)
     assert 0.012 < d < 0.014
+
+
+def test_a_displacement_does_not_lead_the_layers_built_after_it_off_along_it():
+    """An ant walking at 3 cm/s along +y is displaced 0.5 m along +x: the velocity that leads the next layers
+    stays the walk's (it was 100 m/s along the jump at the next frame, and 0.2 m/s a third of a second later)."""
+    period, speed, max_shift = 1 / 190, 0.03, allowed_displacement(2.0, math.radians(0.5))
+    velocity = EyeVelocity(max_shift)
+    eye, t = np.zeros(3), 0.0
+    for frame in range(400):
+        if frame == 200:
+            eye = eye + [0.5, 0.0, 0.0]
+        velocity.update(eye, t)
+        eye, t = eye + [0.0, speed * period, 0.0], t + period
+        if frame >= 200:
+            assert np.allclose(velocity.value, [0.0, speed, 0.0], atol=1e-4)
+    assert np.allclose(velocity.lead(0.2, 0.5 * max_shift), [0.0, speed * 0.2, 0.0], atol=1e-4)
+    assert np.isclose(np.linalg.norm(velocity.lead(10.0, 0.5 * max_shift)), 0.5 * max_shift)
+
+
+class _Builder:
+    """The async builder's process, faked at its pipe (`far_layer._Worker`): records what it is sent and answers a
+    build when told, as the process does."""
+
+    def __init__(self, far_field, args, nice, process=None):
+        self.tables = [(np.zeros((*far_field.grid.shape, 2), np.uint16),) * 2 for _ in range(2)]
+        self.sent, self.done, self.busy, self.error = [], [], False, None
+
+    def send(self, message):
+        self.sent.append(message)
+        self.busy = self.busy or message[0] == "build"
+
+    def finish(self):
+        _, eye, generation, index = next(m for m in reversed(self.sent) if m[0] == "build")
+        self.done.append((eye, generation, index))
+        self.busy = False
+
+    def results(self):
+        out, self.done = self.done, []
+        return out
+
+
+def test_the_frames_own_layer_is_renewed_before_one_asked_for_ahead(dome, monkeypatch):
+    """An edit asked for ahead while the layer in use is due for renewal: the builder renews it first (without the
+    edit, which it gets only with the edit's own layer), then builds the edit's layer; so a frame never runs out
+    of layer while the builder is busy with the edit's (it sent the edit, then the edit's layer, first)."""
+    from antarium.renderers import far_layer
+    from antarium.renderers.farfield import FarFieldTable, TableGrid
+
+    monkeypatch.setattr(far_layer, "_Worker", _Builder)
+    grid = TableGrid(dome.directions, math.radians(3.0))
+    table = FarFieldTable(grid, *far_layer._empty_tables(grid))
+    layer = far_layer.FarLayer("async", None, {}, table, 2.0, math.radians(0.5), 64, 1.0, 0.01,
+                               lambda eye, radius: np.zeros(1, bool))
+    builder = layer._worker
+    eye = np.zeros(3)
+    assert layer.current(eye) is None and builder.sent[-1][0] == "build"
+    builder.finish()
+    assert layer.current(eye) is not None
+    walked = eye + [0.5 * layer.max_shift, 0.0, 0.0]  # due for renewal, still usable
+    assert layer.edit_ahead(("hide", "tree"), walked)
+    assert layer.current(walked) is not None
+    assert [m[0] for m in builder.sent] == ["build", "build"] and builder.sent[-1][2] == 0  # renewal, old objects
+    builder.finish()
+    assert layer.current(walked) is not None
+    assert [m[0] for m in builder.sent[2:]] == ["edit", "build"] and builder.sent[-1][2] == 1  # the edit's layer
+    builder.finish()
+    assert layer.current(walked) is not None and layer.edit_ready(walked)
+    layer.edit(("hide", "tree"))
+    assert layer.current(walked) is not None and layer.generation == 1
 
 
 def test_sync_far_layer_matches_full_renders_along_a_walk(dome, reference):

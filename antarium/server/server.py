@@ -299,8 +299,8 @@ class Server:
 
     def prepare_scene(self, scene: str | dict):
         """The work of loading `scene` while frames go on: parsing, buffers, far field and far layer (in the scene's
-        own process), then the meshes' upload a slice per frame in the loop's idle time; None for a renderer that
-        cannot prepare (it then loads in `load_scene`)."""
+        own process), then the meshes' upload a slice per frame in the loop's idle time, then a far layer fresh
+        at the eye; None for a renderer that cannot prepare (it then loads in `load_scene`)."""
         renderer = self.require_renderer("load_scene")
         if not hasattr(renderer, "prepare_scene"):
             return None
@@ -317,6 +317,7 @@ class Server:
         except Exception as exc:  # the GL driver refused the upload: nothing of the scene is kept
             prepared.release()
             raise self._scene_failed(scene, exc) from None
+        renderer.await_layer(prepared, lambda: loop.pose)  # the eye walked on meanwhile
         return prepared
 
     def load_scene(self, scene: str | dict, prepared=None) -> None:
