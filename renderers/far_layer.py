@@ -19,7 +19,7 @@ same rule by which the near meshes are laid over it per LED.
 Two ways to build it, same code: `"sync"` builds in the calling thread whenever the layer is unusable
 (deterministic: what a frame shows depends only on the poses; for simulated clocks), `"async"` builds in a
 child process with its own GL context (on the other core), continuously while the eye moves, and hands the
-tables over in shared memory (double-buffered); frames never wait for it.
+tables over in shared memory (`TABLE_SLOTS` of them); frames never wait for it.
 """
 
 from __future__ import annotations
@@ -41,6 +41,9 @@ MODES = ("off", "sync", "async")
 REFRESH_FRACTION = 0.25
 #: weight of the newest frame in the eye's velocity estimate (an exponential average over ~20 frames)
 VELOCITY_SMOOTHING = 0.05
+#: async: shared tables: the layer in use, one held for a coming displacement or edit, and the one being built
+#: (so that a held layer, which the eye may never reach, never stops the frames' own from being renewed)
+TABLE_SLOTS = 3
 
 
 def builder_nice() -> int:
@@ -194,7 +197,7 @@ class FarLayer:
         self._asked = 0.0
         self._velocity = EyeVelocity(self.max_shift)
         #: async: a layer asked for ahead of a jump of the eye (`prefetch`): its eye, then (eye, generation, index)
-        #: once built; held in the spare table until a frame's eye is within its range
+        #: once built; held in a table of its own until a frame's eye is within its range
         self._ahead_eye = None
         self._ahead = None
         #: async: an edit asked for ahead of the renderer's (`edit_ahead`), until the renderer makes it; whether the
@@ -243,8 +246,12 @@ class FarLayer:
             self._worker.send(("edit", edit))
 
     def _usable(self, eye: np.ndarray) -> bool:
-        return (self._eye is not None and self._gen_ready == self.generation
-                and float(np.linalg.norm(eye - self._eye)) <= self.max_shift)
+        return self._in_range((self._eye, self._gen_ready), eye)
+
+    def _in_range(self, layer: tuple, eye: np.ndarray) -> bool:
+        """Whether a layer (its eye, generation) is for the current edits and within the allowed shift of `eye`."""
+        return (layer[0] is not None and layer[1] == self.generation
+                and float(np.linalg.norm(eye - layer[0])) <= self.max_shift)
 
     def current(self, eye: np.ndarray):
         """(FarFieldTable, near chunk mask) to draw the frame for `eye` (scene coordinates, m), or None."""
@@ -260,8 +267,8 @@ class FarLayer:
             for eye_built, gen, index in self._worker.results():
                 if self._ahead_eye is not None and np.array_equal(eye_built, self._ahead_eye):
                     self._ahead, self._ahead_eye = (eye_built, gen, index), None
-                else:
-                    self._adopt(eye_built, gen, index)
+                elif not self._usable(eye) or self._in_range((eye_built, gen), eye):  # never a usable one for
+                    self._adopt(eye_built, gen, index)                               # one the eye has left
             ahead = self._ahead
             if ahead is not None and ahead[1] == self.generation \
                     and float(np.linalg.norm(eye - ahead[0])) <= self.max_shift:
@@ -288,7 +295,8 @@ class FarLayer:
         if self._worker.busy or self.error:
             return
         waiting = self._ahead_eye is not None
-        if not self.fresh(eye) and self._ahead is None and not (waiting and self._renewed):
+        edited = self._ahead_edit is not None and self._edit_sent  # the builder has an edit the frames do not yet
+        if not self.fresh(eye) and not edited and not (waiting and self._renewed):
             # for where the eye will be when the layer is in: ahead by the last build's latency (at most half the
             # allowed shift), so that a walking ant stays near the middle of the layer's range
             self._renewed = waiting
@@ -297,24 +305,28 @@ class FarLayer:
         elif waiting:
             self._renewed = False
             self._asked = now
-            if self._ahead_edit is not None and not self._edit_sent:
+            if self._ahead_edit is not None and not self._edit_sent:  # for where the eye will be by then
+                self._ahead_eye = eye + self._velocity.lead(self.latency, 0.5 * self.max_shift)
                 self._worker.send(("edit", self._ahead_edit))
                 self._edit_sent = True
             self._send_build(self._ahead_eye)
 
     def _send_build(self, eye: np.ndarray) -> None:
+        """Build a layer for `eye` (m) into a table neither in use nor held."""
         generation = self.generation + (self._ahead_edit is not None and self._edit_sent)
-        self._worker.send(("build", eye, generation, 1 - self._index if self._eye is not None else 0))
+        taken = {self._index if self._eye is not None else None, None if self._ahead is None else self._ahead[2]}
+        index = next(k for k in range(len(self._tables)) if k not in taken)
+        self._worker.send(("build", eye, generation, index))
 
     def edit_ahead(self, edit: tuple, eye: np.ndarray) -> bool:
-        """Async: have the layer with `edit` built into the spare table, for where the eye (at `eye` now, m) will
-        be when it is in, while frames go on with the current layer (see `_dispatch`); the renderer's own
-        `edit(edit)` then switches to it. False (nothing done) when sync, or another edit is ahead already."""
+        """Async: have the layer with `edit` built into a spare table, for where the eye (at `eye` now, m) will
+        be when it is in (placed when its build begins), while frames go on with the current layer (see
+        `_dispatch`); the renderer's own `edit(edit)` then switches to it. False (nothing done) when sync, or
+        another edit is ahead already."""
         if self.mode != "async" or self._ahead_edit is not None or self.error:
             return False
         self._ahead_edit, self._edit_sent = edit, False
-        lead = self._velocity.lead(self.latency, 0.5 * self.max_shift)
-        self._ahead, self._ahead_eye = None, np.asarray(eye, dtype=np.float64) + lead
+        self._ahead, self._ahead_eye = None, np.asarray(eye, dtype=np.float64)  # placed when its build begins
         return True
 
     def edit_ready(self, eye: np.ndarray) -> bool:
@@ -326,7 +338,7 @@ class FarLayer:
             and float(np.linalg.norm(np.asarray(eye, dtype=np.float64) - ahead[0])) <= self.max_shift
 
     def prefetch(self, eye: np.ndarray) -> None:
-        """Async: build a layer for `eye` (m), where the eye is about to jump, into the spare table, while frames
+        """Async: build a layer for `eye` (m), where the eye is about to jump, into a spare table, while frames
         go on with the current one (see `_dispatch`); the first frame whose eye is in its range uses it
         (`ready_at`)."""
         if self.mode != "async" or self.ready_at(eye):
@@ -338,11 +350,8 @@ class FarLayer:
         eye = np.asarray(eye, dtype=np.float64)
         if self.error:
             return True  # nothing to wait for: every frame is drawn in full
-        for held in (self._ahead, (self._eye, self._gen_ready)):
-            if held is not None and held[0] is not None and held[1] == self.generation \
-                    and float(np.linalg.norm(eye - held[0])) <= self.max_shift:
-                return True
-        return False
+        held = (self._ahead, (self._eye, self._gen_ready))
+        return any(layer is not None and self._in_range(layer, eye) for layer in held)
 
     def _adopt(self, eye: np.ndarray, generation: int, index: int) -> None:
         self._eye, self._gen_ready, self._index = np.asarray(eye, dtype=np.float64), generation, index
@@ -403,7 +412,7 @@ def _empty_tables(grid: TableGrid, buffer=None) -> tuple[np.ndarray, np.ndarray]
 
 
 class _Worker:
-    """The async builder: a child interpreter with its own GL context, two table slots in shared memory. A new
+    """The async builder: a child interpreter with its own GL context, `TABLE_SLOTS` tables in shared memory. A new
     child gets the objects and far field pickled; a scene's own process (`process`) has them already."""
 
     def __init__(self, far_field: FarFieldTable, args: tuple, nice: int, process=None):
@@ -411,7 +420,7 @@ class _Worker:
 
         g = far_field.grid
         nbytes = int(np.prod(g.shape)) * 2 * 2 * 2  # two uint16 tables of two channels
-        self._shm = [shared_memory.SharedMemory(create=True, size=nbytes) for _ in range(2)]
+        self._shm = [shared_memory.SharedMemory(create=True, size=nbytes) for _ in range(TABLE_SLOTS)]
         self.tables = [_empty_tables(g, s.buf) for s in self._shm]
         for gb, uv in self.tables:
             gb[...] = 0

@@ -109,7 +109,9 @@ class _Builder:
     build when told, as the process does."""
 
     def __init__(self, far_field, args, nice, process=None):
-        self.tables = [(np.zeros((*far_field.grid.shape, 2), np.uint16),) * 2 for _ in range(2)]
+        from antarium.renderers.far_layer import TABLE_SLOTS
+
+        self.tables = [(np.zeros((*far_field.grid.shape, 2), np.uint16),) * 2 for _ in range(TABLE_SLOTS)]
         self.sent, self.done, self.busy, self.error = [], [], False, None
 
     def send(self, message):
@@ -126,10 +128,8 @@ class _Builder:
         return out
 
 
-def test_the_frames_own_layer_is_renewed_before_one_asked_for_ahead(dome, monkeypatch):
-    """An edit asked for ahead while the layer in use is due for renewal: the builder renews it first (without the
-    edit, which it gets only with the edit's own layer), then builds the edit's layer; so a frame never runs out
-    of layer while the builder is busy with the edit's (it sent the edit, then the edit's layer, first)."""
+def _async_layer(dome, monkeypatch):
+    """An async far layer on the faked builder, with a first layer in use at the origin."""
     from antarium.renderers import far_layer
     from antarium.renderers.farfield import FarFieldTable, TableGrid
 
@@ -138,11 +138,18 @@ def test_the_frames_own_layer_is_renewed_before_one_asked_for_ahead(dome, monkey
     table = FarFieldTable(grid, *far_layer._empty_tables(grid))
     layer = far_layer.FarLayer("async", None, {}, table, 2.0, math.radians(0.5), 64, 1.0, 0.01,
                                lambda eye, radius: np.zeros(1, bool))
-    builder = layer._worker
     eye = np.zeros(3)
-    assert layer.current(eye) is None and builder.sent[-1][0] == "build"
-    builder.finish()
+    assert layer.current(eye) is None and layer._worker.sent[-1][0] == "build"
+    layer._worker.finish()
     assert layer.current(eye) is not None
+    return layer, layer._worker, eye
+
+
+def test_the_frames_own_layer_is_renewed_before_one_asked_for_ahead(dome, monkeypatch):
+    """An edit asked for ahead while the layer in use is due for renewal: the builder renews it first (without the
+    edit, which it gets only with the edit's own layer), then builds the edit's layer; so a frame never runs out
+    of layer while the builder is busy with the edit's (it sent the edit, then the edit's layer, first)."""
+    layer, builder, eye = _async_layer(dome, monkeypatch)
     walked = eye + [0.5 * layer.max_shift, 0.0, 0.0]  # due for renewal, still usable
     assert layer.edit_ahead(("hide", "tree"), walked)
     assert layer.current(walked) is not None
@@ -154,6 +161,24 @@ def test_the_frames_own_layer_is_renewed_before_one_asked_for_ahead(dome, monkey
     assert layer.current(walked) is not None and layer.edit_ready(walked)
     layer.edit(("hide", "tree"))
     assert layer.current(walked) is not None and layer.generation == 1
+
+
+def test_a_layer_held_for_a_displacement_never_stops_renewal(dome, monkeypatch):
+    """A layer prefetched for a displacement the eye never makes (it was applied without its layer, and the eye
+    walked on) stays held, but the frames' own layer is still renewed as the eye walks, into a third table (with
+    two, renewal waited for the held layer to be used: every frame was drawn in full until the next edit)."""
+    layer, builder, eye = _async_layer(dome, monkeypatch)
+    layer.prefetch(eye + [0.5, 0.0, 0.0])
+    assert layer.current(eye) is not None
+    builder.finish()
+    assert layer.current(eye) is not None and layer.ready_at(eye + [0.5, 0.0, 0.0])  # held
+    for step in range(1, 6):  # walking on, 0.9 of the allowed shift at a time (beyond any lead's renewal distance)
+        walked = eye + [0.0, step * 0.9 * layer.max_shift, 0.0]
+        assert layer.current(walked) is not None, f"no layer after {step} steps"
+        assert builder.busy, "renewal not asked for"
+        builder.finish()
+    used = {m[3] for m in builder.sent if m[0] == "build"}
+    assert used == {0, 1, 2} and layer.ready_at(eye + [0.5, 0.0, 0.0])
 
 
 def test_sync_far_layer_matches_full_renders_along_a_walk(dome, reference):
