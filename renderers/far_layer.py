@@ -248,10 +248,11 @@ class FarLayer:
     def _usable(self, eye: np.ndarray) -> bool:
         return self._in_range((self._eye, self._gen_ready), eye)
 
-    def _in_range(self, layer: tuple, eye: np.ndarray) -> bool:
-        """Whether a layer (its eye, generation) is for the current edits and within the allowed shift of `eye`."""
+    def _in_range(self, layer: tuple, eye: np.ndarray, reach: float = 1.0) -> bool:
+        """Whether a layer (its eye, generation) is for the current edits and within `reach` of the allowed shift
+        of `eye`."""
         return (layer[0] is not None and layer[1] == self.generation
-                and float(np.linalg.norm(eye - layer[0])) <= self.max_shift)
+                and float(np.linalg.norm(eye - layer[0])) <= reach * self.max_shift)
 
     def current(self, eye: np.ndarray):
         """(FarFieldTable, near chunk mask) to draw the frame for `eye` (scene coordinates, m), or None."""
@@ -270,8 +271,7 @@ class FarLayer:
                 elif not self._usable(eye) or self._in_range((eye_built, gen), eye):  # never a usable one for
                     self._adopt(eye_built, gen, index)                               # one the eye has left
             ahead = self._ahead
-            if ahead is not None and ahead[1] == self.generation \
-                    and float(np.linalg.norm(eye - ahead[0])) <= self.max_shift:
+            if ahead is not None and self._in_range(ahead, eye):
                 self._ahead = None
                 self._adopt(*ahead)
             elif ahead is not None and ahead[1] < self.generation:
@@ -284,8 +284,7 @@ class FarLayer:
     def fresh(self, eye: np.ndarray) -> bool:
         """Whether the layer in use is for the current edits and within the refresh distance of `eye` (m): an async
         layer asks for no new one yet."""
-        return (self._eye is not None and self._gen_ready == self.generation
-                and float(np.linalg.norm(eye - self._eye)) <= REFRESH_FRACTION * self.max_shift)
+        return self._in_range((self._eye, self._gen_ready), eye, REFRESH_FRACTION)
 
     def _dispatch(self, eye: np.ndarray, now: float) -> None:
         """Async: the idle builder's next layer. The frames' own comes first when it is due (the eye moved a
@@ -297,19 +296,22 @@ class FarLayer:
         waiting = self._ahead_eye is not None
         edited = self._ahead_edit is not None and self._edit_sent  # the builder has an edit the frames do not yet
         if not self.fresh(eye) and not edited and not (waiting and self._renewed):
-            # for where the eye will be when the layer is in: ahead by the last build's latency (at most half the
-            # allowed shift), so that a walking ant stays near the middle of the layer's range
-            self._renewed = waiting
-            self._asked = now
-            self._send_build(eye + self._velocity.lead(self.latency, 0.5 * self.max_shift))
+            self._renewed, target = waiting, self._led(eye)
         elif waiting:
-            self._renewed = False
-            self._asked = now
-            if self._ahead_edit is not None and not self._edit_sent:  # for where the eye will be by then
-                self._ahead_eye = eye + self._velocity.lead(self.latency, 0.5 * self.max_shift)
+            if self._ahead_edit is not None and not self._edit_sent:
+                self._ahead_eye = self._led(eye)
                 self._worker.send(("edit", self._ahead_edit))
                 self._edit_sent = True
-            self._send_build(self._ahead_eye)
+            self._renewed, target = False, self._ahead_eye
+        else:
+            return
+        self._asked = now
+        self._send_build(target)
+
+    def _led(self, eye: np.ndarray) -> np.ndarray:
+        """Where the eye (m) will be when a layer asked for now is in: ahead by the last build's latency (at most
+        half the allowed shift), so that a walking ant stays near the middle of the layer's range."""
+        return eye + self._velocity.lead(self.latency, 0.5 * self.max_shift)
 
     def _send_build(self, eye: np.ndarray) -> None:
         """Build a layer for `eye` (m) into a table neither in use nor held."""
