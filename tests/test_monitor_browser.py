@@ -96,6 +96,20 @@ commands = true
         _stop(monitor)
 
 
+def _on_panels(leds):
+    """Where LEDs `leds` sit on their flat panels, with the panels' corners on the unit sphere (n, 3), as the
+    page's 3D view draws them."""
+    from antarium.geometry import load_dome
+
+    dome = load_dome()
+    d, panel = np.asarray(dome.directions)[leds], np.asarray(dome.panel)[leds]
+    corners = np.asarray(dome.panel_corners)[panel]
+    corners = corners / np.linalg.norm(corners, axis=-1, keepdims=True)
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    along = np.einsum("ij,ij->i", normal, corners[:, 0]) / np.einsum("ij,ij->i", normal, d)
+    return d * along[:, None]
+
+
 def _state(driver):
     return driver.execute_script(
         "const M = window.antariumMonitor; return {alive: M.alive, frame: M.frame, drawn: M.drawn, "
@@ -139,7 +153,10 @@ def test_the_page_shows_the_dome_the_path_and_the_stats_live(browser, rig):
         own_pixel = first_at[counts == 1]  # LEDs alone on their map pixel
         rng = np.random.default_rng(0)
         leds = np.sort(rng.choice(own_pixel, 200, replace=False)).tolist()
-        snap = browser.execute_script("return window.antariumMonitor.snapshot(arguments[0]);", leds)
+        # the map and the 3D view read back in one task: the same frame
+        snap, view = browser.execute_script(
+            "const M = window.antariumMonitor; return [M.snapshot(arguments[0]), M.snapshot3d(arguments[1])];",
+            leds, _on_panels(leds).tolist())
         with lock:
             values = frames.get(snap["frame"])
         assert values is not None, f"frame {snap['frame']} not seen on the LED stream ({len(frames)} kept)"
@@ -150,6 +167,12 @@ def test_the_page_shows_the_dome_the_path_and_the_stats_live(browser, rig):
         got = np.asarray(snap["colours"], float)
         assert np.abs(got - want).max() <= 1, np.abs(got - want).max()
         assert want[:, 1:].max() > 20  # the habitat lights the dome: the comparison is not of black on black
+        # the 3D view shows each LED it faces where that LED sits on its panel, in the map's colour
+        facing = np.array([v["facing"] for v in view["views"]]) > 0.3
+        seen = np.asarray([v["colour"] for v in view["views"]], float)[facing]
+        assert view["frame"] == snap["frame"] and facing.sum() > 40, (view["frame"], snap["frame"], facing.sum())
+        agree = (np.abs(seen - got[facing]).max(axis=1) <= 1).mean()
+        assert agree >= 0.9, f"the 3D view agrees with the map at {agree:.0%} of the LEDs it faces"
 
         # the path grows while the walker moves, the stats update
         before = _state(browser)

@@ -28,7 +28,8 @@ MAP_SIZE = 560
 
 
 def dome_geometry() -> dict[str, Any]:
-    """LED positions for the page: equal-area map pixels (seen from above, +x right, +y up), 3D directions,
+    """LED positions for the page: equal-area map pixels (seen from above, +x right, +y up) and the map's scale
+    (pixels per unit Lambert radius: the 3D view looks its fragments' directions up in the map), 3D directions,
     UV flags and the 55 panels' corners (unit sphere)."""
     from antarium.geometry import load_dome
 
@@ -49,7 +50,8 @@ def dome_geometry() -> dict[str, Any]:
     on_map = [(to_map(_unit(d[uv] + step * axes[:, k])) - to_map(d[uv])) / step for k in (0, 1)]
     corners = np.asarray(dome.panel_corners)
     corners = corners / np.linalg.norm(corners, axis=-1, keepdims=True)
-    return {"size": MAP_SIZE, "x": px.tolist(), "y": py.tolist(), "uv": np.asarray(dome.is_uv).astype(int).tolist(),
+    return {"size": MAP_SIZE, "scale": float(scale), "x": px.tolist(), "y": py.tolist(),
+            "uv": np.asarray(dome.is_uv).astype(int).tolist(),
             "dirs": np.round(d, 4).ravel().tolist(), "panels": np.round(corners, 4).ravel().tolist(),
             "uv_index": uv.tolist(), "uv_ax": np.round(on_map[0], 2).ravel().tolist(),
             "uv_ay": np.round(on_map[1], 2).ravel().tolist()}
