@@ -122,6 +122,26 @@ def test_a_trip_ends_where_a_tall_object_hides_the_sky_and_keeps_what_it_walked(
     assert m["closest_approach_m"] == pytest.approx(np.hypot(*home.xy.T).min())
 
 
+def test_a_learning_trip_home_learns_until_the_ant_reaches_the_nest_and_not_in_its_search_after():
+    """The MBONs learn the inbound route: every decision until the ant first comes within NEST_RADIUS of the nest,
+    none of the loops it walks around the nest after (views facing every way)."""
+    from antarium.ant.eye import EyeParams
+    from antarium.ant.homing import NEST_RADIUS, walk_home, walk_outbound
+    from antarium.ant.models import make_model
+    from antarium.ant.world import virtual_rig
+
+    model = make_model("cxmb", EyeParams().n_pn, compass="ideal", n_kc=2000, noise=0.0)
+    with virtual_rig(model, scene="sky", renderer_kwargs={"face_size": 64}, compass="ideal") as ant:
+        for _ in range(40):
+            ant.frame()
+        walk_outbound(ant, np.r_[0.3, np.zeros(299)], 0.01)  # 3 m out, straight
+        home = walk_home(ant, 600, learning=True)
+    near = np.flatnonzero(np.hypot(*home.xy.T) < NEST_RADIUS)
+    assert home.lost_cue is None and len(near) and 0 < near[0] < 550  # it came home, with decisions to spare
+    assert model.learned_views == near[0] + 1
+    assert model.learning is False
+
+
 def test_arena_and_foraging_runs_go_on_after_a_trip_without_a_compass_cue(tmp_path):
     """A depolarised sky: every outbound loses its cue at once. Each seed is recorded with why, and the run goes
     on to the next seed and writes strict JSON (null for what was not measured)."""

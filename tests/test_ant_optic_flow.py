@@ -55,7 +55,8 @@ def test_clutter_counts_collisions_and_keeps_the_nest_clear():
 
 
 def test_arena_trips_run_through_the_dome(tmp_path):
-    """A short arena run: outbound with avoidance, CX home (MBONs learn), CXMB and CX from the restored memory."""
+    """A short arena run: outbound with avoidance, CX home (MBONs learn), CXMB and CX from the restored memory;
+    every trip home starts from the same state, so the CX-alone trip walks the first one again, noise and all."""
     from antarium.ant.homing import cluttered_arena
 
     summary = cluttered_arena(tmp_path, seeds=[0], n_outbound=60, n_inbound=60,
@@ -65,7 +66,8 @@ def test_arena_trips_run_through_the_dome(tmp_path):
     import json
 
     outcome = json.loads((tmp_path / "arena_sky.json").read_text())["outcomes"][0]
-    assert outcome["learned_views"] == 60  # one view per decision of the first homeward trip
+    assert 0 < outcome["learned_views"] <= 60  # one view per decision of the first homeward trip, to the nest
+    assert outcome["closest_cx_share"] == pytest.approx(outcome["closest_cx_again_share"], rel=1e-9)
     assert outcome["outbound_length_m"] == pytest.approx(0.59, abs=0.02)
 
 

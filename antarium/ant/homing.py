@@ -15,6 +15,7 @@ metrics cover the decisions walked until then, and the experiment goes on with i
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import time
@@ -35,6 +36,9 @@ OUTBOUND_TURN_MEMORY = 0.9
 #: the foraging task's scene: the dome's sky (the sun, the polarised UV pixels) and nothing else
 PI_SCENE = "sky"
 FACE_SIZE = 64
+#: a learning trip home ends its learning where the ant first comes this close (m) to the nest: the inbound route
+#: ends at the nest, and the search loops around it (views facing every way) are not part of it
+NEST_RADIUS = 0.1
 
 
 def write_json(path: Path, record: Any) -> None:
@@ -117,16 +121,24 @@ def walk_outbound(ant, turns: np.ndarray, step: float) -> Trip:
     return Trip.walked(xy, heading, traces)
 
 
-def walk_home(ant, n: int) -> Trip:
-    """Let the model steer for `n` decisions."""
+def walk_home(ant, n: int, learning: bool = False) -> Trip:
+    """Let the model steer for `n` decisions; `learning`: its MBONs learn (`model.learning`) until the ant first
+    comes within NEST_RADIUS of the nest (the origin), and not after."""
     xy, heading, traces = [], [], []
+    if learning:
+        ant.model.learning = True
     try:
         for _ in range(n):
             cmd = ant.decide()
             traces.append(cmd.trace)
             _record(ant, xy, heading)
+            if learning and math.hypot(*ant.position) < NEST_RADIUS:
+                ant.model.learning = learning = False
     except NoSkyCueError as e:
         return Trip.walked(xy, heading, traces, e)
+    finally:
+        if learning:
+            ant.model.learning = False
     return Trip.walked(xy, heading, traces)
 
 
@@ -259,25 +271,27 @@ class ArenaOutcome:
 
 def arena_trial(ant, clutter, seed: int, n_outbound: int, n_inbound: int):
     """Mitchell 2019's seed task with a CXMB ant (avoiding by optic flow throughout): outbound through the clutter;
-    home by the CX while the MBONs learn (trip 1); back at the feeder with the outbound memory restored, home by
-    CXMB (trip 2); and again by the CX alone (trip 2, comparison). An outbound trip that lost its compass cue ends
-    the seed (no feeder to home from: NaN shares). Returns (ArenaOutcome, trips)."""
+    home by the CX while the MBONs learn (trip 1, until the ant reaches the nest); back at the feeder with the
+    outbound memory restored, home by CXMB (trip 2); and again by the CX alone (trip 2, comparison). Every trip home
+    starts from the same state: the ant put down at the feeder (no optic flow carried over) and the CX as it was
+    there, its CPU4 memory (Zhang's copied memory), TB1 and its noise stream, so that the trips differ only by what
+    steers them (common random numbers: the CX-alone trip walks trip 1 again, and CXMB's difference to it is the
+    MBONs'). An outbound trip that lost its compass cue ends the seed (no feeder to home from: NaN shares).
+    Returns (ArenaOutcome, trips)."""
     model = ant.model
     model.cx.reset()
     out = walk_outbound_avoiding(ant, outbound_turns(seed, n_outbound), model.params.step)
     trips = {"outbound": out}
     if out.lost_cue is None:
-        memory = model.home_memory()
+        at_feeder = copy.deepcopy(model.cx)
         feeder, feeder_heading = out.xy[-1], float(out.heading[-1])
         for name, learning, use_mbons in ARENA_HOME_TRIPS:
-            if name != "cx":
-                ant.place(float(feeder[0]), float(feeder[1]), feeder_heading)
-                ant.frame()
-                ant.sense()
-                model.restore(memory)
-            model.learning, model.use_mbons = learning, use_mbons
-            trips[name] = walk_home(ant, n_inbound)
-        model.learning = False
+            ant.place(float(feeder[0]), float(feeder[1]), feeder_heading)  # the first time too: no flow carried over
+            ant.frame()
+            ant.sense()
+            model.cx = copy.deepcopy(at_feeder)
+            model.use_mbons = use_mbons
+            trips[name] = walk_home(ant, n_inbound, learning)
     home = [name for name, _, _ in ARENA_HOME_TRIPS]
     close = {k: homing_metrics(out, trips[k])["closest_approach_share"] if k in trips else math.nan for k in home}
     length = path_length(out.xy)
@@ -328,7 +342,7 @@ def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound:
         outcomes.append(outcome)
         if out is not None:
             plot_arena(out / f"arena_{compass}_seed{seed:02d}.png", clutter, trips,
-                       f"cluttered arena, seed {seed} ({compass} compass)")
+                       f"cluttered arena, seed {seed} ({compass} compass)", kind)
         if echo is not None:
             lost = "".join(f"; {name} trip ended without a compass cue at {why}"
                            for name, why in outcome.lost_cue.items())
@@ -365,9 +379,9 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
         model.cx.reset()
         out = walk_outbound(ant, outbound_turns(seed, n_outbound), model.params.step)
         memory = model.home_memory()
-        model.learning = True
-        trips["home 1: CX, MBONs learn"] = walk_home(ant, n_inbound)
-        model.learning = False
+        model.use_mbons = False  # home by the CX, also after the MBONs stop learning at the nest
+        trips["home 1: CX, MBONs learn"] = walk_home(ant, n_inbound, learning=True)
+        model.use_mbons = True
         fx, fy = out.xy[-1]
         h = float(out.heading[-1])
         left = np.array([-math.sin(h), math.cos(h)])

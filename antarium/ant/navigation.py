@@ -213,10 +213,10 @@ class OneRingModel(CXMBModel):
     kind = "one_ring"
 
     def _extra(self, senses: Senses):
-        if self.learning:
+        if self.learning or not self.use_mbons:  # the CX alone, as CXMB's (the first trip, the comparison trip)
             return super()._extra(senses)
         p = self.params
-        mb, trace = self.mbon_input(senses.view) if self.use_mbons else (np.full(2 * N_COLUMNS, 0.5), {})
+        mb, trace = self.mbon_input(senses.view)
         flow_turn, flow_trace = self.avoidance(senses)
         strength = min(1.0, abs(flow_turn) / p.flow_gain)
         desired = senses.compass.heading + flow_turn

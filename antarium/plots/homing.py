@@ -12,9 +12,12 @@ from antarium.plots import style
 if TYPE_CHECKING:  # plots sit below the ant: they draw its records, never import it
     from antarium.ant.homing import Trip
 
-#: the arena run's trips: name -> (colour, legend)
-ARENA_TRIPS = {"outbound": ("0.6", "outbound (random walk + optic flow)"), "cx": ("C0", "home 1: CX (MBONs learn)"),
-               "cxmb": ("C3", "home 2: CXMB (memory restored)"), "cx_again": ("C2", "home 2: CX alone (restored)")}
+#: the arena run's trips: name -> (colour, legend; {model}: the model's name in ARENA_MODELS)
+ARENA_TRIPS = {"outbound": ("0.6", "outbound (random walk + optic flow)"),
+               "cx": ("C0", "home 1: CX (MBONs learn to the nest)"),
+               "cxmb": ("C3", "home 2: {model} (same start)"), "cx_again": ("C2", "home 2: CX alone (same start)")}
+#: model kind -> its name in the legend
+ARENA_MODELS = {"cxmb": "CXMB", "one_ring": "One Ring"}
 
 
 def _mark_lost_cue(ax, *trips: Trip) -> None:
@@ -64,16 +67,16 @@ def plot_distance(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: 
     return style.save(fig, path)
 
 
-def plot_arena(path: str | Path, clutter, trips: dict[str, Trip], title: str) -> Path:
-    """Cylinders (grey discs) and the four trips of one arena run; PNG."""
+def plot_arena(path: str | Path, clutter, trips: dict[str, Trip], title: str, model: str = "cxmb") -> Path:
+    """Cylinders (grey discs) and the four trips of one arena run of `model` (an ARENA_MODELS kind); PNG."""
     def draw(ax) -> None:
         import matplotlib.patches as mpatches
 
         for (x, y), r in zip(clutter.centres, clutter.radii, strict=True):
             ax.add_patch(mpatches.Circle((x, y), r, color="0.4"))
-        for name, trip in trips.items():
-            colour, label = ARENA_TRIPS[name]
-            ax.plot(*trip.xy.T, color=colour, lw=0.9, label=label)
+        for trip_name, trip in trips.items():
+            colour, label = ARENA_TRIPS[trip_name]
+            ax.plot(*trip.xy.T, color=colour, lw=0.9, label=label.format(model=ARENA_MODELS[model]))
             _mark_lost_cue(ax, trip)
 
     return _map(path, title, draw)
