@@ -198,3 +198,22 @@ def test_scene_rotation_example_refuses_too_few_decisions_in_one_line(capsys):
     assert stop.value.code == 2
     line = capsys.readouterr().err.strip().splitlines()[-1]
     assert "--decisions must be >= 141" in line and "got 40" in line
+
+
+def test_scene_rotation_example_reports_every_rotation_in_both_scenes(tmp_path, capsys):
+    example = _example("ant_scene_rotation")
+    assert example.main(["--decisions", str(example.MIN_DECISIONS), "--out", str(tmp_path)]) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if "scene rotated" in line]
+    assert len(lines) == example.ROTATIONS * len(example.SCENES)
+    assert all(("+90 deg" in line or "-90 deg" in line) and "the ant turned" in line for line in lines)
+    assert (tmp_path / "scene_rotation.png").stat().st_size > 10_000
+
+
+def test_path_integration_example_writes_its_homing_and_arena_records(tmp_path, capsys):
+    assert _example("ant_path_integration").main(["--short", "--out", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert "closest_approach_share_median" in text and "closest_cxmb_share_median" in text
+    homing = json.loads(next(tmp_path.glob("pi_homing_sky*.json")).read_text())
+    arena = json.loads((tmp_path / "arena_sky.json").read_text())
+    assert homing["summary"]["runs"] == 3 and arena["summary"]["runs"] == 1
+    assert (tmp_path / "arena_sky_seed00.png").stat().st_size > 10_000
