@@ -8,7 +8,8 @@ import subprocess
 import sys
 import time
 
-from antarium.bench.monitor import idle_browser, process_tree_cpu_s
+from antarium.bench.cpu import process_tree_cpu_s
+from antarium.bench.monitor import idle_browser
 
 BURN = "import time\nt = time.process_time()\nwhile time.process_time() - t < {s}: pass\n"
 

@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from antarium.bench.cpu import process_cpu_s
 from antarium.core.rates import DOME_RATE_HZ
 
 GOALS_HZ = {"panorama": 1900.0, "habitat": 390.0}
@@ -66,20 +67,6 @@ def _poses(n: int):
     return [Pose(0.05 * math.sin(0.3 * s) + 0.02 * s, 0.03 * s, 0.01, 0.8 * math.sin(0.7 * s)) for s in t]
 
 
-def _process_cpu_s(pid: int | None) -> float:
-    """CPU seconds (user + system) used so far by process `pid` (Linux /proc; 0 for None or elsewhere)."""
-    import os
-
-    try:
-        text = open(f"/proc/{pid}/stat").read() if pid else ""
-    except OSError:
-        return 0.0
-    if not text:
-        return 0.0
-    fields = text[text.rindex(")") + 2:].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 def measure(renderer, scene, frames: int, warmup: int = 20) -> dict:
     """Render `frames` frames along the walk; returns frames/s and mean ms per stage. With a far layer, the
     layer for the first pose is awaited first, as the server does."""
@@ -91,14 +78,14 @@ def measure(renderer, scene, frames: int, warmup: int = 20) -> dict:
     for k, pose in enumerate(poses[:warmup]):
         renderer.render(pose, out=out, t=k / DOME_RATE_HZ)
     pid = renderer.far_layer_status()["pid"]
-    b0 = _process_cpu_s(pid)
+    b0 = process_cpu_s(pid)
     t0, c0 = time.perf_counter(), time.process_time()
     for k, pose in enumerate(poses[warmup:]):
         renderer.render(pose, out=out, t=(k + warmup) / DOME_RATE_HZ)
         lt = renderer.last_timings
         split[k] = lt["render"], lt["sample"], lt["convert"]
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    builder_cpu = _process_cpu_s(pid) - b0
+    builder_cpu = process_cpu_s(pid) - b0
     ms = split.mean(axis=0) * 1e3
     return {"scene": scene.name, "triangles": scene.n_triangles, "frames": frames, "fps": frames / wall,
             "ms_per_frame": wall / frames * 1e3, "cpu_ms_per_frame": cpu / frames * 1e3,
