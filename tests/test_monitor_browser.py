@@ -132,6 +132,8 @@ def test_the_page_shows_the_dome_the_path_and_the_stats_live(browser, rig):
 
     sub = session.declare_subscriber(led_key("tmon"), keep)
     try:
+        # the subscription reaches the server before the page opens: every frame the page draws is kept here too
+        _wait(lambda: len(frames) > 2, 30, "the test's own LED subscription receives frames")
         browser.get(url)
         _wait(lambda: _state(browser)["alive"] and _state(browser)["drawn"] > 3, 30, "the page shows LED frames")
         first = _state(browser)
