@@ -241,3 +241,21 @@ def test_local_workers_share_the_cores_among_their_software_rasterisers(monkeypa
     assert runner.worker_env(4) == {"LP_NUM_THREADS": "4"} and runner.worker_env(32) == {"LP_NUM_THREADS": "1"}
     monkeypatch.setenv("LP_NUM_THREADS", "0")  # the user's choice is kept (inherited by the workers)
     assert runner.worker_env(4) == {}
+
+
+def test_local_workers_start_without_dasks_malloc_trim_threshold_or_profiler(monkeypatch):
+    """Dask's MALLOC_TRIM_THRESHOLD_ would make every array above 128 kB a fresh mmap in the workers; its profiler
+    takes the interpreter lock every 10 ms for a dashboard that local clusters do not serve."""
+    import dask
+    from distributed import Client
+
+    from antarium.ant.experiment import runner
+
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    monkeypatch.delenv("LP_NUM_THREADS", raising=False)
+    with runner.local_cluster(1) as cluster, Client(cluster) as client:
+        env = next(iter(client.run(lambda: dict(os.environ)).values()))
+        profiling = next(iter(client.run(lambda: dask.config.get("distributed.worker.profile.enabled")).values()))
+    assert profiling is False
+    assert "MALLOC_TRIM_THRESHOLD_" not in env and "MALLOC_TRIM_THRESHOLD_" not in os.environ
+    assert env["OMP_NUM_THREADS"] == "1" and env["LP_NUM_THREADS"] == str(max(1, os.cpu_count() or 1))
