@@ -4,8 +4,10 @@ Three GL 4.3 compute passes over the same data as the CPU path (`kernels`, `outp
 `firmware_proto.video.encode_frame`), so that both give the same LED frame within 1 LSB:
 
 1. sample: per LED, the CSR footprint row over the atlas (texel values rounded back to their 16-bit integers and
-   weighted in float32, in CSR order, as `kernels.sample_pairs`), optionally over the far field's looked-up pairs
-   (`kernels.sample_over_far`), or the far-field pairs alone (a scene without meshes);
+   weighted in float32, in CSR order, as `kernels.sample_pairs`), optionally over the far field
+   (`kernels.sample_over_far`), or the far field alone (a scene without meshes). The far field is the scene's
+   table, uploaded once and looked up here (`kernels.lookup_pairs`), or pairs looked up on the CPU (a far layer,
+   whose tables are rewritten in place);
 2. mean (only when contrast != 1): one work group sums G, B over GB pixels and UV over UV pixels;
 3. convert: contrast, gains, green/blue swap, the G + B <= 65535 rule, truncation to 16 bits
    (`kernels.convert_pairs`), written as one uint32 (G | B << 16) per LED: the (20350, 2) uint16 frame;
@@ -18,10 +20,14 @@ has no fence objects, so the read-back waits for the GPU (`Buffer.read_into`).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from antarium.firmware_proto.video import VIDEO_PAYLOAD_SIZE
 from antarium.geometry.constants import GB_PER_PANEL, N_PANELS, N_PIXELS, PIXELS_PER_PANEL
+
+from .farfield import STEP
 
 #: renderer strings (lower case) of software GL drivers: the CPU path is the faster there
 SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast")
@@ -52,14 +58,38 @@ layout(std430, binding = 1) readonly buffer Indices { int indices[]; };
 layout(std430, binding = 2) readonly buffer Weights { float weights[]; };
 layout(std430, binding = 3) readonly buffer Far { vec2 far_pairs[]; };
 layout(std430, binding = 4) writeonly buffer Pairs { vec2 pairs[]; };
+// a far-field table (`farfield.FarFieldTable`): its [G, B] grid, then its [UV, polarised UV] grid, each
+// (rows, cols + 1) points of two 16-bit values; and per LED the cell it reads at yaw 0
+layout(std430, binding = 8) readonly buffer Table { uint table[]; };
+struct Cell { int row; int col; float row_frac; float col_frac; };
+layout(std430, binding = 9) readonly buffer Cells { Cell cells[]; };
 uniform sampler2D atlas;
 uniform int level;
 uniform int width;   // texels across the atlas at `level`
 uniform int mode;    // 0: atlas, 1: atlas over far, 2: far only
+uniform bool lookup; // far values from the table (else from far_pairs, looked up on the CPU)
+uniform int n_cols;  // table columns (without the repeated one)
+uniform int uv_offset;
+uniform int shift_i; // yaw shift in table columns: shift_i + shift_f, 0 <= shift_f < 1
+uniform float shift_f;
+vec2 point(int k) { uint v = table[k]; return vec2(float(v & 0xFFFFu), float(v >> 16)); }
+vec2 far_value(int i) {  // kernels.lookup_pairs
+    if (!lookup) return far_pairs[i];
+    Cell c = cells[i];
+    float s = c.col_frac + shift_f;
+    float whole = floor(s);
+    float f = s - whole;
+    int j = (c.col + shift_i + int(whole)) % n_cols;
+    int k = (is_uv(i) ? uv_offset : 0) + c.row * (n_cols + 1) + j;
+    vec2 a0 = point(k), b0 = point(k + n_cols + 1);
+    vec2 a = a0 + f * (point(k + 1) - a0);
+    vec2 b = b0 + f * (point(k + n_cols + 2) - b0);
+    return (a + c.row_frac * (b - a)) * (1.0 / 65535.0);
+}
 void main() {
     int i = int(gl_GlobalInvocationID.x);
     if (i >= N_LEDS) return;
-    if (mode == 2) { pairs[i] = far_pairs[i]; return; }
+    if (mode == 2) { pairs[i] = far_value(i); return; }
     bool uv = is_uv(i);
     float a0 = 0.0, a1 = 0.0, cov = 0.0;
     for (int k = indptr[i]; k < indptr[i + 1]; ++k) {
@@ -72,7 +102,7 @@ void main() {
     }
     if (mode == 1) {
         float u = max(1.0 - cov, 0.0);
-        vec2 f = far_pairs[i];
+        vec2 f = far_value(i);
         a0 += u * f.x;
         a1 = uv ? u * f.y : a1 + u * f.y;
     }
@@ -188,8 +218,9 @@ def check_path(path) -> str | None:
 class GpuFramePath:
     """Compute passes and buffers of the GPU path for one GL context (use it with that context current).
 
-    GPU memory: the CSR matrix (set_matrix), 4 x 20350 x 8 bytes of pairs, far pairs, gains, and the 142,560-byte
-    output; host: the 142,560-byte read-back array (`frame` and `datagrams` are views of it).
+    GPU memory: the CSR matrix (set_matrix), the scene's far-field table (set_table), 4 x 20350 x 8 bytes of
+    pairs, far pairs, gains, and the 142,560-byte output; host: the 142,560-byte read-back array (`frame` and
+    `datagrams` are views of it).
     """
 
     def __init__(self, ctx):
@@ -208,6 +239,8 @@ class GpuFramePath:
         self._gain = ctx.buffer(reserve=n * 8)
         self._out = ctx.buffer(reserve=n * 4 + _WORDS * 4)
         self._matrix = None
+        self._table = self._cells = None
+        self._table_source = None
         self.host = np.zeros(n * 4 + _WORDS * 4, np.uint8)
         #: the last frame, (20350, 2) uint16, and its 55 VIDEO datagrams (55, 1112) uint8 with INFO 0
         self.frame = self.host[: n * 4].view(np.uint16).reshape(n, 2)
@@ -217,8 +250,11 @@ class GpuFramePath:
     @property
     def gpu_bytes(self) -> int:
         """Bytes of GPU buffers this path holds."""
-        bufs = [self._far, self._pairs, self._means, self._gain, self._out, *(self._matrix or ())]
-        return sum(b.size for b in bufs)
+        return sum(b.size for b in self._buffers())
+
+    def _buffers(self) -> list:
+        return [b for b in (self._far, self._pairs, self._means, self._gain, self._out, *(self._matrix or ()),
+                            self._table, self._cells) if b is not None]
 
     def set_matrix(self, key, indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray) -> None:
         """Upload a CSR footprint matrix (weights in radiance per 16-bit texel unit), unless `key` is the current."""
@@ -231,15 +267,46 @@ class GpuFramePath:
                              for a, dt in ((indptr, np.int32), (indices, np.int32), (weights, np.float32)))
         self.matrix_key = key
 
+    def set_table(self, table) -> None:
+        """Upload a `farfield.FarFieldTable` (its two grids, 2 x rows x (cols + 1) x 4 bytes, and each LED's cell,
+        20350 x 16 bytes), unless it is the current one. A table is never changed in place once made (a new
+        footprint makes a new one); a far layer's are, and go through `run(far_pairs=...)` instead."""
+        if table is self._table_source:
+            return
+        g = table.grid
+        grids = np.concatenate([np.ascontiguousarray(t, dtype=np.uint16).reshape(-1)
+                                for t in (table.table_gb, table.table_uv)])
+        col = np.floor(g.col0)
+        cells = np.empty((len(g.row), 4), np.int32)
+        cells[:, 0], cells[:, 1] = g.row, col
+        cells[:, 2:].view(np.float32)[:] = np.stack([g.row_frac, g.col0 - col], axis=1)
+        for b in (self._table, self._cells):
+            if b is not None:
+                b.release()
+        self._table, self._cells = self.ctx.buffer(grids.view(np.uint32)), self.ctx.buffer(cells)
+        self._sample["n_cols"].value = g.n_cols
+        self._sample["uv_offset"].value = table.table_gb.size // 2
+        self._table_source, self._n_cols = table, g.n_cols
+
     def set_gain(self, gain: np.ndarray) -> None:
         """(20350, 2) float32 per-LED gains of the output columns (`FrameConverter.gain`)."""
         self._gain.write(np.ascontiguousarray(gain, dtype=np.float32))
 
     def run(self, mode: int, atlas=None, level: int = 0, width: int = 0, far_pairs: np.ndarray | None = None,
-            contrast: float = 1.0, swap: bool = False) -> np.ndarray:
-        """Run the passes and read the frame and datagrams back into `host`; returns `frame`."""
+            psi: float = 0.0, contrast: float = 1.0, swap: bool = False) -> np.ndarray:
+        """Run the passes and read the frame and datagrams back into `host`; returns `frame`. The far field (modes
+        OVER_FAR, FAR_ONLY): `far_pairs` (20350, 2) float32, or else the table of `set_table` at yaw `psi` (rad)."""
         mgl = self._mgl
-        if far_pairs is not None:
+        lookup = far_pairs is None and mode != ATLAS
+        self._sample["lookup"].value = lookup
+        if lookup:
+            shift = (psi / STEP) % self._n_cols  # as FarFieldTable.lookup, split so float32 keeps its fraction
+            whole = math.floor(shift)
+            self._sample["shift_i"].value = int(whole) % self._n_cols
+            self._sample["shift_f"].value = shift - whole
+            self._table.bind_to_storage_buffer(8)
+            self._cells.bind_to_storage_buffer(9)
+        elif far_pairs is not None:
             self._far.write(far_pairs)
         if mode != FAR_ONLY:
             atlas.use(3)
@@ -274,7 +341,7 @@ class GpuFramePath:
         return self.frame
 
     def release(self) -> None:
-        for b in (self._far, self._pairs, self._means, self._gain, self._out, *(self._matrix or ())):
+        for b in self._buffers():
             b.release()
         for p in (self._sample, self._mean, self._convert, self._pack):
             p.release()

@@ -596,9 +596,10 @@ class Renderer:
         gpu = self._gpu is not None
         if self._table is not None and not meshes:
             t1 = time.perf_counter()
-            self._table.lookup(psi, pairs)
             if gpu:
-                self._run_gpu(FAR_ONLY, far_pairs=pairs)
+                self._run_gpu(FAR_ONLY, psi=psi)
+            else:
+                self._table.lookup(psi, pairs)
         else:
             from .kernels import sample_over_far, sample_pairs
 
@@ -611,7 +612,10 @@ class Renderer:
                     self.full_frames += 1
                 else:
                     self.layer_frames += 1
-            if over_table:  # the far field's lookup needs no GL: the helper thread does it meanwhile
+            # the far field: the scene's table is looked up on the GPU path's device; a far layer's (rewritten in
+            # place), and every table on the CPU path, by the helper thread while GL draws
+            lookup_here = over_table and not (gpu and layer is None)
+            if lookup_here:
                 helper = self._helper_thread()
                 far = self._table if layer is None else layer[0]
                 looked_up = helper.submit(far.lookup, psi, self._far_pairs)
@@ -619,10 +623,10 @@ class Renderer:
                               chunks=None if layer is None else layer[1], read_back=not gpu)
             t1 = time.perf_counter()
             if gpu:
-                if over_table:
+                if lookup_here:
                     self._finish(looked_up, far.lookup, psi, self._far_pairs)
-                mode, far_in = (OVER_FAR, self._far_pairs) if over_table else (ATLAS, None)
-                self._run_gpu(mode, level, far_in)
+                self._run_gpu(OVER_FAR if over_table else ATLAS, level, self._far_pairs if lookup_here else None,
+                              psi)
             elif over_table:  # then each thread samples half of the LEDs
                 self._finish(looked_up, far.lookup, psi, self._far_pairs)
                 n = len(indptr) - 1
@@ -641,9 +645,10 @@ class Renderer:
         self.last_timings = {"render": t1 - t0, "sample": t2 - t1, "convert": t3 - t2}
         return out
 
-    def _run_gpu(self, mode: int, level: int = 0, far_pairs: np.ndarray | None = None) -> None:
+    def _run_gpu(self, mode: int, level: int = 0, far_pairs: np.ndarray | None = None, psi: float = 0.0) -> None:
         """The GPU path's passes for this frame: gains re-uploaded after a change, the footprint matrix after a new
-        footprint; the frame and its datagrams land in `self._gpu`."""
+        footprint, the scene's far-field table after a new one (looked up at yaw `psi` unless `far_pairs` are
+        given); the frame and its datagrams land in `self._gpu`."""
         conv = self._convert
         if self._gain_version != conv.version:
             self._gpu.set_gain(conv.gain)
@@ -651,7 +656,9 @@ class Renderer:
         if mode != FAR_ONLY:
             _, _, indptr, indices, weights = self._sampling()
             self._gpu.set_matrix((self._fwhm, level), indptr, indices, weights)
-        self._gpu.run(mode, self._atlas, level, self.face_size >> level, far_pairs, conv.contrast,
+        if mode != ATLAS and far_pairs is None:
+            self._gpu.set_table(self._table)
+        self._gpu.run(mode, self._atlas, level, self.face_size >> level, far_pairs, psi, conv.contrast,
                       conv.swap_green_blue)
 
     @property

@@ -100,6 +100,33 @@ def _copy(scene):
     return Scene(far=scene.far, objects=dict(scene.objects), name=scene.name)
 
 
+def test_the_far_field_table_looked_up_on_the_gpu_matches_the_cpu_at_every_heading(pair):
+    """The table is uploaded once and looked up in the sample pass, its yaw shift split in whole and fractional
+    columns: headings on both sides of 0 and of a turn, and between grid columns, with and without meshes."""
+    headings = [-7.0, -1e-9, 0.0, 1e-4, math.radians(0.125), math.pi, 2 * math.pi - 1e-6, 12.5, 1e4]
+    poses = [Pose(0.1, 0.2, 0.05, h) for h in headings]
+    for spec in ({"scene": "sky"}, with_box({"scene": "horizon", "sky": 0.6, "ground": 0.2})):
+        for r in pair:
+            r.set_scene(spec if isinstance(spec, dict) else _copy(spec))
+        assert_same(pair, poses=poses, what=f"in {spec if isinstance(spec, dict) else 'horizon + box'}")
+    assert pair[1]._gpu._table_source is pair[1]._table
+
+
+def test_a_far_layer_on_the_gpu_path_matches_the_cpu_path():
+    """A far layer's tables are rewritten in place: on the GPU path they are looked up on the CPU and uploaded."""
+    dome = load_dome()
+    layered = [Renderer(dome, face_size=FACE, path=p, far_layer="sync") for p in ("cpu", "gpu")]
+    try:
+        for r in layered:
+            r.set_scene("habitat")
+            assert r.wait_far_layer(POSES[1])
+        assert_same(layered, poses=[POSES[1]])
+        assert [r.layer_frames for r in layered] == [1, 1]
+    finally:
+        for r in layered:
+            r.release()
+
+
 def test_every_scene_edit_matches_the_cpu_path(pair, tmp_path):
     scene = with_box({"scene": "sky"})
     for r in pair:
