@@ -46,6 +46,42 @@ def test_isolation_places_the_loop_thread_alone_and_everything_else_elsewhere():
         child.wait()
 
 
+def test_a_second_placement_walks_only_what_came_since_and_places_it(monkeypatch):
+    """Once a second in the loop's idle time: with nothing new it reads two /proc entries and walks nothing; a
+    thread or a process (with its threads) the loop's thread started since lands on the other CPUs."""
+    isolation = realtime.Isolation("auto")
+    me = threading.get_native_id()
+    walks = []
+    real_descendants = realtime.descendants
+    monkeypatch.setattr(realtime, "descendants", lambda *a: walks.append(1) or real_descendants(*a))
+    stop = threading.Event()
+    child = None
+    try:
+        isolation.apply(me)
+        isolation.apply(me)
+        assert len(walks) == 1  # nothing came: no walk
+        late = threading.Thread(target=stop.wait, daemon=True)  # started on the loop's CPU: it inherits it
+        late.start()
+        assert os.sched_getaffinity(late.native_id) == {isolation.cpu}
+        isolation.apply(me)
+        assert len(walks) == 2 and os.sched_getaffinity(late.native_id) == isolation.others
+        child = subprocess.Popen([sys.executable, "-c", "import threading, time; threading.Thread(target="
+                                  "time.sleep, args=(30,)).start(); time.sleep(30)"])
+        time.sleep(0.5)
+        isolation.apply(me)
+        assert len(walks) == 3
+        threads = [int(t) for t in os.listdir(f"/proc/{child.pid}/task")]
+        assert len(threads) == 2 and all(os.sched_getaffinity(t) == isolation.others for t in threads)
+        isolation.apply(me)
+        assert len(walks) == 3
+    finally:
+        isolation.release()
+        stop.set()
+        if child is not None:
+            child.kill()
+            child.wait()
+
+
 def test_a_cpu_the_process_may_not_use_is_refused():
     with pytest.raises(ValueError, match="is not one this process may use"):
         realtime.Isolation(max(os.sched_getaffinity(0)) + 1000)
