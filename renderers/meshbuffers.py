@@ -238,14 +238,17 @@ class MeshBuffers:
     lod_angle: radians; a chunk at distance D uses level-of-detail cells up to lod_angle * D (0: no LOD).
     arrays: the objects' `MeshArrays`, made beforehand in another thread (default: made here); only the GL
     uploads then run here, or only what is left of them when `upload` (a `StagedUpload` of those arrays) is given.
+    gpu_cull: cull and choose levels in a compute pass (`gpu_cull.GpuCulling`, GL 4.3) instead of numpy here,
+    except for a frame that draws only some chunks (a far layer's near set).
     """
 
     def __init__(self, ctx, prog, objects: dict, chunk_size: float = 2.0, lod_angle: float = 0.0,
-                 arrays: MeshArrays | None = None, upload: StagedUpload | None = None):
+                 arrays: MeshArrays | None = None, upload: StagedUpload | None = None, gpu_cull: bool = False):
         self.ctx, self.prog = ctx, prog
         self.lod_angle = float(lod_angle)
         self._resources = []
         self.n_chunks = 0
+        self._culling = None
         if not objects:
             return
         import moderngl
@@ -266,8 +269,13 @@ class MeshBuffers:
         self._indirect = ctx.buffer(reserve=6 * self.n_chunks * 20)
         self._cmds = np.zeros((6 * self.n_chunks, 5), dtype=np.uint32)
         self._cmds[:, 1] = 1
-        self.last_triangles = 0
         self._resources += [self._vao, self._vbo, self._ibo, self._indirect]
+        if gpu_cull:
+            from .gpu_cull import GpuCulling
+
+            self._culling = GpuCulling(ctx, self._first, self._count, self._single_sided)
+            self._resources.append(self._culling)
+            self._chunks_changed = True  # bounds or shown chunks to upload before the next frame
 
     def _texture_array(self, objects):
         import cv2
@@ -290,6 +298,7 @@ class MeshBuffers:
         block = interleave(obj, local, colours, uv, tex_layer)
         self._vbo.write(block.tobytes(), offset=v0 * _FLOATS_PER_VERTEX * 4)
         self._arrays.bounds(name, obj)
+        self._chunks_changed = True
 
     @property
     def drawable(self) -> bool:
@@ -299,6 +308,7 @@ class MeshBuffers:
     def hide(self, name: str) -> None:
         *_, c0, c1 = self._ranges[name]
         self._active[c0:c1] = False
+        self._chunks_changed = True
 
     def visible_chunks(self, q: np.ndarray, eye: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
         """(n, 6) bool: the bounding sphere of chunk ids[i] (default: every chunk) meets face k's 90° frustum."""
@@ -324,50 +334,76 @@ class MeshBuffers:
         """(n_chunks,) bool: some of the chunk's bounding sphere lies within `radius` (m) of `eye` (m)."""
         return self._arrays.near_chunks(eye, radius)
 
-    def draw(self, fbo, views: np.ndarray, proj: np.ndarray, q: np.ndarray, eye: np.ndarray, n: int,
-             chunks: np.ndarray | None = None) -> int:
-        """Draw every face's visible chunks (only those where `chunks` (n_chunks,) bool is set, if given) into
-        the atlas; returns the number of chunk draws."""
+    def commands(self, q: np.ndarray, eye: np.ndarray, chunks: np.ndarray | None = None) -> tuple:
+        """The indirect draw commands of a frame, computed here: ((m, 5) uint32 commands, (12,) commands per batch).
+        Batch 2k + s holds face k's visible chunks (only those where `chunks` is set, if given) that are
+        single-sided (s = 1) or not, each at its level of detail, front to back (distance to the bounding
+        sphere), ties by chunk."""
         ids = np.arange(self.n_chunks) if chunks is None else np.flatnonzero(chunks)
         level = self.levels(eye, ids)
         counts = self._count[ids, level]
         firsts = self._first[ids, level]
         vis = self.visible_chunks(q, eye, ids) & (counts > 0)[:, None]
-        # commands ordered by (face, culled or not), so each face needs at most two indirect draws
         face, local = np.nonzero(vis.T)
         chunk = ids[local]
         batch = 2 * face + self._single_sided[chunk]
         # front to back within each batch, so that hidden fragments fail the depth test early
         near = np.linalg.norm(self._centre[chunk] - eye, axis=1) - self._radius[chunk]
         order = np.lexsort((near, batch))
-        chunk, local, batch = chunk[order], local[order], batch[order]
-        total = len(chunk)
-        self.last_triangles = int(counts[local].sum()) // 3
-        if total == 0:
-            return 0
-        cmds = self._cmds[:total]
+        local, batch = local[order], batch[order]
+        cmds = self._cmds[:len(local)]
         cmds[:, 0] = counts[local]
         cmds[:, 2] = firsts[local]
+        return cmds, np.bincount(batch, minlength=12)
+
+    def draw(self, fbo, views: np.ndarray, proj: np.ndarray, q: np.ndarray, eye: np.ndarray, n: int,
+             chunks: np.ndarray | None = None) -> int:
+        """Draw every face's visible chunks (only those where `chunks` (n_chunks,) bool is set, if given) into
+        the atlas; returns the number of draw commands issued."""
+        if self._culling is not None and chunks is None:
+            return self._draw_culled_on_gpu(fbo, views, proj, q, eye, n)
+        cmds, per_batch = self.commands(q, eye, chunks)
+        if len(cmds) == 0:
+            return 0
         self._indirect.write(cmds.tobytes())
-        per_batch = np.bincount(batch, minlength=12)
         offsets = np.concatenate([[0], np.cumsum(per_batch)[:-1]])
+        self._draw_faces(fbo, views, proj, n, self._indirect, [
+            ((int(offsets[2 * k]), int(per_batch[2 * k])), (int(offsets[2 * k + 1]), int(per_batch[2 * k + 1])))
+            for k in range(6)])
+        return len(cmds)
+
+    def _draw_culled_on_gpu(self, fbo, views: np.ndarray, proj: np.ndarray, q: np.ndarray, eye: np.ndarray,
+                            n: int) -> int:
+        """`draw` with the commands written by the culling pass: per face, the double-sided chunks' slots and
+        the single-sided ones', every chunk's command issued (empty when not drawn)."""
+        culling = self._culling
+        if self._chunks_changed:
+            culling.set_chunks(self._centre, self._radius, self._active)
+            self._chunks_changed = False
+        culling.run(q, eye, self.lod_angle, LOD_CELLS[0])
+        m, d = self.n_chunks, culling.n_double
+        self._draw_faces(fbo, views, proj, n, culling.commands,
+                         [((k * m, d), (k * m + d, m - d)) for k in range(6)])
+        return 6 * m
+
+    def _draw_faces(self, fbo, views: np.ndarray, proj: np.ndarray, n: int, commands, batches: list) -> None:
+        """Face k's commands in `commands`: batches[k] = ((first, count) double-sided, (first, count) single-sided,
+        drawn with back faces culled)."""
         self._textures.use(1)
-        for k in range(6):
-            if per_batch[2 * k] + per_batch[2 * k + 1] == 0:
+        for k, face in enumerate(batches):
+            if face[0][1] + face[1][1] == 0:
                 continue
             fbo.viewport = (0, k * n, n, n)
             self.prog["view_proj"].write((proj @ views[k]).T.astype("f4").tobytes())
-            for b in (2 * k, 2 * k + 1):
-                if per_batch[b]:
+            for single_sided, (first, count) in enumerate(face):
+                if count:
                     self.ctx.cull_face = "back"
-                    if b % 2:
+                    if single_sided:
                         self.ctx.enable(self._mgl.CULL_FACE)
                     else:
                         self.ctx.disable(self._mgl.CULL_FACE)
-                    self._vao.render_indirect(self._indirect, self._mgl.TRIANGLES, count=int(per_batch[b]),
-                                              first=int(offsets[b]))
+                    self._vao.render_indirect(commands, self._mgl.TRIANGLES, count=count, first=first)
         self.ctx.disable(self._mgl.CULL_FACE)
-        return total
 
     def release(self) -> None:
         for res in self._resources:

@@ -307,7 +307,7 @@ class Renderer:
                 far_tex = self._make_far_texture(new)
             if new.objects:
                 meshes = MeshBuffers(self.ctx, self._mesh_prog, new.objects, self.chunk_size, self.lod_angle,
-                                     arrays=prepared.arrays, upload=prepared.upload)
+                                     arrays=prepared.arrays, upload=prepared.upload, gpu_cull=self._gpu is not None)
                 prepared.upload = None  # the meshes own its buffers now
             prepared.arrays = None
         except BaseException:
@@ -508,7 +508,8 @@ class Renderer:
         objects = dict(scene.objects)
         objects[name] = obj
         trial = Scene(far=scene.far, objects=objects, name=scene.name)
-        meshes = MeshBuffers(self.ctx, self._mesh_prog, trial.objects, self.chunk_size, self.lod_angle)
+        meshes = MeshBuffers(self.ctx, self._mesh_prog, trial.objects, self.chunk_size, self.lod_angle,
+                             gpu_cull=self._gpu is not None)
         if self._meshes is not None:
             self._meshes.release()
         self._meshes = meshes

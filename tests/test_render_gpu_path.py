@@ -112,6 +112,32 @@ def test_the_far_field_table_looked_up_on_the_gpu_matches_the_cpu_at_every_headi
     assert pair[1]._gpu._table_source is pair[1]._table
 
 
+def test_the_culling_pass_writes_the_cpu_paths_commands_in_its_order(pair):
+    """Per face and sidedness: the same chunks, levels of detail and front-to-back order as
+    `MeshBuffers.commands` (the order decides depth ties), then the chunks not drawn, with empty commands."""
+    gpu = pair[1]
+    scene = build_scene("habitat")
+    scene.objects["box"] = SceneObject(box(), position=(0.2, 0.1, 0.0))  # single-sided beside the habitat's
+    scene.__post_init__()
+    gpu.set_scene(_copy(scene))
+    meshes = gpu._meshes
+    m, d = meshes.n_chunks, meshes._culling.n_double
+    assert 0 < d < m
+    for pose in POSES:
+        gpu.render(pose, t=0.0)
+        eye = gpu._scene_eye(gpu.scene, pose)
+        expected, per_batch = meshes.commands(gpu._last_q, eye)
+        expected = np.split(expected[:, [0, 2]], np.cumsum(per_batch)[:-1])
+        with gpu.ctx:
+            written = np.frombuffer(meshes._culling.commands.read(), np.uint32).reshape(6, m, 5)
+        for k in range(6):
+            for s, (a, b) in enumerate(((0, d), (d, m))):
+                cmds = written[k, a:b]
+                n = len(expected[2 * k + s])
+                assert np.array_equal(cmds[:n][:, [0, 2]], expected[2 * k + s]), (k, s)
+                assert (cmds[:n, 1] == 1).all() and not cmds[n:, :2].any()
+
+
 def test_a_far_layer_on_the_gpu_path_matches_the_cpu_path():
     """A far layer's tables are rewritten in place: on the GPU path they are looked up on the CPU and uploaded."""
     dome = load_dome()
