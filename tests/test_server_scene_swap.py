@@ -122,3 +122,42 @@ def test_a_failed_load_prepared_off_the_loop_keeps_the_scene(server):
     with pytest.raises(RuntimeError, match="failed to load .*the current scene 'horizon' stays on the dome"):
         server.command("load_scene", {"scene": {"scene": "grating", "period_deg": "wide"}})
     assert server.renderer.scene is before and server.scene_name == "horizon"
+
+
+def test_a_sky_change_is_built_off_the_loop_while_frames_go_on(server, monkeypatch):
+    server.command("load_scene", {"scene": "sky"})
+    builds = []  # (thread, frame before, frame after) of each scene built for it
+    build = SceneSettings.build
+
+    def recorded(self, scene):
+        before = server.loop.frame
+        out = build(self, scene)
+        builds.append((threading.current_thread(), before, server.loop.frame))
+        return out
+
+    monkeypatch.setattr(SceneSettings, "build", recorded)
+    server.command("sky", {"sun_azimuth_deg": 120.0, "dop_max": 0.4})
+    assert len(builds) == 1 and builds[0][0] is not server._loop_thread
+    assert builds[0][2] > builds[0][1]  # frames went on while its far field was built
+    sky = server.renderer.scene.sky
+    assert sky.sun_azimuth == pytest.approx(np.radians(120.0)) and sky.dop_max == 0.4
+    server.command("load_scene", {"scene": "horizon"})
+    with pytest.raises(RuntimeError, match="sky: the current scene 'horizon' has no sky"):
+        server.command("sky", {"dop_max": 0.2})
+
+
+def test_a_scene_loaded_while_a_sky_change_was_prepared_gets_the_change(server, monkeypatch):
+    server.command("load_scene", {"scene": "sky"})
+    prepare = server.prepare_scene
+    released = []
+
+    def then_another_load(scene, command="load_scene"):
+        prepared = prepare(scene, command)
+        monkeypatch.setattr(prepared, "release", lambda: released.append(1))
+        server.loop.call_soon(server.load_scene, "sky").result(10.0)  # a new scene object, sun where it was
+        return prepared
+
+    monkeypatch.setattr(server, "prepare_scene", then_another_load)
+    server.command("sky", {"sun_elevation_deg": 10.0})
+    assert released == [1]  # the prepared scene, made from the replaced one, was never shown
+    assert server.renderer.scene.sky.sun_elevation == pytest.approx(np.radians(10.0))

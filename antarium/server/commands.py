@@ -170,8 +170,9 @@ def _scene_edit(server: Server, p: dict[str, Any]) -> None:
     server.loop.event("scene_edit", op=op, args=args)
 
 
-def _sky(server: Server, p: dict[str, Any]) -> None:
-    """Move the sun / change the sky's polarisation of the current scene (rebuilds its far field)."""
+def _sky_scene(server: Server, p: dict[str, Any]):
+    """(the current scene, a copy with its sky changed as asked); CommandError or RuntimeError naming what is
+    wrong."""
     renderer = server.require_renderer("sky")
     scene = renderer.scene
     sky = getattr(scene, "sky", None)
@@ -182,13 +183,45 @@ def _sky(server: Server, p: dict[str, Any]) -> None:
     if not changes:
         raise CommandError("sky: give at least one of sun_azimuth_deg, sun_elevation_deg, dop_max, sun_radiance")
     new_sky = dataclasses.replace(sky, **changes)
-    new_scene = dataclasses.replace(scene, far=[new_sky if layer is sky else layer for layer in scene.far])
+    return scene, dataclasses.replace(scene, far=[new_sky if layer is sky else layer for layer in scene.far])
+
+
+@dataclasses.dataclass
+class PreparedSky:
+    """A sky change prepared off the frame loop: the scene it changes, and the changed scene ready to swap in."""
+
+    base: Any
+    prepared: Any
+
+    def release(self) -> None:
+        if self.prepared is not None:
+            self.prepared.release()
+
+
+def _prepare_sky(server: Server, p: dict[str, Any]) -> PreparedSky:
+    """Before a sky change: the scene with the new sky (far field, far layer, buffers) is prepared while frames
+    go on, as a scene load is (caller's thread)."""
+    base, scene = _sky_scene(server, p)
+    return PreparedSky(base, server.prepare_scene(scene, "sky"))
+
+
+def _sky(server: Server, p: dict[str, Any]) -> None:
+    """Move the sun / change the sky's polarisation of the current scene: the prepared scene swapped in, or, when
+    another scene came in meanwhile, the sky of that one changed here (holding frames)."""
+    renderer = server.require_renderer("sky")
+    ready: PreparedSky | None = p.get("prepared")
+    if ready is not None and ready.prepared is not None and renderer.scene is ready.base:
+        target = ready.prepared
+    else:
+        if ready is not None:
+            ready.release()
+        target = _sky_scene(server, p)[1]
     try:
-        renderer.set_scene(new_scene)
+        renderer.set_scene(target)
     except (OSError, ValueError, RuntimeError) as exc:
         raise RuntimeError(f"sky: {exc}; the current sky stays") from None
     server.loop.renderer_changed()
-    server.loop.event("sky", **{k: p[k] for k in p if p[k] is not None})
+    server.loop.event("sky", **{k: p[k] for k in p if p[k] is not None and k != "prepared"})
 
 
 _XY = 1e6  # metres: anything farther is a typo, not a world
@@ -236,7 +269,7 @@ COMMANDS: dict[str, Command] = {
         "sun_elevation_deg": Param("number", False, None, lo=-90, hi=90),
         "dop_max": Param("number", False, None, lo=0, hi=1, doc="maximum degree of polarisation"),
         "sun_radiance": Param("number", False, None, lo=0, hi=1000),
-    }, _sky),
+    }, _sky, prepare=_prepare_sky),
     "polarisers": Command(
         {"angles_deg": Param("number_list", False, None, doc="55 x 9 e-vector angles, degrees; null: follow the sky")},
         _polarisers),
