@@ -240,7 +240,7 @@ class GpuFramePath:
         self._out = ctx.buffer(reserve=n * 4 + _WORDS * 4)
         self._matrix = None
         self._table = self._cells = None
-        self._table_source = None
+        self._table_source, self._n_cols = None, 0
         self.host = np.zeros(n * 4 + _WORDS * 4, np.uint8)
         #: the last frame, (20350, 2) uint16, and its 55 VIDEO datagrams (55, 1112) uint8 with INFO 0
         self.frame = self.host[: n * 4].view(np.uint16).reshape(n, 2)

@@ -137,12 +137,13 @@ class Isolation:
         that may only have the loop's idle time) to the loop's CPU, every other thread of this process and every
         descendant process (only those in `processes` when given; the others stay where they are) to the others.
 
-        Called once a second in the loop's idle time, it walks every thread of every process of ours (2.4 ms
-        for 84 threads here with pathlib, 0.8 ms now; three times that on a 16-CPU workstation) only when
-        something may have landed on the loop's CPU: a thread of ours came or went, the loop's or a `beside`
-        thread started or lost a child, or the arguments changed. Whatever a thread on the other CPUs starts
-        inherits them. Otherwise it costs a directory listing and one /proc read per such thread (0.06 ms). Not
-        followed: a process of ours that moves itself onto the loop's CPU (the kernel says nothing of it)."""
+        Called once a second in the loop's idle time, it walks every thread of every process of ours (84 threads
+        with pathlib: 2.4 ms on a 2-core VM, 7-15 ms on a 16-CPU GPU workstation, a late frame a second there;
+        with os calls 0.8 ms on the VM) only when something may have landed on the loop's CPU: a thread of ours
+        came or went, the loop's or a `beside` thread started or lost a child, or the arguments changed.
+        Whatever a thread on the other CPUs starts inherits them. Otherwise it costs a directory listing and one
+        /proc read per such thread (0.06 ms). Not followed: a process of ours that moves itself onto the loop's
+        CPU (the kernel says nothing of it)."""
         state = (frozenset(_tids("self")), frozenset(beside), None if processes is None else frozenset(processes),
                  frozenset(_thread_children("self", (loop_thread_id, *beside))) if _children_files() else None)
         if state == self._state:
