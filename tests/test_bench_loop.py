@@ -1,6 +1,7 @@
 """`antarium bench loop` end to end on the embedded default rig (one short run): it prints its report and writes
 the same figures as JSON. No timing is asserted; the figures are the benchmark's, not the test's."""
 
+import argparse
 import json
 
 from antarium.cli import main
@@ -23,7 +24,7 @@ def test_a_command_cut_short_by_the_runs_end_is_no_error_and_no_reply_time():
 
     from antarium.bench.loop import ScriptedCommands
 
-    script = ScriptedCommands(None, "habitat", None, None, None)  # no schedule: no thread, records given here
+    script = ScriptedCommands(None, "habitat", {})  # no schedule: no thread, records given here
     script.every = {"load_scene": 5.0}
     script.records = [("load_scene", 5.0, 7.0, ""),
                       ("load_scene", 10.0, 12.5, "load_scene: the server is not running"),
@@ -33,3 +34,19 @@ def test_a_command_cut_short_by_the_runs_end_is_no_error_and_no_reply_time():
     assert summary["sent"] == 2 and summary["cut_by_the_end"] == 1
     assert summary["errors"] == ["load_scene: scene 'x' failed to load"]
     assert summary["reply"]["max_ms"] == 2000.0 and summary["late_frames_around"] == 1
+
+
+def test_every_scripted_command_has_its_option_and_a_bad_interval_is_named():
+    import pytest
+
+    from antarium.bench.loop import SCRIPTED, ScriptedCommands
+    from antarium.commands.bench import add_arguments
+    from antarium.server.commands import COMMANDS
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["loop", "--sky-every", "6", "--load-every", "30"])
+    assert set(SCRIPTED) <= set(COMMANDS) and all(hasattr(args, option) for option in SCRIPTED.values())
+    assert args.sky_every == 6.0 and args.load_every == 30.0 and args.edit_every is None
+    with pytest.raises(ValueError, match="--sky-every must be a positive number of seconds, got -1"):
+        ScriptedCommands(None, "habitat", {"sky": -1.0})

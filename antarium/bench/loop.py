@@ -6,10 +6,10 @@ the goal is stated for 600) or `--frames`, then reads the recorded per-frame tab
 frame rate against target, late and skipped frames, closed-loop latency p50/p99/max and per-stage times,
 as ratios to the dome's needs (190 frames/s, 5.3 ms frame period). The first second (warm-up) is excluded.
 
-With `--load-every S`, `--displace-every S` and `--edit-every S` a script thread sends the rig's scene again
-(`load_scene`), a virtual displacement (`set_pose` 0.5 m away and back) or an object move (`scene_edit`) on that
-schedule, as an experiment script would; the report then lists each kind's reply times and the late frames from
-its sending to 1 s after its reply.
+With `--load-every S`, `--displace-every S`, `--edit-every S` and `--sky-every S` a script thread sends the rig's
+scene again (`load_scene`), a virtual displacement (`set_pose` 0.5 m away and back), an object move (`scene_edit`)
+or a move of the sun (`sky`, 60° and back) on that schedule, as an experiment script would; the report then lists
+each kind's reply times and the late frames from its sending to 1 s after its reply.
 
 With `--machine-probe`, a stall probe runs on every CPU beside it (`antarium.bench.jitter.StallProbes`, real-time
 above the loop): the report then says how often the machine itself stopped a CPU, and how many late frames
@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import tempfile
 from typing import TYPE_CHECKING, Any
@@ -121,8 +122,8 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None)
         server = Server(config, record="bench-loop", echo=lambda line: None)
         probes = _start_probes(config.loop.realtime_priority) if getattr(args, "machine_probe", False) \
             else None
-        script = ScriptedCommands(server, config.render.scene, getattr(args, "load_every", None),
-                                  getattr(args, "displace_every", None), getattr(args, "edit_every", None))
+        script = ScriptedCommands(server, config.render.scene,
+                                  {kind: getattr(args, option, None) for kind, option in SCRIPTED.items()})
         try:
             server.run(seconds=seconds, frames=args.frames)
         finally:
@@ -146,20 +147,24 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None)
 AFTER_REPLY_S = 1.0
 
 
-class ScriptedCommands:
-    """A thread sending commands to `server` on a schedule (seconds between them; None: never), and recording
-    (kind, sent, replied, error) for each on the server's clock."""
+#: command the script sends -> the option (`args` attribute) giving the seconds between two of them
+SCRIPTED = {"load_scene": "load_every", "set_pose": "displace_every", "scene_edit": "edit_every",
+            "sky": "sky_every"}
 
-    def __init__(self, server, scene, load_every: float | None, displace_every: float | None,
-                 edit_every: float | None) -> None:
+
+class ScriptedCommands:
+    """A thread sending commands to `server` on a schedule (`every`: command -> seconds between them; None:
+    never), and recording (kind, sent, replied, error) for each on the server's clock."""
+
+    def __init__(self, server, scene, every: dict[str, float | None]) -> None:
         import threading
 
         self.server, self.scene = server, scene
-        self.every = {k: v for k, v in (("load_scene", load_every), ("set_pose", displace_every),
-                                        ("scene_edit", edit_every)) if v}
-        for kind, every in self.every.items():
-            if not every > 0:
-                raise ValueError(f"--{kind} interval must be > 0 seconds, got {every}")
+        self.every = {k: v for k, v in every.items() if v is not None}
+        for kind, seconds in self.every.items():
+            if not seconds > 0:
+                raise ValueError(f"--{SCRIPTED[kind].replace('_', '-')} must be a positive number of seconds, "
+                                 f"got {seconds:g}")
         self.records: list[tuple[str, float, float, str]] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="bench-script", daemon=True) if self.every else None
@@ -172,6 +177,10 @@ class ScriptedCommands:
         if kind == "set_pose":
             pose = self.server.loop.pose
             return {"x": pose.x + (0.5 if n % 2 == 0 else -0.5), "y": pose.y}
+        if kind == "sky":
+            sky = self.server.renderer.scene.sky
+            azimuth = math.degrees(sky.sun_azimuth) if sky is not None else 0.0  # no sky: the server refuses it
+            return {"sun_azimuth_deg": (azimuth + (60.0 if n % 2 == 0 else -60.0) + 180.0) % 360.0 - 180.0}
         scene = self.server.renderer.scene
         name = next(iter(scene.objects))
         x, y, z = (float(c) for c in scene.objects[name].position)

@@ -27,6 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="loop: a virtual displacement (set_pose, 0.5 m away and back) every S seconds")
     parser.add_argument("--edit-every", type=float, default=None, metavar="S",
                         help="loop: move the scene's first object 0.2 m and back (scene_edit) every S seconds")
+    parser.add_argument("--sky-every", type=float, default=None, metavar="S",
+                        help="loop: move the sun 60 degrees and back (sky) every S seconds")
     parser.add_argument("--browser-idle", action="store_true",
                         help="monitor: run the headless browser SCHED_IDLE, so that it gets only the CPU time the loop "
                              "leaves, as if it ran on the experimenter's computer")
