@@ -94,11 +94,13 @@ void main() {{
 class GpuCulling:
     """The culling pass and the command buffer for one `MeshBuffers` (use it with its context current).
 
-    first, count: (n, levels) uint32 index offsets and counts per chunk and level; single_sided: (n,) bool.
+    first, count: (n, levels) uint32 index offsets and counts per chunk and level; single_sided: (n,) bool;
+    lod_angle (rad) and cell0 (m, the finest level's cell) as `MeshBuffers.levels` uses them.
     GPU memory: n x (36 + 8 x levels) bytes of chunk data and 6 x n x 36 bytes of commands and sort keys.
     """
 
-    def __init__(self, ctx, first: np.ndarray, count: np.ndarray, single_sided: np.ndarray):
+    def __init__(self, ctx, first: np.ndarray, count: np.ndarray, single_sided: np.ndarray, lod_angle: float,
+                 cell0: float):
         import moderngl
 
         self.ctx, self._mgl = ctx, moderngl
@@ -114,8 +116,11 @@ class GpuCulling:
         self.commands = ctx.buffer(np.zeros(6 * self.n * _COMMAND, np.uint32))
         self._keys = ctx.buffer(reserve=6 * self.n * 8)
         self._drawn = ctx.buffer(reserve=6 * self.n * 8)
-        self._prog["n"].value = self.n
-        self._prog["n_double"].value = self.n_double
+        m, d = self.n, self.n_double
+        #: per face, the (first, count) of its double-sided and of its single-sided commands
+        self.batches = [((k * m, d), (k * m + d, m - d)) for k in range(6)]
+        for name, value in (("n", m), ("n_double", d), ("lod_angle", float(lod_angle)), ("cell0", float(cell0))):
+            self._prog[name].value = value
 
     def _buffers(self) -> tuple:
         return self._spheres, self._flags, self._first, self._count, self.commands, self._keys, self._drawn
@@ -127,13 +132,11 @@ class GpuCulling:
         self._spheres.write(spheres)
         self._flags.write(np.asarray(active, dtype=np.uint32) | (self._single.astype(np.uint32) << 1))
 
-    def run(self, q: np.ndarray, eye: np.ndarray, lod_angle: float, cell0: float) -> None:
+    def run(self, q: np.ndarray, eye: np.ndarray) -> None:
         """Write every face's commands for an eye at `eye` (m) with dome rotation `q` (3, 3)."""
         p, mgl = self._prog, self._mgl
         p["q"].write(np.ascontiguousarray(q, dtype="f4"))
         p["eye"].value = tuple(float(v) for v in eye)
-        p["lod_angle"].value = float(lod_angle)
-        p["cell0"].value = float(cell0)
         for b, buf in enumerate(self._buffers()):
             buf.bind_to_storage_buffer(b)
         groups = (6 * self.n + _GROUP - 1) // _GROUP

@@ -273,7 +273,8 @@ class MeshBuffers:
         if gpu_cull:
             from .gpu_cull import GpuCulling
 
-            self._culling = GpuCulling(ctx, self._first, self._count, self._single_sided)
+            self._culling = GpuCulling(ctx, self._first, self._count, self._single_sided, self.lod_angle,
+                                       LOD_CELLS[0])
             self._resources.append(self._culling)
             self._chunks_changed = True  # bounds or shown chunks to upload before the next frame
 
@@ -380,11 +381,9 @@ class MeshBuffers:
         if self._chunks_changed:
             culling.set_chunks(self._centre, self._radius, self._active)
             self._chunks_changed = False
-        culling.run(q, eye, self.lod_angle, LOD_CELLS[0])
-        m, d = self.n_chunks, culling.n_double
-        self._draw_faces(fbo, views, proj, n, culling.commands,
-                         [((k * m, d), (k * m + d, m - d)) for k in range(6)])
-        return 6 * m
+        culling.run(q, eye)
+        self._draw_faces(fbo, views, proj, n, culling.commands, culling.batches)
+        return 6 * self.n_chunks
 
     def _draw_faces(self, fbo, views: np.ndarray, proj: np.ndarray, n: int, commands, batches: list) -> None:
         """Face k's commands in `commands`: batches[k] = ((first, count) double-sided, (first, count) single-sided,
