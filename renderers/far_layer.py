@@ -108,11 +108,18 @@ class FarLayerBuilder:
         self._texels = np.empty((6 * n * n, 4), dtype=np.uint16)
         self._taps, self._weights = cube_taps(g.directions(), n)
         self._field = np.empty((g.n_rows * g.n_cols, 4), dtype=np.float32)
-        cols = g.n_cols  # the far field as radiance [G, B, UV, polarised UV], converted once, not per build
-        self._static = np.concatenate([far_field.table_gb[:, :cols], far_field.table_uv[:, :cols]],
-                                      axis=2).astype(np.float32) / np.float32(65535.0)
+        self.set_far_field(far_field)
         self.meshes: MeshBuffers | None = None
         self.set_objects(objects)
+
+    def set_far_field(self, far_field: FarFieldTable) -> None:
+        """The far field under the objects (a new sky): a table on this builder's grid."""
+        g = self.far_field.grid
+        if far_field.grid.shape != g.shape:
+            raise ValueError(f"far field on a {far_field.grid.shape} grid, the layer's is {g.shape}")
+        self.far_field, cols = far_field, g.n_cols  # as radiance [G, B, UV, polarised UV], converted once a field
+        self._static = np.concatenate([far_field.table_gb[:, :cols], far_field.table_uv[:, :cols]],
+                                      axis=2).astype(np.float32) / np.float32(65535.0)
 
     def set_objects(self, objects: dict) -> None:
         meshes = MeshBuffers(self.ctx, self._prog, objects, self.chunk_size, self.lod_angle)
@@ -121,16 +128,19 @@ class FarLayerBuilder:
         self.meshes = meshes
 
     def apply(self, edit: tuple) -> None:
-        """A scene edit: ("objects", {name: SceneObject}), ("move", name, SceneObject) or ("hide", name)."""
+        """A scene edit: ("objects", {name: SceneObject}), ("move", name, SceneObject), ("hide", name) or
+        ("far", FarFieldTable)."""
         kind = edit[0]
         if kind == "objects":
             self.set_objects(edit[1])
+        elif kind == "far":
+            self.set_far_field(edit[1])
         elif kind == "move":
             self.meshes.update_object(edit[1], edit[2])
         elif kind == "hide":
             self.meshes.hide(edit[1])
         else:
-            raise ValueError(f"unknown far-layer edit {kind!r}; allowed: objects, move, hide")
+            raise ValueError(f"unknown far-layer edit {kind!r}; allowed: objects, move, hide, far")
 
     def build(self, eye: np.ndarray, out: FarFieldTable) -> FarFieldTable:
         """The far layer seen from `eye` (3,) m, written into the tables of `out` (same grid); returns `out`."""
@@ -339,6 +349,17 @@ class FarLayer:
         return ahead is not None and ahead[1] == self.generation + 1 \
             and float(np.linalg.norm(np.asarray(eye, dtype=np.float64) - ahead[0])) <= self.max_shift
 
+    def withdraw(self, edit: tuple, undo: tuple) -> None:
+        """Async: the edit sent ahead (`edit_ahead`) will not be made after all: the builder gets `undo`, the edit
+        that restores what `edit` changed, if it had `edit` already. Nothing when `edit` is not the one ahead."""
+        if self._ahead_edit is not edit:
+            return
+        sent = self._edit_sent
+        self._ahead_edit = self._ahead = self._ahead_eye = None
+        if sent:
+            self.generation += 1  # no layer built with the edit is ever used: those are one generation on
+            self.edit(undo)
+
     def prefetch(self, eye: np.ndarray) -> None:
         """Async: build a layer for `eye` (m), where the eye is about to jump, into a spare table, while frames
         go on with the current one (see `_dispatch`); the first frame whose eye is in its range uses it
@@ -396,7 +417,10 @@ class EyeVelocity:
 
 
 def _same_edit(a: tuple, b: tuple) -> bool:
-    """Whether two far-layer edits do the same (a move to the same place, or hiding the same object)."""
+    """Whether two far-layer edits do the same (a move to the same place, hiding the same object, or the same new
+    far field)."""
+    if a[0] == b[0] == "far":
+        return a[1] is b[1]
     if a[0] != b[0] or a[1] != b[1] or a[0] not in ("move", "hide"):
         return False
     return a[0] == "hide" or (np.array_equal(a[2].position, b[2].position) and a[2].yaw == b[2].yaw

@@ -55,6 +55,18 @@ class PreparedScene:
 
 
 @dataclass(frozen=True)
+class PreparedFar:
+    """A new far field for a renderer's current scene (`Renderer.prepare_far`, any thread), for `Renderer.set_far`:
+    the scene it is for, its far-field layers, and the footprint FWHM (rad) and far-field table it was made with
+    (None: the scene is drawn from a cube texture, made at the swap)."""
+
+    scene: Scene
+    far: list
+    fwhm: float
+    table: FarFieldTable | None
+
+
+@dataclass(frozen=True)
 class SceneSettings:
     """What preparing a scene needs of its renderer, as plain data (it crosses to the scene's process).
 

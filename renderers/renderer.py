@@ -11,6 +11,7 @@ world-aligned cube texture sampled by the background pass. Scenes without meshes
 from __future__ import annotations
 
 import collections
+import dataclasses
 import functools
 import math
 import os
@@ -371,6 +372,59 @@ class Renderer:
 
         await_layer(prepared, lambda: self._scene_eye(prepared.scene, pose()),
                     LAYER_WAIT_S if timeout_s is None else timeout_s)
+
+    def prepare_far(self, far):
+        """`set_far`'s work but the GL uploads, for any thread: a `PreparedFar` with the current scene's far field
+        replaced by the layers `far` (its table). Raises ValueError for layers a scene cannot have."""
+        from .prepared import PreparedFar, SceneSettings
+
+        scene = self._require_scene()
+        trial = dataclasses.replace(scene, far=list(far))  # checks the layers
+        fwhm = self._fwhm
+        table = FarFieldTable.of_scene(trial, self._directions, fwhm) if SceneSettings.of(self).table_ok(trial) \
+            else None
+        return PreparedFar(scene, trial.far, fwhm, table)
+
+    def prefetch_far(self, pose, prepared) -> None:
+        """A `set_far(prepared)` about to come, the eye at `pose`: the async far layer over the new far field is
+        built meanwhile, so that the change shows with its layer from its first frame (`edit_ready`); withdrawn
+        with `withdraw_far` if the change is not made. Rendering thread."""
+        if self._layer is not None and prepared.table is not None and self._current(prepared):
+            self._layer.edit_ahead(("far", prepared.table), self._scene_eye(prepared.scene, _check_pose(pose)))
+
+    def withdraw_far(self, prepared) -> None:
+        """A prefetched far field that will not be shown: the far layer's builder goes back to the current one.
+        Rendering thread."""
+        if self._layer is not None and prepared.table is not None and self._table is not None:
+            self._layer.withdraw(("far", prepared.table), ("far", self._table))
+
+    def _current(self, prepared) -> bool:
+        """Whether a `PreparedFar` was made for the scene and footprint now in use."""
+        return prepared.scene is self.scene and prepared.fwhm == self._fwhm
+
+    @_gl_current
+    def set_far(self, far) -> None:
+        """Replace the current scene's far-field layers (a list, or `prepare_far`'s result), keeping its objects and
+        every edit made to it: only the far field's table (or cube texture) and the far layer's field change. A
+        result prepared for another scene or footprint is prepared again here. On error the far field stays."""
+        from .prepared import PreparedFar
+
+        scene = self._require_scene()
+        if not isinstance(far, PreparedFar) or not self._current(far):
+            if isinstance(far, PreparedFar):
+                self.withdraw_far(far)
+                far = far.far
+            far = self.prepare_far(far)
+        had_table = self._table is not None
+        far_tex = self._make_far_texture(dataclasses.replace(scene, far=far.far)) if far.table is None else None
+        old_tex, self._far_tex = self._far_tex, far_tex
+        scene.far, self._table = far.far, far.table
+        if old_tex is not None:
+            old_tex.release()
+        if self._layer is not None and had_table and far.table is not None:
+            self._layer_edit(("far", far.table))
+        else:
+            self._restart_layer()
 
     def _restart_layer(self) -> None:
         """A new far layer for the current scene and footprint (none when off, or nothing to split)."""

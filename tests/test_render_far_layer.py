@@ -316,3 +316,73 @@ def test_a_frame_never_waits_for_a_helper_that_has_not_started_its_work(dome):
     np.testing.assert_array_equal(held_off, expected)
     np.testing.assert_array_equal(r.render(WALK[3], t=0.0), expected)
     r.release()
+
+
+def test_an_edit_sent_ahead_and_withdrawn_is_undone_in_the_builder(dome, monkeypatch):
+    """A new far field sent ahead (a `sky` change being prepared) that is then not made: the builder gets the edit
+    that restores its field, and no layer built with the withdrawn field is ever used."""
+    layer, builder, eye = _async_layer(dome, monkeypatch)
+    new, old = ("far", object()), ("far", object())
+    assert layer.edit_ahead(new, eye)
+    assert layer.current(eye) is not None
+    assert [m[0] for m in builder.sent[1:]] == ["edit", "build"] and builder.sent[1][1] is new
+    layer.withdraw(new, old)
+    assert builder.sent[-1] == ("edit", old) and layer.edit_ready(eye)
+    builder.finish()  # the layer with the withdrawn field comes in: never used
+    assert layer.current(eye) is None
+    assert builder.sent[-1][0] == "build" and builder.sent[-1][2] == layer.generation
+    builder.finish()
+    assert layer.current(eye) is not None
+    layer.withdraw(new, old)  # no longer ahead: nothing
+    assert builder.sent[-1][0] == "build"
+
+
+def _sun_moved(scene):
+    """The scene's far-field layers with its sun turned 90 degrees and less polarisation."""
+    import dataclasses
+
+    sky = scene.sky
+    moved = dataclasses.replace(sky, sun_azimuth=sky.sun_azimuth + math.pi / 2, dop_max=0.3)
+    return [moved if layer is sky else layer for layer in scene.far]
+
+
+@pytest.mark.parametrize("far_layer", ["off", "sync"])
+def test_a_new_sky_keeps_the_objects_and_every_edit_made_while_it_was_prepared(dome, far_layer, monkeypatch):
+    """`set_far` swaps the far field (table, far layer's field) and nothing else: the meshes are not built again,
+    and an object edit or a contrast made between `prepare_far` and the swap stay (the frame equals a full render
+    of the scene with the new sky and the same edits)."""
+    import dataclasses
+
+    from antarium.renderers import renderer as renderer_module
+
+    pose = Pose(0.0, 0.0, 0.01, 0.3)
+    position = (6.0, 0.0, 0.0)
+    base = small_habitat()
+    ref = Renderer(dome)
+    ref.set_scene(dataclasses.replace(base, far=_sun_moved(base)))
+    ref.move_object("tree_0", position=position, yaw=0.0)
+    ref.set_contrast(0.8)
+    expected = drive_to_radiance(ref.render(pose, t=0.0))
+    ref.release()
+
+    r = Renderer(dome, far_layer=far_layer)
+    try:
+        r.set_scene(small_habitat())
+        before = drive_to_radiance(r.render(pose, t=0.0))
+        prepared = r.prepare_far(_sun_moved(r.scene))
+        r.move_object("tree_0", position=position, yaw=0.0)
+        r.set_contrast(0.8)
+
+        def no_new_meshes(*args, **kwargs):
+            raise AssertionError("the meshes were built again for a new sky")
+
+        monkeypatch.setattr(renderer_module, "MeshBuffers", no_new_meshes)
+        r.set_far(prepared)
+        after = drive_to_radiance(r.render(pose, t=0.0))
+        assert r.scene.sky.dop_max == 0.3 and "tree_0" in r.scene.objects
+        assert not r.last_full_render or far_layer == "off"
+    finally:
+        r.release()
+    up = dome.elevation > math.radians(30)
+    assert np.abs(after - before)[up].sum(axis=1).mean() > 0.01  # the sky changed
+    assert np.abs(after - expected).sum(axis=1).mean() < 0.004

@@ -126,16 +126,16 @@ def test_a_failed_load_prepared_off_the_loop_keeps_the_scene(server):
 
 def test_a_sky_change_is_built_off_the_loop_while_frames_go_on(server, monkeypatch):
     server.command("load_scene", {"scene": "sky"})
-    builds = []  # (thread, frame before, frame after) of each scene built for it
-    build = SceneSettings.build
+    builds = []  # (thread, frame before, frame after) of each far field made for it
+    prepare = server.renderer.prepare_far
 
-    def recorded(self, scene):
+    def recorded(far):
         before = server.loop.frame
-        out = build(self, scene)
+        out = prepare(far)
         builds.append((threading.current_thread(), before, server.loop.frame))
         return out
 
-    monkeypatch.setattr(SceneSettings, "build", recorded)
+    monkeypatch.setattr(server.renderer, "prepare_far", recorded)
     server.command("sky", {"sun_azimuth_deg": 120.0, "dop_max": 0.4})
     assert len(builds) == 1 and builds[0][0] is not server._loop_thread
     assert builds[0][2] > builds[0][1]  # frames went on while its far field was built
@@ -148,16 +148,41 @@ def test_a_sky_change_is_built_off_the_loop_while_frames_go_on(server, monkeypat
 
 def test_a_scene_loaded_while_a_sky_change_was_prepared_gets_the_change(server, monkeypatch):
     server.command("load_scene", {"scene": "sky"})
-    prepare = server.prepare_scene
-    released = []
+    prepare = server.renderer.prepare_far
 
-    def then_another_load(scene, command="load_scene"):
-        prepared = prepare(scene, command)
-        monkeypatch.setattr(prepared, "release", lambda: released.append(1))
+    def then_another_load(far):
+        monkeypatch.undo()  # once: the swap then prepares the change for the new scene itself
+        prepared = prepare(far)
         server.loop.call_soon(server.load_scene, "sky").result(10.0)  # a new scene object, sun where it was
         return prepared
 
-    monkeypatch.setattr(server, "prepare_scene", then_another_load)
+    monkeypatch.setattr(server.renderer, "prepare_far", then_another_load)
     server.command("sky", {"sun_elevation_deg": 10.0})
-    assert released == [1]  # the prepared scene, made from the replaced one, was never shown
     assert server.renderer.scene.sky.sun_elevation == pytest.approx(np.radians(10.0))
+    assert server.renderer.scene.sky.sun_azimuth == pytest.approx(np.radians(135.0))  # the new scene's, kept
+
+
+def test_a_sky_change_keeps_the_meshes_and_shows_with_its_far_layer(habitat_server):
+    meshes = habitat_server.renderer._meshes
+    _no_full_frames_through(habitat_server, "sky", {"sun_azimuth_deg": 30.0, "dop_max": 0.5})
+    assert habitat_server.renderer.scene.sky.dop_max == 0.5
+    assert habitat_server.renderer._meshes is meshes  # nothing of the meshes made again
+
+
+def test_an_object_edit_made_while_a_sky_change_was_prepared_is_kept(habitat_server, monkeypatch):
+    """Stop 28's sky change swapped in a copy of the scene made before the edit: the removed bush came back."""
+    renderer = habitat_server.renderer
+    name = next(n for n in renderer.scene.objects if n.startswith("bush"))
+    prepare = renderer.prepare_far
+
+    def then_an_edit(far):
+        monkeypatch.undo()
+        prepared = prepare(far)
+        habitat_server.command("scene_edit", {"op": "remove_object", "args": {"name": name}})
+        return prepared
+
+    monkeypatch.setattr(renderer, "prepare_far", then_an_edit)
+    meshes = renderer._meshes  # the edit hides the bush's chunks in these
+    habitat_server.command("sky", {"sun_elevation_deg": 25.0, "sun_azimuth_deg": 200.0})
+    assert renderer.scene.sky.sun_elevation == pytest.approx(np.radians(25.0))
+    assert name not in renderer.scene.objects and renderer._meshes is meshes

@@ -58,26 +58,32 @@ def _set_pose(server: Server, p: dict[str, Any]) -> None:
     server.loop.set_pose(Pose(p["x"], p["y"], z, math.remainder(heading, math.tau)))
 
 
-#: how long a displacement (an object edit) waits for the far layer at its target (with it) before it is applied
-#: anyway (s)
-DISPLACEMENT_WAIT_S = EDIT_WAIT_S = 2.0
+#: how long a displacement, an object edit or a sky change waits for the far layer at its target (with the edit, over
+#: the new sky) before it is applied anyway (s)
+PREFETCH_WAIT_S = 2.0
+
+
+def _prefetched(server: Server, prefetch: Callable[[], None], ready: Callable[[], bool]) -> None:
+    """`prefetch()` run in the loop's thread, then (in the caller's, beside the loop) a wait until `ready()` or for
+    `PREFETCH_WAIT_S`. A loop held up longer leaves nothing to prepare: the command then waits in its queue."""
+    import time
+
+    try:
+        server.loop.call_soon(prefetch).result(PREFETCH_WAIT_S)
+    except TimeoutError:
+        return
+    deadline = time.monotonic() + PREFETCH_WAIT_S
+    while not ready() and time.monotonic() < deadline:
+        time.sleep(0.002)
 
 
 def _prepare_pose(server: Server, p: dict[str, Any]) -> None:
     """Before a displacement: the far layer at its target is built while frames go on (caller's thread)."""
-    import time
-
     renderer = server.renderer
     if renderer is None or not hasattr(renderer, "prefetch_pose"):
         return
     target = Pose(p["x"], p["y"], server.loop.pose.z if p["z"] is None else p["z"], 0.0)
-    try:
-        server.loop.call_soon(renderer.prefetch_pose, target).result(DISPLACEMENT_WAIT_S)
-    except TimeoutError:  # the loop is held up: the displacement then waits in its queue, nothing to prepare
-        return
-    deadline = time.monotonic() + DISPLACEMENT_WAIT_S
-    while not renderer.ready_for(target) and time.monotonic() < deadline:
-        time.sleep(0.002)
+    _prefetched(server, lambda: renderer.prefetch_pose(target), lambda: renderer.ready_for(target))
 
 
 def _reset_origin(server: Server, p: dict[str, Any]) -> None:
@@ -140,21 +146,15 @@ def _edit_kwargs(op: str, args: dict[str, Any]) -> dict[str, Any]:
 
 def _prepare_edit(server: Server, p: dict[str, Any]) -> None:
     """Before an object edit: the far layer with the edit is built while frames go on (caller's thread)."""
-    import time
-
     renderer = server.renderer
     if renderer is None or not hasattr(renderer, "prefetch_edit"):
         return
     kwargs = _edit_kwargs(p["op"], p["args"])
     try:
-        server.loop.call_soon(renderer.prefetch_edit, server.loop.pose, p["op"], **kwargs).result(EDIT_WAIT_S)
-    except TimeoutError:  # the loop is held up: the edit then waits in its queue, nothing to prepare
-        return
+        _prefetched(server, lambda: renderer.prefetch_edit(server.loop.pose, p["op"], **kwargs),
+                    lambda: renderer.edit_ready(server.loop.pose))
     except TypeError as exc:
         raise CommandError(f"scene_edit {p['op']}: {exc}") from None
-    deadline = time.monotonic() + EDIT_WAIT_S
-    while not renderer.edit_ready(server.loop.pose) and time.monotonic() < deadline:
-        time.sleep(0.002)
 
 
 def _scene_edit(server: Server, p: dict[str, Any]) -> None:
@@ -170,11 +170,10 @@ def _scene_edit(server: Server, p: dict[str, Any]) -> None:
     server.loop.event("scene_edit", op=op, args=args)
 
 
-def _sky_scene(server: Server, p: dict[str, Any]):
-    """(the current scene, a copy with its sky changed as asked); CommandError or RuntimeError naming what is
-    wrong."""
-    renderer = server.require_renderer("sky")
-    scene = renderer.scene
+def _sky_layers(server: Server, p: dict[str, Any]) -> tuple[list, list]:
+    """(the current scene's far-field layers, the same with its sky changed as asked); CommandError or RuntimeError
+    naming what is wrong."""
+    scene = server.require_renderer("sky").scene
     sky = getattr(scene, "sky", None)
     if sky is None:
         raise RuntimeError(f"sky: the current scene {server.scene_name!r} has no sky")
@@ -183,42 +182,48 @@ def _sky_scene(server: Server, p: dict[str, Any]):
     if not changes:
         raise CommandError("sky: give at least one of sun_azimuth_deg, sun_elevation_deg, dop_max, sun_radiance")
     new_sky = dataclasses.replace(sky, **changes)
-    return scene, dataclasses.replace(scene, far=[new_sky if layer is sky else layer for layer in scene.far])
+    return scene.far, [new_sky if layer is sky else layer for layer in scene.far]
 
 
 @dataclasses.dataclass
 class PreparedSky:
-    """A sky change prepared off the frame loop: the scene it changes, and the changed scene ready to swap in."""
+    """A sky change prepared off the frame loop: the far-field layers it changes (the scene's `far` list) and the
+    renderer's `PreparedFar` of the new ones, its far layer prefetched; `release` withdraws that prefetch."""
 
-    base: Any
-    prepared: Any
+    base: list
+    far: Any
+    server: Server
 
     def release(self) -> None:
-        if self.prepared is not None:
-            self.prepared.release()
+        renderer = self.server.renderer
+        self.server.loop.call_soon(renderer.withdraw_far, self.far)
 
 
 def _prepare_sky(server: Server, p: dict[str, Any]) -> PreparedSky:
-    """Before a sky change: the scene with the new sky (far field, far layer, buffers) is prepared while frames
-    go on, as a scene load is (caller's thread)."""
-    base, scene = _sky_scene(server, p)
-    return PreparedSky(base, server.prepare_scene(scene, "sky"))
+    """Before a sky change: the new far field's table is made, and the far layer over it built, while frames go on
+    (caller's thread). Nothing else of the scene is made again: its objects and edits stay as they are."""
+    renderer = server.require_renderer("sky")
+    base, far = _sky_layers(server, p)
+    ready = PreparedSky(base, renderer.prepare_far(far), server)
+    _prefetched(server, lambda: renderer.prefetch_far(server.loop.pose, ready.far),
+                lambda: renderer.edit_ready(server.loop.pose))
+    return ready
 
 
 def _sky(server: Server, p: dict[str, Any]) -> None:
-    """Move the sun / change the sky's polarisation of the current scene: the prepared scene swapped in, or, when
-    another scene came in meanwhile, the sky of that one changed here (holding frames)."""
+    """Move the sun / change the sky's polarisation of the current scene: the prepared far field swapped in, or,
+    when the scene or its far field changed meanwhile, the change made to the current one here (holding frames)."""
     renderer = server.require_renderer("sky")
     ready: PreparedSky | None = p.get("prepared")
-    if ready is not None and ready.prepared is not None and renderer.scene is ready.base:
-        target = ready.prepared
-    else:
-        if ready is not None:
-            ready.release()
-        target = _sky_scene(server, p)[1]
+    target = ready.far if ready is not None else None
+    if ready is not None and (renderer.scene is not ready.far.scene or renderer.scene.far is not ready.base):
+        renderer.withdraw_far(ready.far)
+        target = None
     try:
-        renderer.set_scene(target)
+        renderer.set_far(_sky_layers(server, p)[1] if target is None else target)
     except (OSError, ValueError, RuntimeError) as exc:
+        if target is not None:
+            renderer.withdraw_far(target)
         raise RuntimeError(f"sky: {exc}; the current sky stays") from None
     server.loop.renderer_changed()
     server.loop.event("sky", **{k: p[k] for k in p if p[k] is not None and k != "prepared"})

@@ -297,19 +297,18 @@ class Server:
             raise RuntimeError(f"{what}: this rig has no renderer (pose-only)")
         return self.renderer
 
-    def prepare_scene(self, scene, command: str = "load_scene"):
-        """The work of loading `scene` (a name, file path, spec or `Scene`) while frames go on: parsing, buffers, far
-        field and far layer (in the scene's own process), then the meshes' upload a slice per frame in the loop's
-        idle time, then a far layer fresh at the eye; None for a renderer that cannot prepare (it then loads in
-        `load_scene`). command: the command it serves, named in its errors."""
-        renderer = self.require_renderer(command)
+    def prepare_scene(self, scene: str | dict):
+        """The work of loading `scene` while frames go on: parsing, buffers, far field and far layer (in the scene's
+        own process), then the meshes' upload a slice per frame in the loop's idle time, then a far layer fresh
+        at the eye; None for a renderer that cannot prepare (it then loads in `load_scene`)."""
+        renderer = self.require_renderer("load_scene")
         if not hasattr(renderer, "prepare_scene"):
             return None
         loop = self.loop
         try:
             prepared = renderer.prepare_scene(scene, pose=lambda: loop.pose)
         except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
-            raise self._scene_failed(scene, exc, command) from None
+            raise self._scene_failed(scene, exc) from None
         try:
             while not loop.when_idle(renderer.upload_step, prepared).result(UPLOAD_STEP_WAIT_S):
                 pass
@@ -317,7 +316,7 @@ class Server:
             pass
         except Exception as exc:  # the GL driver refused the upload: nothing of the scene is kept
             prepared.release()
-            raise self._scene_failed(scene, exc, command) from None
+            raise self._scene_failed(scene, exc) from None
         renderer.await_layer(prepared, lambda: loop.pose)  # the eye walked on meanwhile
         return prepared
 
@@ -337,11 +336,10 @@ class Server:
             self.trial_log.add_scene(self.clock.now(), self.scene_name, digest)
         self.loop.event("scene_loaded", scene=scene, sha256=digest)
 
-    def _scene_failed(self, scene, exc: BaseException, command: str = "load_scene") -> RuntimeError:
+    def _scene_failed(self, scene: str | dict, exc: BaseException) -> RuntimeError:
         kept = "no scene was loaded before" if self.scene_name is None else \
             f"the current scene {self.scene_name!r} stays on the dome"
-        shown = scene if isinstance(scene, (str, dict)) else getattr(scene, "name", type(scene).__name__)
-        return RuntimeError(f"{command}: scene {shown!r} failed to load ({exc}); {kept}")
+        return RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); {kept}")
 
     def trial_start(self, name: str, metadata: dict, folder: str = "") -> dict[str, Any]:
         """Open the trial log `<folder or [log] dir>/<rig>_<time>_<name>.h5`; reply {"path": its absolute path}."""
