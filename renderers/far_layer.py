@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import math
 import os
+import queue
+import threading
 import time
 
 import numpy as np
@@ -439,7 +441,9 @@ def _empty_tables(grid: TableGrid, buffer=None) -> tuple[np.ndarray, np.ndarray]
 
 class _Worker:
     """The async builder: a child interpreter with its own GL context, `TABLE_SLOTS` tables in shared memory. A new
-    child gets the objects and far field pickled; a scene's own process (`process`) has them already."""
+    child gets the objects and far field pickled; a scene's own process (`process`) has them already. Messages go
+    out in order through a thread of their own: a new far field (7 MB for the habitat) takes 10-20 ms to pass the
+    pipe, which the frame that sends it must not wait for."""
 
     def __init__(self, far_field: FarFieldTable, args: tuple, nice: int, process=None):
         from multiprocessing import shared_memory
@@ -456,11 +460,20 @@ class _Worker:
         names = [s.name for s in self._shm]
         self.busy = False
         self.error: str | None = None
-        try:
-            self._conn.send((names, nice) if process is not None else
-                            (names, nice, far_field.table_gb, far_field.table_uv, g, args))
-        except (OSError, EOFError) as exc:
-            self.error = f"far-layer process gone: {exc}"
+        self._outbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._sender = threading.Thread(target=self._send_all, name="far-layer-send", daemon=True)
+        self._sender.start()
+        self._outbox.put((names, nice) if process is not None else
+                         (names, nice, far_field.table_gb, far_field.table_uv, g, args))
+
+    def _send_all(self) -> None:
+        """The sending thread: each message in the order given, until None."""
+        while (message := self._outbox.get()) is not None:
+            try:
+                self._conn.send(message)
+            except (OSError, EOFError) as exc:
+                self.error = f"far-layer process gone: {exc}"
+                return
 
     @property
     def pid(self) -> int:
@@ -469,11 +482,7 @@ class _Worker:
     def send(self, message: tuple) -> None:
         if self.error is not None:
             return
-        try:
-            self._conn.send(message)
-        except (OSError, EOFError) as exc:
-            self.error = f"far-layer process gone: {exc}"
-            return
+        self._outbox.put(message)
         if message[0] == "build":
             self.busy = True
 
@@ -493,10 +502,9 @@ class _Worker:
         return out
 
     def close(self) -> None:
-        try:
-            self._conn.send(("stop",))
-        except (OSError, EOFError):
-            pass
+        self._outbox.put(("stop",))
+        self._outbox.put(None)
+        self._sender.join(5)
         if not self._child.wait(5):
             self._child.kill()
         self._child.close()
