@@ -30,10 +30,12 @@ def test_a_command_cut_short_by_the_runs_end_is_no_error_and_no_reply_time():
                       ("load_scene", 10.0, 12.5, "load_scene: the server is not running"),
                       ("load_scene", 3.0, 4.0, "load_scene: scene 'x' failed to load")]
     t = np.arange(0.0, 12.0, 0.5)
-    summary = script.summary({"t_start": t, "late": (t == 6.0).astype(np.uint8)})["load_scene"]
+    summary = script.summary({"t_start": t, "late": (t == 6.0).astype(np.uint8),
+                              "full_render": ((t == 6.0) | (t == 9.0)).astype(np.uint8)})["load_scene"]
     assert summary["sent"] == 2 and summary["cut_by_the_end"] == 1
     assert summary["errors"] == ["load_scene: scene 'x' failed to load"]
     assert summary["reply"]["max_ms"] == 2000.0 and summary["late_frames_around"] == 1
+    assert summary["full_frames_around"] == 1  # 9.0 is 2 s after the reply at 7.0
 
 
 def test_every_scripted_command_has_its_option_and_a_bad_interval_is_named():

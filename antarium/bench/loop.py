@@ -212,9 +212,11 @@ class ScriptedCommands:
             self._thread.join(10.0)
 
     def summary(self, frames: dict[str, np.ndarray]) -> dict[str, Any]:
-        """Per kind: how many were sent, refused, their reply times, and the late frames around them."""
+        """Per kind: how many were sent, refused, their reply times, and the late frames (and those drawn in full: no
+        far layer for them) around them."""
         out: dict[str, Any] = {}
         t, late = frames["t_start"], frames["late"].astype(bool)
+        full = frames["full_render"].astype(bool) if "full_render" in frames else np.zeros(len(t), dtype=bool)
         end = t[-1] if len(t) else -np.inf
         for kind in self.every:
             done = [r for r in self.records if r[0] == kind]
@@ -226,7 +228,8 @@ class ScriptedCommands:
             out[kind] = {"sent": len(rows), "cut_by_the_end": len(done) - len(rows),
                          "errors": [r[3] for r in rows if r[3]][:3],
                          "reply": _pct(replies) if len(rows) else None,
-                         "late_frames_around": int((late & around).sum()), "frames_around": int(around.sum())}
+                         "late_frames_around": int((late & around).sum()), "frames_around": int(around.sum()),
+                         "full_frames_around": int((full & around).sum())}
         return out
 
 
@@ -268,8 +271,9 @@ def _print(r: dict[str, Any]) -> None:
     for kind, c in (r.get("commands") or {}).items():
         errors = f"; ERRORS: {' | '.join(c['errors'])}" if c["errors"] else ""
         errors += f"; {c['cut_by_the_end']} more cut short by the run's end" if c["cut_by_the_end"] else ""
-        print(f"  {kind:<14}  {c['sent']} sent, reply {_fmt(c['reply'])}; {c['late_frames_around']} late of the "
-              f"{c['frames_around']} frames from sending to {AFTER_REPLY_S:g} s after the reply{errors}")
+        print(f"  {kind:<14}  {c['sent']} sent, reply {_fmt(c['reply'])}; {c['late_frames_around']} late "
+              f"({c['full_frames_around']} drawn in full) of the {c['frames_around']} frames from sending to "
+              f"{AFTER_REPLY_S:g} s after the reply{errors}")
     m = r.get("machine")
     if m is not None:
         for cpu, p in m["probes"].items():
