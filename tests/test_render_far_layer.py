@@ -346,11 +346,11 @@ def _sun_moved(scene):
     return [moved if layer is sky else layer for layer in scene.far]
 
 
-@pytest.mark.parametrize("far_layer", ["off", "sync"])
-def test_a_new_sky_keeps_the_objects_and_every_edit_made_while_it_was_prepared(dome, far_layer, monkeypatch):
-    """`set_far` swaps the far field (table, far layer's field) and nothing else: the meshes are not built again,
-    and an object edit or a contrast made between `prepare_far` and the swap stay (the frame equals a full render
-    of the scene with the new sky and the same edits)."""
+@pytest.mark.parametrize(("far_layer", "path"), [("off", "cpu"), ("sync", "cpu"), ("off", "gpu")])
+def test_a_new_sky_keeps_the_objects_and_every_edit_made_while_it_was_prepared(dome, far_layer, path, monkeypatch):
+    """`set_far` swaps the far field (table, far layer's field; on the GPU path the table the device looks up) and
+    nothing else: the meshes are not built again, and an object edit or a contrast made between `prepare_far` and
+    the swap stay (the frame equals a full render of the scene with the new sky and the same edits)."""
     import dataclasses
 
     from antarium.renderers import renderer as renderer_module
@@ -365,7 +365,7 @@ def test_a_new_sky_keeps_the_objects_and_every_edit_made_while_it_was_prepared(d
     expected = drive_to_radiance(ref.render(pose, t=0.0))
     ref.release()
 
-    r = Renderer(dome, far_layer=far_layer)
+    r = Renderer(dome, far_layer=far_layer, path=path)
     try:
         r.set_scene(small_habitat())
         before = drive_to_radiance(r.render(pose, t=0.0))
