@@ -32,19 +32,69 @@ def decode_mesh_text(data: bytes, name: str) -> str:
     return text
 
 
+#: MTL colour statements: "K? r g b", "K? r" (grey: g and b default to r), "K? spectral file [factor]", "K? xyz x y z"
+MTL_COLOURS = ("Ka", "Kd", "Ks", "Ke", "Tf")
+
+
+def read_mtl(text: str) -> tuple[str, dict[str, tuple[float, float, float]]]:
+    """An MTL file's text as trimesh reads it, and {material name: Kd (r, g, b), 0..1 sRGB} of the materials that
+    state one. trimesh drops every material of a file that has a one-number colour ("Kd 0.3") or a spectral or
+    xyz one: the first is written out in full here, the others (which the dome's channels cannot take) are left
+    out, their material white. A material without Kd gets a diffuse of 0.4 in trimesh, so the Kd stated is
+    kept here. MeshTextError for a colour that is none of these."""
+    out, kd, name = [], {}, None
+    for line in text.splitlines():
+        words = line.split()
+        if len(words) >= 2 and words[0] == "newmtl":
+            name = " ".join(words[1:])
+        elif words and words[0] in MTL_COLOURS:
+            if words[1:2] in (["spectral"], ["xyz"]):
+                out.append(f"# {line}")
+                continue
+            try:
+                rgb = [float(w) for w in words[1:]]
+            except ValueError:
+                rgb = []
+            if len(rgb) not in (1, 3):
+                raise MeshTextError(f"material {name!r}: {line.strip()!r}; allowed: {words[0]} r g b, or "
+                                    f"{words[0]} r (grey)")
+            rgb = rgb * 3 if len(rgb) == 1 else rgb
+            if words[0] == "Kd" and name is not None:
+                kd[name] = tuple(rgb)
+            line = f"{words[0]} {rgb[0]!r} {rgb[1]!r} {rgb[2]!r}"
+        out.append(line)
+    return "\n".join(out) + "\n", kd
+
+
 def load_text_mesh(path: Path):
-    """trimesh.Scene of an OBJ file, with its MTL files decoded the same way (resolved next to it)."""
+    """trimesh.Scene of an OBJ file, with its MTL files decoded the same way (resolved next to it) and read by
+    `read_mtl`; the Kd of every material that states one in `scene.metadata["mtl_kd"]`."""
     import io
 
     import trimesh
+
+    kd: dict[str, tuple[float, float, float]] = {}
+    refused: list[MeshTextError] = []  # trimesh skips a material file whose reading raises: raised after it
 
     class _Utf8Resolver(trimesh.resolvers.FilePathResolver):
         def get(self, name: str) -> bytes:
             data = super().get(name)
             if Path(name).suffix.lower() in TEXT_SUFFIXES:
-                return decode_mesh_text(data, name).encode("utf-8")
+                try:
+                    text = decode_mesh_text(data, name)
+                    if Path(name).suffix.lower() == ".mtl":
+                        text, stated = read_mtl(text)
+                        kd.update(stated)
+                except MeshTextError as exc:
+                    refused.append(exc)
+                    raise
+                return text.encode("utf-8")
             return data
 
     text = decode_mesh_text(path.read_bytes(), str(path))
-    return trimesh.load(io.BytesIO(text.encode("utf-8")), file_type=path.suffix.lower().lstrip("."),
-                        resolver=_Utf8Resolver(str(path)), force="scene", process=False)
+    scene = trimesh.load(io.BytesIO(text.encode("utf-8")), file_type=path.suffix.lower().lstrip("."),
+                         resolver=_Utf8Resolver(str(path)), force="scene", process=False)
+    if refused:
+        raise refused[0]
+    scene.metadata["mtl_kd"] = kd
+    return scene

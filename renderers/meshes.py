@@ -1,8 +1,8 @@
 """Mesh worlds from files through trimesh (OBJ, PLY, GLB/GLTF, STL): metres, +z up.
 
 Each geometry node becomes a named `SceneObject`: its position is the node's translation, its vertices the
-rest of the node transform. Vertex colours and textures are sRGB and map to G, B, UV by `channels`;
-meshes without colour are mid-grey.
+rest of the node transform. Vertex colours, textures and material colours (glTF's base colour, OBJ's MTL Kd) are
+sRGB and map to G, B, UV by `channels`; meshes without colour are mid-grey.
 """
 
 from __future__ import annotations
@@ -21,15 +21,16 @@ DEFAULT_GREY = 0.5
 GLTF_TO_WORLD = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
 
 
-def _colours_and_texture(geom, name: str):
-    """(V, 3) linear G, B, UV vertex colours, and (uv, texture) or (None, None)."""
+def _colours_and_texture(geom, name: str, mtl_kd: dict):
+    """(V, 3) linear G, B, UV vertex colours, and (uv, texture) or (None, None). mtl_kd: an OBJ's {material name:
+    Kd}, the material's colour (it multiplies its texture, as glTF's base colour factor does)."""
     n = len(geom.vertices)
     visual = getattr(geom, "visual", None)
     kind = getattr(visual, "kind", None)
     if kind == "texture":
         material = visual.material
         image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
-        factor = getattr(material, "baseColorFactor", None)
+        factor = mtl_kd.get(getattr(material, "name", None), getattr(material, "baseColorFactor", None))
         base = np.ones(3) if factor is None else np.asarray(factor, dtype=np.float64)[:3] / (
             255.0 if np.asarray(factor).dtype.kind in "iu" else 1.0)
         colours = np.repeat(rgb_to_gbu(srgb_to_linear(base))[None, :], n, axis=0)
@@ -72,7 +73,7 @@ def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
             continue
         name = str(node)
         try:
-            colours, uv, texture = _colours_and_texture(geom, name)
+            colours, uv, texture = _colours_and_texture(geom, name, loaded.metadata.get("mtl_kd", {}))
             t = np.asarray(transform, dtype=np.float64)
             if path.suffix.lower() in (".glb", ".gltf"):
                 t = GLTF_TO_WORLD @ t
