@@ -29,6 +29,7 @@ import os
 import queue
 import threading
 import time
+import weakref
 
 import numpy as np
 
@@ -461,25 +462,23 @@ class _Worker:
         self.busy = False
         self.error: str | None = None
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
-        self._sender = threading.Thread(target=self._send_all, name="far-layer-send", daemon=True)
+        self._failed: list[str] = []  # the sending thread's error
+        # the thread holds the queue and the connection, not the worker: a worker dropped without `close` still
+        # ends it (and, with the connection, its child process)
+        self._sender = threading.Thread(target=_send_all, args=(self._outbox, self._conn, self._failed),
+                                        name="far-layer-send", daemon=True)
         self._sender.start()
+        weakref.finalize(self, self._outbox.put, None)
         self._outbox.put((names, nice) if process is not None else
                          (names, nice, far_field.table_gb, far_field.table_uv, g, args))
-
-    def _send_all(self) -> None:
-        """The sending thread: each message in the order given, until None."""
-        while (message := self._outbox.get()) is not None:
-            try:
-                self._conn.send(message)
-            except (OSError, EOFError) as exc:
-                self.error = f"far-layer process gone: {exc}"
-                return
 
     @property
     def pid(self) -> int:
         return self._child.pid
 
     def send(self, message: tuple) -> None:
+        if self._failed and self.error is None:
+            self.error = self._failed[0]
         if self.error is not None:
             return
         self._outbox.put(message)
@@ -489,6 +488,8 @@ class _Worker:
     def results(self):
         """Layers finished since the last call: (eye, generation, table index) each."""
         out = []
+        if self._failed and self.error is None:
+            self.error = self._failed[0]
         try:
             while self.error is None and self._conn.poll():
                 msg = self._conn.recv()
@@ -512,6 +513,17 @@ class _Worker:
         for s in self._shm:
             s.close()
             s.unlink()
+
+
+def _send_all(outbox: queue.SimpleQueue, conn, failed: list[str]) -> None:
+    """A `_Worker`'s sending thread: each message in the order given, until None (or the first failure, in
+    `failed`)."""
+    while (message := outbox.get()) is not None:
+        try:
+            conn.send(message)
+        except (OSError, EOFError) as exc:
+            failed.append(f"far-layer process gone: {exc}")
+            return
 
 
 def _serve(conn_arg: str) -> None:  # pragma: no cover - runs in the child process

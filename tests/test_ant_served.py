@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import wait_for
 
 from antarium import bus
 from antarium.ant.agent import learning_walk
@@ -68,11 +69,16 @@ def test_the_ant_sees_the_frames_the_server_sends(model_file, tmp_path):
     with Server(served_config(config), echo=lambda line: None) as server:
         with served_ant(model, config, eye_params) as ant:
             ant.place(*ROUTE.start, 0.0)
-            ant.frame()
-            ant.frame()
-            leds = ant.read_leds()
-            sent = server.loop.last_frame
-            assert np.corrcoef(ant.eye.look(leds).pns()[0], ant.eye.look(sent).pns()[0])[0, 1] > 0.95
+            placed = server.loop.frame
+
+            def similarity() -> float:
+                """Of the ant's view of the frame its dome holds and of the frame the server sent last."""
+                ant.frame()
+                leds, sent = ant.read_leds(), server.loop.last_frame
+                return np.corrcoef(ant.eye.look(leds).pns()[0], ant.eye.look(sent).pns()[0])[0, 1]
+
+            # on a loaded machine the dome may still hold a frame from before the placement for a few frames
+            assert wait_for(lambda: server.loop.frame > placed + 2 and similarity() > 0.95, 10.0)
             assert (ant.position[0], ant.position[1]) == pytest.approx(ROUTE.start, abs=0.01)
 
 
