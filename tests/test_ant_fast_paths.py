@@ -34,6 +34,25 @@ def test_kernel_novelty_equals_argpartition_for_every_batch_size():
     assert fast[:, 0].min() < 0.5 and fast[:, 1].max() == 1.0  # the learned directions are familiar
 
 
+@pytest.mark.parametrize("kind", ["normal", "ties", "constant", "spread"])
+def test_the_kernels_lower_bound_is_reached_by_k_values_and_never_above_the_kth_largest(kind):
+    """The block maxima's bound that decides which KCs are read at all: if it were above the k-th largest, an
+    active KC would be missed."""
+    from antarium.ant.kc_kernel import _BINS, _lower_bound
+
+    rng = np.random.default_rng(3)
+    counts = np.empty(_BINS, np.int64)
+    for trial in range(200):
+        n = int(rng.integers(1, 1500))
+        values = {"normal": rng.normal(5.0, 1.0, n), "ties": rng.integers(0, 4, n) * 0.25,
+                  "constant": np.full(n, 2.5), "spread": rng.normal(0.0, 1.0, n) * 10.0 ** rng.integers(-30, 30)}[kind]
+        values = values.astype(np.float32)
+        for k in {1, max(1, n // 100), n}:
+            low = _lower_bound(values, k, counts)
+            assert (values >= low).sum() >= k and low <= np.sort(values)[-k], (kind, trial, n, k)
+            assert low in values
+
+
 def test_kernel_breaks_ties_toward_lower_kc_and_handles_all_active():
     kc = KenyonCells(N_PN, 1_000, 4, 0.01, seed=1)
     mbon = MBON(kc.n_kc)

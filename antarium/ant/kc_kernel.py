@@ -4,8 +4,9 @@
 MBON in `weights`:
   EP = the sum of each KC's PNs, for 64 PN vectors at once (SIMD over the vectors; the PNs summed in ascending
   index order in float32, the order of the sparse product in `KenyonCells.excitation`, so EP is the same),
-  the k-th largest EP of each vector from the candidates above a lower bound (the k-th largest of the maxima of
-  blocks of 16 KCs: only the blocks reaching it are read), and lambda = undepressed active KCs / k.
+  the k-th largest EP of each vector from the candidates above a lower bound (a value that k of the maxima of
+  blocks of 16 KCs reach, from their histogram: only the blocks reaching it are read), and lambda = undepressed
+  active KCs / k.
 Ties at the k-th value (equal EP) are broken toward the lower KC index; `np.argpartition` breaks them in an
 unspecified way, so the two agree exactly whenever the k-th largest EP is unique (any natural image).
 Compiled on first use and cached on disk; single-threaded (one core per model in a sweep).
@@ -18,6 +19,7 @@ from numba import njit
 
 _GROUP = 64  # PN vectors whose EPs are summed together (a 61-direction scan is one group)
 _BLOCK = 16  # KCs per block: summed together, then written out direction by direction; one maximum each
+_BINS = 128  # of the histogram of a vector's block maxima that bounds its k-th largest EP from below
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy", boundscheck=False)
@@ -111,10 +113,40 @@ def _kth_largest(a, n, k):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+def _lower_bound(values, k, counts):
+    """A value that at least k of `values` (k <= len) reach, close below their k-th largest: the smallest of those
+    in the histogram bins (len(counts) of them, from their minimum to their maximum) from the one holding the k-th
+    largest up. Three passes, no sorting."""
+    n = values.shape[0]
+    lo = hi = values[0]
+    for i in range(n):
+        lo = min(lo, values[i])
+        hi = max(hi, values[i])
+    if not hi > lo:
+        return lo
+    bins = counts.shape[0]
+    scale = bins / (np.float64(hi) - np.float64(lo))
+    counts[:] = 0
+    for i in range(n):
+        counts[min(bins - 1, int((values[i] - np.float64(lo)) * scale))] += 1
+    first, total = 0, 0
+    for b in range(bins - 1, -1, -1):
+        total += counts[b]
+        if total >= k:
+            first = b
+            break
+    low = hi
+    for i in range(n):
+        if min(bins - 1, int((values[i] - np.float64(lo)) * scale)) >= first:
+            low = min(low, values[i])
+    return low
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
 def _select(ep_t, k, block_max, weights, out):
     """novelty (G, n_out) float64 into `out` from EP (G, n_kc) and the MBONs' weights (n_out, n_kc) uint8.
 
-    The k-th largest block maximum is a lower bound of the k-th largest EP (k blocks hold a value at least that
+    A value that k block maxima reach is a lower bound of the k-th largest EP (k blocks hold a value at least that
     large), so only the blocks whose maximum reaches it can hold active KCs."""
     n_kc = ep_t.shape[1]
     n_blocks = block_max.shape[1]
@@ -122,18 +154,18 @@ def _select(ep_t, k, block_max, weights, out):
     n_out = weights.shape[0]
     cand = np.empty(n_kc, np.int32)
     vals = np.empty(n_kc, np.float32)
-    scratch = np.empty(max(n_kc, n_blocks), np.float32)
+    scratch = np.empty(n_kc, np.float32)
+    counts = np.empty(_BINS, np.int64)
     for d in range(out.shape[0]):
-        scratch[:n_blocks] = block_max[d]
-        low = _kth_largest(scratch, n_blocks, k)
+        low = _lower_bound(block_max[d], k, counts)
         n = 0
         for b in range(n_blocks):
             if block_max[d, b] >= low:
                 for c in range(b * size, min(n_kc, (b + 1) * size)):
-                    if ep_t[d, c] >= low:
-                        cand[n] = c
-                        vals[n] = ep_t[d, c]
-                        n += 1
+                    v = ep_t[d, c]
+                    cand[n] = c  # written always, kept only when it reaches the bound (no branch to mispredict)
+                    vals[n] = v
+                    n += v >= low
         scratch[:n] = vals[:n]
         kth = _kth_largest(scratch, n, k)
         ties_left = k
