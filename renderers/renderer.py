@@ -11,7 +11,6 @@ world-aligned cube texture sampled by the background pass. Scenes without meshes
 from __future__ import annotations
 
 import collections
-import dataclasses
 import functools
 import math
 import os
@@ -379,7 +378,8 @@ class Renderer:
         from .prepared import PreparedFar, SceneSettings
 
         scene = self._require_scene()
-        trial = dataclasses.replace(scene, far=list(far))  # checks the layers
+        # the far field alone: the objects are not read here (the loop's thread may be editing them meanwhile)
+        trial = Scene(far=list(far), name=scene.name)
         fwhm = self._fwhm
         table = FarFieldTable.of_scene(trial, self._directions, fwhm) if SceneSettings.of(self).table_ok(trial) \
             else None
@@ -416,7 +416,7 @@ class Renderer:
                 far = far.far
             far = self.prepare_far(far)
         had_table = self._table is not None
-        far_tex = self._make_far_texture(dataclasses.replace(scene, far=far.far)) if far.table is None else None
+        far_tex = self._make_far_texture(Scene(far=far.far, name=scene.name)) if far.table is None else None
         old_tex, self._far_tex = self._far_tex, far_tex
         scene.far, self._table = far.far, far.table
         if old_tex is not None:

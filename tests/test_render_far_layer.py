@@ -386,3 +386,26 @@ def test_a_new_sky_keeps_the_objects_and_every_edit_made_while_it_was_prepared(d
     up = dome.elevation > math.radians(30)
     assert np.abs(after - before)[up].sum(axis=1).mean() > 0.01  # the sky changed
     assert np.abs(after - expected).sum(axis=1).mean() < 0.004
+
+
+def test_a_new_sky_drawn_from_a_cube_texture(dome):
+    """A renderer that draws the far field from a cube texture (no table) gets the new sky's texture at the swap."""
+    import dataclasses
+
+    from antarium.renderers.library import build_scene
+
+    pose = Pose(0.0, 0.0, 0.0, 0.0)
+    base = build_scene("sky")
+    ref = Renderer(dome, fast_far_field=False)
+    ref.set_scene(dataclasses.replace(base, far=_sun_moved(base)))
+    expected = ref.render(pose, t=0.0).astype(np.int64)
+    ref.release()
+    r = Renderer(dome, fast_far_field=False)
+    try:
+        r.set_scene(build_scene("sky"))
+        before = r.render(pose, t=0.0).astype(np.int64)
+        r.set_far(r.prepare_far(_sun_moved(r.scene)))
+        after = r.render(pose, t=0.0).astype(np.int64)
+    finally:
+        r.release()
+    assert np.abs(after - before).max() > 1000 and np.abs(after - expected).max() <= 1
