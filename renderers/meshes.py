@@ -1,8 +1,8 @@
 """Mesh worlds from files through trimesh (OBJ, PLY, GLB/GLTF, STL): metres, +z up.
 
 Each geometry node becomes a named `SceneObject`: its position is the node's translation, its vertices the
-rest of the node transform. Vertex colours, textures and material colours (glTF's base colour, OBJ's MTL Kd) are
-sRGB and map to G, B, UV by `channels`; meshes without colour are mid-grey.
+rest of the node transform. Vertex colours, textures and material colours (glTF's base colour, OBJ's MTL Kd for a
+material without a texture) are sRGB and map to G, B, UV by `channels`; meshes without colour are mid-grey.
 """
 
 from __future__ import annotations
@@ -23,18 +23,23 @@ GLTF_TO_WORLD = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0
 
 def _colours_and_texture(geom, name: str, mtl_kd: dict):
     """(V, 3) linear G, B, UV vertex colours, and (uv, texture) or (None, None). mtl_kd: an OBJ's {material name:
-    Kd}, the material's colour (it multiplies its texture, as glTF's base colour factor does)."""
+    Kd}: the colour of a material drawn without a texture (with one, the texture alone gives the colour, as
+    Blender's importer and the photogrammetry programs that write such files mean it; the MTL specification
+    would multiply it by Kd, often a placeholder such as 0.8 there)."""
     n = len(geom.vertices)
     visual = getattr(geom, "visual", None)
     kind = getattr(visual, "kind", None)
     if kind == "texture":
         material = visual.material
         image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
-        factor = mtl_kd.get(getattr(material, "name", None), getattr(material, "baseColorFactor", None))
+        textured = image is not None and visual.uv is not None and len(visual.uv) == n
+        factor = getattr(material, "baseColorFactor", None)
+        if not textured:
+            factor = mtl_kd.get(getattr(material, "name", None), factor)
         base = np.ones(3) if factor is None else np.asarray(factor, dtype=np.float64)[:3] / (
             255.0 if np.asarray(factor).dtype.kind in "iu" else 1.0)
         colours = np.repeat(rgb_to_gbu(srgb_to_linear(base))[None, :], n, axis=0)
-        if image is not None and visual.uv is not None and len(visual.uv) == n:
+        if textured:
             img = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
             if max(img.shape[:2]) > MAX_TEXTURE_SIDE:
                 raise ValueError(f"texture of object {name!r} is {img.shape[1]}x{img.shape[0]} pixels; the largest "

@@ -54,6 +54,19 @@ def test_each_material_gets_its_mtl_colour(tmp_path):
     assert np.allclose(colours, expected, atol=1e-6)
 
 
+def test_a_textured_material_takes_its_texture_alone(tmp_path):
+    from PIL import Image
+
+    from antarium.renderers.meshes import load_mesh_objects
+
+    Image.fromarray(np.full((4, 4, 3), 200, np.uint8)).save(tmp_path / "bark.png")
+    (tmp_path / "t.mtl").write_text("newmtl bark\nKd 0.8 0.8 0.8\nmap_Kd bark.png\n")
+    (tmp_path / "t.obj").write_text("mtllib t.mtl\nv 0 1 0\nv 1 1 0\nv 0 1 1\nvt 0 0\nvt 1 0\nvt 0 1\n"
+                                    "usemtl bark\nf 1/1 2/2 3/3\n")
+    (obj,) = load_mesh_objects(tmp_path / "t.obj").values()
+    assert obj.mesh.texture is not None and np.allclose(obj.mesh.colours, [1.0, 1.0, 0.25])  # Kd not applied
+
+
 def test_a_kd_that_is_not_three_numbers_is_named(tmp_path):
     (tmp_path / "bad.mtl").write_text("newmtl leaf\nKd green\n")
     (tmp_path / "bad.obj").write_text("mtllib bad.mtl\nusemtl leaf\n" + TRIANGLE.decode())
