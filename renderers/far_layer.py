@@ -352,6 +352,11 @@ class FarLayer:
         return ahead is not None and ahead[1] == self.generation + 1 \
             and float(np.linalg.norm(np.asarray(eye, dtype=np.float64) - ahead[0])) <= self.max_shift
 
+    @property
+    def ahead(self) -> tuple | None:
+        """The edit sent ahead (`edit_ahead`) and not yet made, or None."""
+        return self._ahead_edit
+
     def withdraw(self, edit: tuple, undo: tuple) -> None:
         """Async: the edit sent ahead (`edit_ahead`) will not be made after all: the builder gets `undo`, the edit
         that restores what `edit` changed, if it had `edit` already. Nothing when `edit` is not the one ahead."""

@@ -479,8 +479,17 @@ class Renderer:
                 "max_latency_s": layer.max_latency if layer is not None else 0.0}
 
     def _layer_edit(self, edit: tuple) -> None:
-        if self._layer is not None:
-            self._layer.edit(edit)
+        """An edit of the scene, to the far layer. A new far field sent ahead to its builder (a `sky` change being
+        prepared) is withdrawn first when this edit is another: the layers built for this edit must not show a
+        sky that is not on the dome yet (the sky's swap then sends it again, as any edit)."""
+        layer = self._layer
+        if layer is None:
+            return
+        ahead = layer.ahead
+        if ahead is not None and ahead[0] == "far" and self._table is not None \
+                and not (edit[0] == "far" and edit[1] is ahead[1]):
+            layer.withdraw(ahead, ("far", self._table))
+        layer.edit(edit)
 
     def _ensure_far_texture(self) -> None:
         """The far field as a cube texture, for a scene whose frames use the table (a cube-map picture)."""

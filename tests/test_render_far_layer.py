@@ -409,3 +409,24 @@ def test_a_new_sky_drawn_from_a_cube_texture(dome):
     finally:
         r.release()
     assert np.abs(after - before).max() > 1000 and np.abs(after - expected).max() <= 1
+
+
+def test_another_edit_withdraws_a_new_sky_sent_ahead_first(dome, monkeypatch):
+    """An object edit made while a sky change's far field is ahead in the builder (another client's command): the
+    builder goes back to the field on the dome before it gets the edit, so that no layer shows the new sky early;
+    the sky's own swap then sends its field again."""
+    from antarium.renderers import far_layer
+    from antarium.renderers.farfield import FarFieldTable, TableGrid
+
+    layer, builder, eye = _async_layer(dome, monkeypatch)
+    grid = TableGrid(dome.directions, math.radians(3.0))
+    shown, new = (FarFieldTable(grid, *far_layer._empty_tables(grid)) for _ in range(2))
+    r = Renderer.__new__(Renderer)  # the renderer's bookkeeping only: its layer and table
+    r._layer, r._table = layer, shown
+    assert layer.edit_ahead(("far", new), eye)
+    assert layer.current(eye) is not None and builder.sent[-2] == ("edit", ("far", new))
+    r._layer_edit(("hide", "tree"))
+    assert builder.sent[-2:] == [("edit", ("far", shown)), ("edit", ("hide", "tree"))] and layer.ahead is None
+    r._table = new
+    r._layer_edit(("far", new))  # the sky's swap
+    assert builder.sent[-1] == ("edit", ("far", new))
