@@ -57,14 +57,19 @@ def test_a_second_placement_walks_only_what_came_since_and_places_it(monkeypatch
     stop = threading.Event()
     child = None
 
+    def seen() -> tuple:
+        """What `apply` compares: this process's threads and the children of this ("the loop's") thread."""
+        return set(os.listdir("/proc/self/task")), sorted(realtime._thread_children("self", [me]))
+
     def walks_of_an_apply() -> int:
-        """Walks (0 or 1) of one `apply` right after another, with no thread of this process coming or going in
-        between (a thread of an earlier test that ends is something that came: retried then)."""
+        """Walks (0 or 1) of one `apply` right after another, with nothing coming or going in between (a thread
+        or child process of an earlier test that ends is something that changed: retried then)."""
         for _ in range(20):
+            first = seen()
             isolation.apply(me)
-            before, n = set(os.listdir("/proc/self/task")), len(walks)
+            before, n = seen(), len(walks)
             isolation.apply(me)
-            if set(os.listdir("/proc/self/task")) == before:
+            if first == before == seen():
                 break
         return len(walks) - n
 
