@@ -37,18 +37,18 @@ def test_utf8_text_is_kept_as_it_is():
 
 
 def test_each_material_gets_its_mtl_colour(tmp_path):
-    """Stop 28 noted it: every OBJ material drew white, its Kd ignored (trimesh keeps Kd as a diffuse that a material
+    """Noted since stop 25: every OBJ material drew white, its Kd ignored (trimesh keeps Kd as a diffuse that a material
     without Kd also has, at 0.4). Kd is the material's sRGB colour; one number is a grey; a material without Kd, or
     with a spectral one, is white. trimesh alone drops every material of this file (grey objects)."""
     from antarium.renderers.channels import rgb_to_gbu, srgb_to_linear
     from antarium.renderers.meshes import load_mesh_objects
 
-    (tmp_path / "two.mtl").write_text("newmtl leaf\nKd 0.1 0.7 0.2\nnewmtl bark\nKd 0.4 0.25 0.1\nKs 0.5\n"
+    (tmp_path / "four.mtl").write_text("newmtl leaf\nKd 0.1 0.7 0.2\nnewmtl bark\nKd 0.4 0.25 0.1\nKs 0.5\n"
                                       "newmtl plain\nNs 10\nKd spectral sky.rfl\nnewmtl grey\nKd 0.3\n")
-    (tmp_path / "two.obj").write_text("mtllib two.mtl\nv 0 1 0\nv 1 1 0\nv 0 1 1\nv 1 1 1\nv 2 1 1\n"
+    (tmp_path / "four.obj").write_text("mtllib four.mtl\nv 0 1 0\nv 1 1 0\nv 0 1 1\nv 1 1 1\nv 2 1 1\n"
                                       "usemtl leaf\nf 1 2 3\nusemtl bark\nf 2 4 3\nusemtl plain\nf 2 5 4\n"
                                       "usemtl grey\nf 1 3 5\n")
-    colours = sorted(tuple(o.mesh.colours[0]) for o in load_mesh_objects(tmp_path / "two.obj").values())
+    colours = sorted(tuple(o.mesh.colours[0]) for o in load_mesh_objects(tmp_path / "four.obj").values())
     kds = [(0.1, 0.7, 0.2), (0.4, 0.25, 0.1), (1.0, 1.0, 1.0), (0.3, 0.3, 0.3)]  # "plain" states no Kd: white
     expected = sorted(tuple(rgb_to_gbu(srgb_to_linear(np.array(kd)))) for kd in kds)
     assert np.allclose(colours, expected, atol=1e-6)
