@@ -37,7 +37,7 @@ def test_utf8_text_is_kept_as_it_is():
 
 
 def test_each_material_gets_its_mtl_colour(tmp_path):
-    """Noted since stop 25: every OBJ material drew white, its Kd ignored (trimesh keeps Kd as a diffuse that a material
+    """Noted since stop 23: every OBJ material drew white, its Kd ignored (trimesh keeps Kd as a diffuse that a material
     without Kd also has, at 0.4). Kd is the material's sRGB colour; one number is a grey; a material without Kd, or
     with a spectral one, is white. trimesh alone drops every material of this file (grey objects)."""
     from antarium.renderers.channels import rgb_to_gbu, srgb_to_linear
