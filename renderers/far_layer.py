@@ -481,9 +481,13 @@ class _Worker:
     def pid(self) -> int:
         return self._child.pid
 
-    def send(self, message: tuple) -> None:
+    def _sender_failed(self) -> None:
+        """The sending thread's error, once, as the worker's."""
         if self._failed and self.error is None:
             self.error = self._failed[0]
+
+    def send(self, message: tuple) -> None:
+        self._sender_failed()
         if self.error is not None:
             return
         self._outbox.put(message)
@@ -493,8 +497,7 @@ class _Worker:
     def results(self):
         """Layers finished since the last call: (eye, generation, table index) each."""
         out = []
-        if self._failed and self.error is None:
-            self.error = self._failed[0]
+        self._sender_failed()
         try:
             while self.error is None and self._conn.poll():
                 msg = self._conn.recv()

@@ -216,7 +216,7 @@ class ScriptedCommands:
         far layer for them) around them."""
         out: dict[str, Any] = {}
         t, late = frames["t_start"], frames["late"].astype(bool)
-        full = frames["full_render"].astype(bool) if "full_render" in frames else np.zeros(len(t), dtype=bool)
+        full = frames["full_render"].astype(bool)
         end = t[-1] if len(t) else -np.inf
         for kind in self.every:
             done = [r for r in self.records if r[0] == kind]
