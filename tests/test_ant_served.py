@@ -92,3 +92,30 @@ def test_a_config_that_cannot_serve_the_ant_is_refused_naming_the_key(tmp_path, 
     config[section] = {**config[section], **value}
     with pytest.raises(ValueError, match=message):
         served_config(config)
+
+
+
+def test_the_ant_dome_settles_on_every_frame_sent_before_it():
+    """`DomeHost.settle` returns once the dome handled every datagram queued before it: of frames a link sent in
+    a burst, the last is shown (the served ant reads its view only after this); a dome that does not answer in
+    time is an error."""
+    from antarium.ant.served import DomeHost
+    from antarium.firmware_proto.udp import UdpLink
+    from antarium.firmware_proto.video import decode_frame, encode_frame
+
+    dome = DomeHost("127.0.0.1", free_udp_port("127.0.0.1"))
+    dome.start()
+    link = UdpLink(dome.host, dome.port)
+    try:
+        rng = np.random.default_rng(3)
+        frames = [rng.integers(0, 32768, (20350, 2), dtype=np.uint16) for _ in range(20)]
+        for frame in frames:
+            link.send_frame(frame)
+        dome.settle(5.0)
+        assert dome.stats()["frames_latched"] == 20
+        np.testing.assert_array_equal(dome.led_values(), decode_frame(encode_frame(frames[-1], 0)))
+        with dome._lock, pytest.raises(RuntimeError, match="did not answer in 0.2 s"):  # the dome busy throughout
+            dome.settle(0.2)
+    finally:
+        link.close()
+        dome.stop()

@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -73,6 +74,8 @@ class DomeHost:
         self._ready = threading.Event()
         self._error: BaseException | None = None
         self._thread: threading.Thread | None = None
+        self._probe: socket.socket | None = None
+        self._tag = 0
 
     def handle_datagram(self, payload) -> list[bytes]:
         with self._lock:
@@ -103,25 +106,55 @@ class DomeHost:
             self.stop()
             raise RuntimeError(f"the virtual ant's dome cannot listen on udp://{self.host}:{self.port}: "
                                f"{self._error or 'timed out'}")
+        self._probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._probe.connect((self.host, self.port))
+
+    def settle(self, timeout_s: float) -> None:
+        """Wait until the dome has handled every datagram that reached it before this call: it answers the HELLO
+        sent here only after them (one socket, read in order). Raises RuntimeError after `timeout_s`."""
+        from antarium.firmware_proto.control import encode_hello
+        from antarium.firmware_proto.errors import ProtocolError
+        from antarium.firmware_proto.replies import decode_reply
+        from antarium.firmware_proto.udp import MAX_DATAGRAM
+
+        self._tag = (self._tag + 1) % 256
+        self._probe.send(encode_hello(self._tag))
+        deadline = time.monotonic() + timeout_s
+        while (left := deadline - time.monotonic()) > 0:
+            self._probe.settimeout(left)
+            try:
+                reply = decode_reply(self._probe.recv(MAX_DATAGRAM))
+            except TimeoutError:
+                break
+            except ProtocolError:
+                continue
+            if reply.tag == self._tag:
+                return
+        raise RuntimeError(f"the virtual ant's dome on udp://{self.host}:{self.port} did not answer in {timeout_s} s")
 
     def stop(self) -> None:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(5.0)
+        if self._probe is not None:
+            self._probe.close()
 
 
 class ServedLoop:
     """The served rig's frame loop as the virtual ant sees it (the interface `VirtualAnt` uses of a `FrameLoop`).
 
     `step()` waits for the next frame slot on `clock`, lets the ant's trackball driver read (and publish) every
-    report due, then waits (bounded, `timeout_s`) for the pose of a frame the server began after that;
+    report due, then waits (bounded, `timeout_s`) for the pose of a frame the server began after that and, with
+    `settle` (`DomeHost.settle`), until the ant's dome shows that frame;
     `set_pose` is the rig's `set_pose` command; `event` keeps the ant's events (`events`) and hands them to
     `on_event`.
     """
 
     def __init__(self, rig, legs: TrackballLegs, clock: Clock, rate_hz: float, tether: str, pose_every: int = 1,
-                 timeout_s: float = 10.0, on_event: Callable[[float, str, dict], None] | None = None) -> None:
+                 timeout_s: float = 10.0, on_event: Callable[[float, str, dict], None] | None = None,
+                 settle: Callable[[float], None] | None = None) -> None:
         self.rig, self.legs, self.clock = rig, legs, clock
+        self.settle = settle
         self.source = legs.source
         self.tether = tether
         self.period = 1.0 / rate_hz
@@ -142,6 +175,8 @@ class ServedLoop:
         self.clock.sleep_until(self._next_t)
         self.source.read()  # every report due has been read and published; the server integrates the samples
         self.pose = self._next_pose()
+        if self.settle is not None:  # the server sent that frame before its pose: the dome shows it once settled
+            self.settle(self.timeout_s)
         self.frame += 1
 
     def _next_pose(self) -> Pose:
@@ -207,7 +242,7 @@ def served_ant(model, config: str | Path | dict[str, Any], eye_params: EyeParams
             session.put(events, json.dumps({"t": t, "kind": kind, "data": data}, default=float))
 
         loop = ServedLoop(rig, legs, clock, loop_cfg.rate_hz, loop_cfg.tether, loop_cfg.pose_every_frames,
-                          timeout_s, on_event=publish)
+                          timeout_s, on_event=publish, settle=dome.settle)
         yield VirtualAnt(eye, model, loop, legs, dome.led_values, frames_per_decision)
 
 
