@@ -1,8 +1,10 @@
 """Mesh worlds from files through trimesh (OBJ, PLY, GLB/GLTF, STL): metres, +z up.
 
 Each geometry node becomes a named `SceneObject`: its position is the node's translation, its vertices the
-rest of the node transform. Vertex colours, textures and material colours (glTF's base colour, OBJ's MTL Kd for a
-material without a texture) are sRGB and map to G, B, UV by `channels`; meshes without colour are mid-grey.
+rest of the node transform. Textures, vertex colours (OBJ, PLY) and OBJ's MTL Kd (of a material without a
+texture) are sRGB; glTF's base colour factor and vertex colours (COLOR_0) are linear, as its specification says
+(glTF 2.0, sections 3.9.2 and 3.7.2.1), its base colour texture sRGB. All map to G, B, UV by `channels`; meshes
+without colour are mid-grey.
 """
 
 from __future__ import annotations
@@ -21,11 +23,12 @@ DEFAULT_GREY = 0.5
 GLTF_TO_WORLD = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
 
 
-def _colours_and_texture(geom, name: str, mtl_kd: dict):
-    """(V, 3) linear G, B, UV vertex colours, and (uv, texture) or (None, None). mtl_kd: an OBJ's {material name:
-    Kd}: the colour of a material drawn without a texture (with one, the texture alone gives the colour, as
-    Blender's importer and the photogrammetry programs that write such files mean it; the MTL specification
-    would multiply it by Kd, often a placeholder such as 0.8 there)."""
+def _colours_and_texture(geom, name: str, mtl_kd: dict, gltf: bool):
+    """(V, 3) linear G, B, UV vertex colours, and (uv, texture) or (None, None). gltf: the colour factor and the
+    vertex colours are linear (else sRGB). mtl_kd: an OBJ's {material name: Kd}: the colour of a material drawn
+    without a texture (with one, the texture alone gives the colour, as Blender's importer and the photogrammetry
+    programs that write such files mean it; the MTL specification would multiply it by Kd, often a placeholder
+    such as 0.8 there)."""
     n = len(geom.vertices)
     visual = getattr(geom, "visual", None)
     kind = getattr(visual, "kind", None)
@@ -38,7 +41,7 @@ def _colours_and_texture(geom, name: str, mtl_kd: dict):
             factor = mtl_kd.get(getattr(material, "name", None), factor)
         base = np.ones(3) if factor is None else np.asarray(factor, dtype=np.float64)[:3] / (
             255.0 if np.asarray(factor).dtype.kind in "iu" else 1.0)
-        colours = np.repeat(rgb_to_gbu(srgb_to_linear(base))[None, :], n, axis=0)
+        colours = np.repeat(rgb_to_gbu(base if gltf else srgb_to_linear(base))[None, :], n, axis=0)
         if textured:
             img = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
             if max(img.shape[:2]) > MAX_TEXTURE_SIDE:
@@ -47,8 +50,8 @@ def _colours_and_texture(geom, name: str, mtl_kd: dict):
             return colours, np.asarray(visual.uv, dtype=np.float32), rgb_to_gbu(srgb_to_linear(img))
         return colours, None, None
     if kind == "vertex" or kind == "face":
-        rgba = np.asarray(visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
-        return rgb_to_gbu(srgb_to_linear(rgba)), None, None
+        rgb = np.asarray(visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
+        return rgb_to_gbu(rgb if gltf else srgb_to_linear(rgb)), None, None
     return np.full((n, 3), DEFAULT_GREY, dtype=np.float32), None, None
 
 
@@ -71,6 +74,7 @@ def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
     except Exception as exc:  # trimesh raises many types for corrupt files
         raise ValueError(f"cannot read mesh file {path}: {type(exc).__name__}: {exc}") from exc
     objects: dict[str, SceneObject] = {}
+    gltf = path.suffix.lower() in (".glb", ".gltf")
     for node in loaded.graph.nodes_geometry:
         transform, geom_name = loaded.graph[node]
         geom = loaded.geometry[geom_name]
@@ -78,9 +82,9 @@ def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
             continue
         name = str(node)
         try:
-            colours, uv, texture = _colours_and_texture(geom, name, loaded.metadata.get("mtl_kd", {}))
+            colours, uv, texture = _colours_and_texture(geom, name, loaded.metadata.get("mtl_kd", {}), gltf)
             t = np.asarray(transform, dtype=np.float64)
-            if path.suffix.lower() in (".glb", ".gltf"):
+            if gltf:
                 t = GLTF_TO_WORLD @ t
             local = np.asarray(geom.vertices, dtype=np.float64) @ t[:3, :3].T
             mesh = MeshData(local.astype(np.float32), np.asarray(geom.faces), colours, uv, texture)
@@ -94,7 +98,8 @@ def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
 
 
 def save_glb(objects: dict[str, SceneObject], path: str | Path) -> Path:
-    """Write named objects to a GLB file (+y up as glTF requires; vertex colours sRGB; node = position)."""
+    """Write named objects to a GLB file (+y up as glTF requires; linear vertex colours, as glTF's COLOR_0 is;
+    node = position)."""
     import trimesh
 
     scene = trimesh.Scene()
@@ -102,8 +107,7 @@ def save_glb(objects: dict[str, SceneObject], path: str | Path) -> Path:
         m = obj.mesh
         # invert the G, B mapping approximately for viewers: R = G, G = G, B = B (UV is implied by B)
         lin = np.stack([m.colours[:, 0], m.colours[:, 0], m.colours[:, 1]], axis=1)
-        srgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * np.power(lin, 1 / 2.4) - 0.055)
-        rgba = np.concatenate([np.clip(srgb, 0, 1) * 255, np.full((len(lin), 1), 255)], axis=1).astype(np.uint8)
+        rgba = np.concatenate([np.rint(np.clip(lin, 0, 1) * 255), np.full((len(lin), 1), 255)], axis=1).astype(np.uint8)
         c, s = np.cos(obj.yaw), np.sin(obj.yaw)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) * obj.scale
         local = m.vertices.astype(np.float64) @ rot.T

@@ -177,6 +177,31 @@ def test_mesh_formats_load(renderer, dome, tmp_path):
         assert lit.sum() > 50 and np.abs(az).max() < math.radians(20), suffix
 
 
+def test_gltf_colours_are_linear_and_other_formats_srgb(tmp_path):
+    """glTF's vertex colours and base colour factor are linear (its specification); PLY and OBJ vertex colours
+    sRGB. Before 2026-11-26 glTF colours were decoded as sRGB: a mid-grey 128 became 0.22 instead of 0.50."""
+    import trimesh
+
+    from antarium.renderers.channels import rgb_to_gbu, srgb_to_linear
+    from antarium.renderers.meshes import load_mesh_objects
+
+    level = 128 / 255
+    m = trimesh.creation.box(extents=(0.2, 0.2, 0.2))
+    m.visual.vertex_colors = np.tile([128, 128, 128, 255], (len(m.vertices), 1))
+    plain = trimesh.creation.box(extents=(0.2, 0.2, 0.2))
+    plain.visual = trimesh.visual.TextureVisuals(
+        material=trimesh.visual.material.PBRMaterial(baseColorFactor=[128, 128, 128, 255]))
+    expected = {".glb": level, ".ply": srgb_to_linear(np.array(level)), ".obj": srgb_to_linear(np.array(level))}
+    for suffix, value in expected.items():
+        m.export(tmp_path / f"box{suffix}")
+        (obj,) = load_mesh_objects(tmp_path / f"box{suffix}").values()
+        np.testing.assert_allclose(obj.mesh.colours, np.tile(rgb_to_gbu(np.full(3, value)), (len(obj.mesh.colours), 1)),
+                                   atol=1e-6, err_msg=suffix)
+    plain.export(tmp_path / "plain.glb")
+    (obj,) = load_mesh_objects(tmp_path / "plain.glb").values()
+    np.testing.assert_allclose(obj.mesh.colours[0], rgb_to_gbu(np.full(3, level)), atol=1e-6)
+
+
 def test_textured_mesh(renderer, dome, tmp_path):
     import trimesh
     from PIL import Image
