@@ -131,8 +131,8 @@ class FarLayerBuilder:
         self.meshes = meshes
 
     def apply(self, edit: tuple) -> None:
-        """A scene edit: ("objects", {name: SceneObject}), ("move", name, SceneObject), ("hide", name) or
-        ("far", FarFieldTable)."""
+        """A scene edit: ("objects", {name: SceneObject}), ("move", name, SceneObject), ("hide", name),
+        ("show", name) (a hide undone) or ("far", FarFieldTable)."""
         kind = edit[0]
         if kind == "objects":
             self.set_objects(edit[1])
@@ -142,8 +142,10 @@ class FarLayerBuilder:
             self.meshes.update_object(edit[1], edit[2])
         elif kind == "hide":
             self.meshes.hide(edit[1])
+        elif kind == "show":
+            self.meshes.show(edit[1])
         else:
-            raise ValueError(f"unknown far-layer edit {kind!r}; allowed: objects, move, hide, far")
+            raise ValueError(f"unknown far-layer edit {kind!r}; allowed: objects, move, hide, show, far")
 
     def build(self, eye: np.ndarray, out: FarFieldTable) -> FarFieldTable:
         """The far layer seen from `eye` (3,) m, written into the tables of `out` (same grid); returns `out`."""
@@ -245,7 +247,7 @@ class FarLayer:
     def edit(self, edit: tuple) -> None:
         """Apply a scene edit (see `FarLayerBuilder.apply`); the layer is unusable until rebuilt, unless the
         edit was sent ahead (`edit_ahead`): its layer is then used from the next frame."""
-        if self._ahead_edit is not None and _same_edit(edit, self._ahead_edit) and self._edit_sent:
+        if self._ahead_edit is not None and same_edit(edit, self._ahead_edit) and self._edit_sent:
             self._ahead_edit = None
             self.generation += 1
             return
@@ -424,7 +426,7 @@ class EyeVelocity:
         return lead * (limit / norm) if norm > limit else lead
 
 
-def _same_edit(a: tuple, b: tuple) -> bool:
+def same_edit(a: tuple, b: tuple) -> bool:
     """Whether two far-layer edits do the same (a move to the same place, hiding the same object, or the same new
     far field)."""
     if a[0] == b[0] == "far":

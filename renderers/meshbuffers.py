@@ -307,8 +307,16 @@ class MeshBuffers:
         return self.n_chunks > 0 and bool(self._active.any())
 
     def hide(self, name: str) -> None:
+        """Stop drawing the named object's chunks."""
+        self._show(name, False)
+
+    def show(self, name: str) -> None:
+        """Draw the named object's chunks again (a hide undone)."""
+        self._show(name, True)
+
+    def _show(self, name: str, shown: bool) -> None:
         *_, c0, c1 = self._ranges[name]
-        self._active[c0:c1] = False
+        self._active[c0:c1] = shown
         self._chunks_changed = True
 
     def visible_chunks(self, q: np.ndarray, eye: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:

@@ -479,17 +479,29 @@ class Renderer:
                 "max_latency_s": layer.max_latency if layer is not None else 0.0}
 
     def _layer_edit(self, edit: tuple) -> None:
-        """An edit of the scene, to the far layer. A new far field sent ahead to its builder (a `sky` change being
-        prepared) is withdrawn first when this edit is another: the layers built for this edit must not show a
-        sky that is not on the dome yet (the sky's swap then sends it again, as any edit)."""
+        """An edit of the scene, to the far layer. An edit sent ahead to its builder (a `sky`, `move_object` or
+        `remove_object` being prepared) is withdrawn first when this edit is another: the layers built for this
+        edit must not show what is not on the dome yet (its swap then sends it again, as any edit)."""
         layer = self._layer
         if layer is None:
             return
+        from .far_layer import same_edit
+
         ahead = layer.ahead
-        if ahead is not None and ahead[0] == "far" and self._table is not None \
-                and not (edit[0] == "far" and edit[1] is ahead[1]):
-            layer.withdraw(ahead, ("far", self._table))
+        if ahead is not None and not same_edit(edit, ahead) and (undo := self._undo(ahead)) is not None:
+            layer.withdraw(ahead, undo)
         layer.edit(edit)
+
+    def _undo(self, edit: tuple) -> tuple | None:
+        """The far-layer edit that restores what `edit`, not made here, changed in the builder; None where the
+        renderer draws its far field from a texture (no far field table to restore)."""
+        kind, name = edit[0], edit[1]
+        if kind == "far":
+            return None if self._table is None else ("far", self._table)
+        if kind == "hide":
+            return ("show", name)
+        current = self.scene.objects.get(name)  # "move": where the object is now (gone: hidden)
+        return ("hide", name) if current is None else ("move", name, current)
 
     def _ensure_far_texture(self) -> None:
         """The far field as a cube texture, for a scene whose frames use the table (a cube-map picture)."""

@@ -7,6 +7,7 @@ import os
 import signal
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -411,22 +412,48 @@ def test_a_new_sky_drawn_from_a_cube_texture(dome):
     assert np.abs(after - before).max() > 1000 and np.abs(after - expected).max() <= 1
 
 
-def test_another_edit_withdraws_a_new_sky_sent_ahead_first(dome, monkeypatch):
-    """An object edit made while a sky change's far field is ahead in the builder (another client's command): the
-    builder goes back to the field on the dome before it gets the edit, so that no layer shows the new sky early;
-    the sky's own swap then sends its field again."""
+@pytest.mark.parametrize("kind", ["far", "move", "hide"])
+def test_another_edit_withdraws_an_edit_sent_ahead_first(dome, monkeypatch, kind):
+    """An object edit made while another edit is ahead in the builder (a sky change, an object moved or removed,
+    being prepared; the other edit another client's command): the builder undoes the edit ahead (the field on
+    the dome, the object where it is, the object shown) before it gets the other, so that no layer shows the edit
+    ahead early (until 2026-11-26 only a sky was withdrawn: a move or removal could show up to 2 s early); the
+    edit's own swap then sends it again."""
     from antarium.renderers import far_layer
     from antarium.renderers.farfield import FarFieldTable, TableGrid
+    from antarium.renderers.scene import SceneObject
 
     layer, builder, eye = _async_layer(dome, monkeypatch)
     grid = TableGrid(dome.directions, math.radians(3.0))
     shown, new = (FarFieldTable(grid, *far_layer._empty_tables(grid)) for _ in range(2))
-    r = Renderer.__new__(Renderer)  # the renderer's bookkeeping only: its layer and table
-    r._layer, r._table = layer, shown
-    assert layer.edit_ahead(("far", new), eye)
-    assert layer.current(eye) is not None and builder.sent[-2] == ("edit", ("far", new))
+    bush = SceneObject(None, position=(1.0, 0.0, 0.0))
+    r = Renderer.__new__(Renderer)  # the renderer's bookkeeping only: its layer, table and scene's objects
+    r._layer, r._table, r.scene = layer, shown, SimpleNamespace(objects={"bush": bush})
+    ahead, undo = {"far": (("far", new), ("far", shown)),
+                   "move": (("move", "bush", SceneObject(None, position=(3.0, 0.0, 0.0))), ("move", "bush", bush)),
+                   "hide": (("hide", "bush"), ("show", "bush"))}[kind]
+    assert layer.edit_ahead(ahead, eye)
+    assert layer.current(eye) is not None and builder.sent[-2] == ("edit", ahead)
     r._layer_edit(("hide", "tree"))
-    assert builder.sent[-2:] == [("edit", ("far", shown)), ("edit", ("hide", "tree"))] and layer.ahead is None
-    r._table = new
-    r._layer_edit(("far", new))  # the sky's swap
-    assert builder.sent[-1] == ("edit", ("far", new))
+    assert builder.sent[-2:] == [("edit", undo), ("edit", ("hide", "tree"))] and layer.ahead is None
+    r._layer_edit(ahead)  # the edit's swap
+    assert builder.sent[-1] == ("edit", ahead)
+
+
+def test_a_hidden_object_is_shown_again_by_the_builder(dome):
+    """The builder's "show" edit undoes its "hide": a tree beyond the near radius (drawn by the far layer alone)
+    removed, then shown again in the layer, gives the frame from before."""
+    pose = Pose(0.0, 0.0, 0.01, 0.0)
+    r = Renderer(dome, far_layer="sync")
+    try:
+        r.set_scene(small_habitat())  # tree_0 is 7.6 m from the eye
+        before = r.render(pose, t=0.0).copy()
+        r.remove_object("tree_0")
+        removed = r.render(pose, t=0.0).copy()
+        r._layer.edit(("show", "tree_0"))
+        shown = r.render(pose, t=0.0)
+        assert r.far_layer_status()["layer_frames"] == 3
+    finally:
+        r.release()
+    assert np.abs(removed.astype(int) - before).max() > 10_000
+    np.testing.assert_array_equal(shown, before)
