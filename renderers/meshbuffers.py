@@ -78,14 +78,17 @@ class MeshArrays:
     of a scene's objects. Needs no GL context: built in any thread, uploaded by `MeshBuffers` in the GL one.
 
     vertices (V, 9) float32 [position (world, m), colour, uv, texture layer]; indices (I,) uint32; first, count
-    (n_chunks, levels) uint32 index ranges per level of detail; centre (n_chunks, 3), radius (n_chunks,) m.
+    (n_chunks, levels) uint32 index ranges per level of detail; centre (n_chunks, 3), radius (n_chunks,) m;
+    texels: the texture array's layers (`texture_layers`), None when no object has a texture.
     """
 
     def __init__(self, objects: dict, chunk_size: float = 2.0):
         self.n_chunks = 0
         self.ranges = {}  # name -> vertex start, object-space vertices, colours, uv, layer, order, chunks
+        self.texels = None
         if not objects:
             return
+        self.texels = texture_layers([o.mesh.texture for o in objects.values() if o.mesh.texture is not None])
         n_levels = 1 + len(LOD_CELLS)
         vert_blocks, idx_blocks = [], []
         first, count, sided = [], [], []  # per chunk: (n_levels,) index offsets and counts; back-face culling
@@ -173,13 +176,29 @@ def interleave(obj, local, colours, uv, tex_layer: float) -> np.ndarray:
     return v
 
 
+def texture_layers(textures: list[np.ndarray]) -> np.ndarray | None:
+    """(L, side, side, 3) float16 layers of the mesh texture array, from textures (H, W, 3) of linear G, B, UV
+    (each resized to the largest side among them, at most MAX_TEXTURE_ARRAY_SIDE texels, its rows bottom up as GL
+    reads them); None for no texture."""
+    if not textures:
+        return None
+    import cv2
+
+    side = min(MAX_TEXTURE_ARRAY_SIDE, max(max(t.shape[:2]) for t in textures))
+    out = np.empty((len(textures), side, side, 3), dtype=np.float16)
+    for layer, t in zip(out, textures, strict=True):
+        layer[:] = cv2.resize(np.asarray(t, dtype=np.float32), (side, side), interpolation=cv2.INTER_AREA)[::-1]
+    return out
+
+
 #: bytes a `StagedUpload.step` copies: well under a millisecond, so that a step fits the idle end of a frame
 UPLOAD_SLICE_BYTES = 2 << 20
 
 
 class StagedUpload:
-    """The vertex and index buffers of a `MeshArrays`, filled a slice at a time in the GL thread (`step`), so that
-    loading a large scene never holds a frame for its whole upload; `MeshBuffers` takes them (`finish`).
+    """The vertex and index buffers and the texture array of a `MeshArrays`, filled a slice at a time in the GL
+    thread (`step`), so that loading a large scene never holds a frame for its whole upload; `MeshBuffers` takes
+    them (`finish`). The texture array's mipmaps are made in one step of their own, after its last layer.
 
     discard: where `discard()` hands it for release in the GL thread (it may be called from any thread).
     """
@@ -187,36 +206,62 @@ class StagedUpload:
     def __init__(self, ctx, arrays: MeshArrays, discard=None):
         self.ctx = ctx
         self._data = [memoryview(np.ascontiguousarray(a)).cast("B") for a in (arrays.vertices, arrays.indices)]
+        self._texels = arrays.texels
         self.buffers: list = []
+        self.texture = None
         self._part = self._offset = 0
+        self._row = 0  # texture rows written, over all layers
+        self._mipmapped = self._texels is None
         self._discard = discard
         self.discarded = False
 
     @property
     def done(self) -> bool:
-        return self._part == len(self._data)
+        return self._part == len(self._data) and self._mipmapped
 
     def step(self, nbytes: int = UPLOAD_SLICE_BYTES) -> bool:
-        """Copy about `nbytes` more (the first step creates the buffers); True once everything is up. GL thread."""
+        """Copy about `nbytes` more (the first step creates the buffers and the texture array); True once
+        everything is up. GL thread."""
         if self.discarded or self.done:
             return True
         if not self.buffers:
             self.buffers = [self.ctx.buffer(reserve=max(1, d.nbytes)) for d in self._data]
-            return False
-        data, buf = self._data[self._part], self.buffers[self._part]
-        end = min(data.nbytes, self._offset + nbytes)
-        if end > self._offset:
-            buf.write(data[self._offset:end], offset=self._offset)
-        self._offset = end
-        if end == data.nbytes:
-            self._part, self._offset = self._part + 1, 0
+            self.texture = self._new_texture()
+        elif self._part < len(self._data):
+            data, buf = self._data[self._part], self.buffers[self._part]
+            end = min(data.nbytes, self._offset + nbytes)
+            if end > self._offset:
+                buf.write(data[self._offset:end], offset=self._offset)
+            self._offset = end
+            if end == data.nbytes:
+                self._part, self._offset = self._part + 1, 0
+        elif self._row < self._texels.shape[0] * self._texels.shape[1]:
+            self._write_rows(nbytes)
+        else:
+            self.texture.build_mipmaps()
+            self._mipmapped = True
         return self.done
 
-    def finish(self) -> list:
-        """The filled (vertex, index) buffers, copying what is left now. GL thread."""
+    def _new_texture(self):
+        """The texture array, its layers still to write (one white texel when there is no texture)."""
+        if self._texels is None:
+            return self.ctx.texture_array((1, 1, 1), 3, np.ones(3, dtype=np.float16).tobytes(), dtype="f2")
+        n_layers, side = self._texels.shape[:2]
+        return self.ctx.texture_array((side, side, n_layers), 3, dtype="f2")
+
+    def _write_rows(self, nbytes: int) -> None:
+        """About `nbytes` of texture rows, within one layer."""
+        side = self._texels.shape[1]
+        layer, y = divmod(self._row, side)
+        rows = min(side - y, max(1, nbytes // self._texels[0, 0].nbytes))
+        self.texture.write(self._texels[layer, y:y + rows].tobytes(), viewport=(0, y, layer, side, rows, 1))
+        self._row += rows
+
+    def finish(self) -> tuple:
+        """The filled vertex buffer, index buffer and texture array, copying what is left now. GL thread."""
         while not self.step(1 << 62):
             pass
-        return self.buffers
+        return (*self.buffers, self.texture)
 
     def discard(self) -> None:
         """Not needed after all (any thread): released in the GL thread, or here when no one takes it."""
@@ -227,9 +272,10 @@ class StagedUpload:
             self.release()
 
     def release(self) -> None:
-        for buf in self.buffers:
-            buf.release()
-        self.buffers = []
+        for res in (*self.buffers, self.texture):
+            if res is not None:
+                res.release()
+        self.buffers, self.texture = [], None
 
 
 class MeshBuffers:
@@ -256,11 +302,11 @@ class MeshBuffers:
         self._mgl = moderngl
         a = MeshArrays(objects, chunk_size) if arrays is None else arrays
         self._arrays = a
-        self._textures = self._texture_array(objects)
         self._ranges, self._centre, self._radius = a.ranges, a.centre, a.radius
         if upload is None:
             upload = StagedUpload(ctx, a)
-        self._vbo, self._ibo = upload.finish()
+        self._vbo, self._ibo, self._textures = upload.finish()
+        a.texels = None  # on the GPU now: not kept twice (up to 6 MB a layer)
         self._vao = ctx.vertex_array(prog, [(self._vbo, "3f 3f 2f 1f", "in_pos", "in_col", "in_uv", "in_layer")],
                                      self._ibo, index_element_size=4)
         self.n_chunks = a.n_chunks
@@ -269,7 +315,7 @@ class MeshBuffers:
         self._indirect = ctx.buffer(reserve=6 * self.n_chunks * 20)
         self._cmds = np.zeros((6 * self.n_chunks, 5), dtype=np.uint32)
         self._cmds[:, 1] = 1
-        self._resources += [self._vao, self._vbo, self._ibo, self._indirect]
+        self._resources += [self._vao, self._vbo, self._ibo, self._textures, self._indirect]
         if gpu_cull:
             from .gpu_cull import GpuCulling
 
@@ -277,21 +323,6 @@ class MeshBuffers:
                                        LOD_CELLS[0])
             self._resources.append(self._culling)
             self._chunks_changed = True  # bounds or shown chunks to upload before the next frame
-
-    def _texture_array(self, objects):
-        import cv2
-
-        textures = [o.mesh.texture for o in objects.values() if o.mesh.texture is not None]
-        if not textures:
-            tex = self.ctx.texture_array((1, 1, 1), 3, np.ones(3, dtype=np.float16).tobytes(), dtype="f2")
-        else:
-            side = min(MAX_TEXTURE_ARRAY_SIDE, max(max(t.shape[:2]) for t in textures))
-            layers = [cv2.resize(t, (side, side), interpolation=cv2.INTER_AREA)[::-1] for t in textures]
-            data = np.ascontiguousarray(np.stack(layers), dtype=np.float16)
-            tex = self.ctx.texture_array((side, side, len(layers)), 3, data.tobytes(), dtype="f2")
-            tex.build_mipmaps()
-        self._resources.append(tex)
-        return tex
 
     def update_object(self, name: str, obj) -> None:
         """Re-upload a moved object's vertices (all levels) and recompute its chunks' bounds."""
