@@ -120,6 +120,18 @@ def test_route_file_heading_column_sets_the_release_heading(field):
     assert r1 and all(abs(r.route_heading_deg) < 0.1 for r in r1)   # the file's heading is the route's own
 
 
+EXAMPLE_SPECS = sorted((Path(__file__).resolve().parent.parent / "examples" / "experiment").glob("*.toml"))
+#: runs each example spec names in its comment (models x routes x grid points)
+EXAMPLE_RUNS = {"ardin_eye": 1 * 13 * 4, "heldout_habitat": 3 * 6, "heldout_habitat_8m": 3 * 13, "sweep": 3 * 10 * 3}
+
+
+@pytest.mark.parametrize("path", EXAMPLE_SPECS, ids=[p.stem for p in EXAMPLE_SPECS])
+def test_the_example_specs_expand_into_the_runs_they_name(path):
+    """Every spec in examples/experiment loads (its worlds built, its routes checked against them) and expands
+    into the runs its comment names."""
+    assert len(load_spec(path).runs) == EXAMPLE_RUNS[path.stem]
+
+
 def test_bad_spec_gets_one_clear_line(field):
     d, _ = field
     with pytest.raises(SpecError, match="unknown parameter 'bogus'"):

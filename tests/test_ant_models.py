@@ -12,6 +12,7 @@ from antarium.ant.models import (
     AntcarParams,
     ArdinModel,
     PerfectMemoryModel,
+    _best_angle,
     make_model,
     oscillation_angles,
 )
@@ -111,6 +112,23 @@ def test_scanning_models_turn_toward_the_most_familiar_direction(kind):
     cmd = model.decide(View(view.band, 6, 50, math.radians(30)))
     assert cmd.turn == pytest.approx(math.radians(-30), abs=math.radians(2.1))
     assert cmd.forward == model.params.step
+
+
+@pytest.mark.parametrize(("tied", "expected"), [
+    ([3, 4, 5, 6, 7], 5),        # a plateau of equally familiar directions: its middle, not its edge nearest 0
+    ([4, 5, 6, 7], 5),           # an even run: of its two middles, the smaller turn
+    ([0, 1, 5, 6, 7, 8, 9], 7),  # two runs: the one holding the smallest turn
+    ([2], 2),
+])
+def test_scanning_models_take_the_middle_of_tied_directions(tied, expected):
+    """Among equally familiar directions (binary MBON synapses tie often: a whole range of a view fully familiar)
+    the scan takes the middle of the run of tied neighbours nearest straight ahead. Until 2026-11-26 it took the
+    smallest turn, the plateau's edge, so the ant lagged on curves (Ardin: 0.77 put-backs a route on a held-out
+    habitat, 0.69 with the middle; docs/virtual_ant.md)."""
+    angles = np.radians(np.arange(-8, 11, 2.0))  # index 4 is straight ahead
+    cost = np.ones(len(angles))
+    cost[tied] = 0.0
+    assert _best_angle(angles, cost) == expected
 
 
 def test_make_model_rejects_unknown_kinds_and_parameters():

@@ -39,9 +39,18 @@ def _scan_angles(half_range: float, step: float) -> np.ndarray:
 
 
 def _best_angle(angles: np.ndarray, cost: np.ndarray) -> int:
-    """Index of the lowest cost; among ties the smallest turn."""
-    best = np.flatnonzero(cost <= cost.min() + 1e-12)
-    return int(best[np.argmin(np.abs(angles[best]))])
+    """Index of the lowest cost among `angles` (ascending). Among ties, the middle of the run of tied neighbours
+    that holds the smallest turn (of its two middles, the smaller turn): a plateau of fully familiar directions
+    is centred on the route, and its edge nearest straight ahead is not."""
+    tied = cost <= cost.min() + 1e-12
+    best = np.flatnonzero(tied)
+    lo = hi = int(best[np.argmin(np.abs(angles[best]))])
+    while lo > 0 and tied[lo - 1]:
+        lo -= 1
+    while hi < len(tied) - 1 and tied[hi + 1]:
+        hi += 1
+    middles = {(lo + hi) // 2, (lo + hi + 1) // 2}
+    return min(middles, key=lambda k: (abs(angles[k]), k))
 
 
 @dataclass(frozen=True)

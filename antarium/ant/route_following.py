@@ -27,10 +27,11 @@ from antarium.plots.ant import plot_paths, plot_traces, scene_top_view
 #: metres between learned views: Antcar learns continuously (every frame of a 1 cm/frame walk), Ardin and
 #: perfect memory at intervals
 LEARN_SPACING_M = {"antcar": 0.01, "ardin": 0.04, "perfect_memory": 0.04}
-#: the eye each model sees with. Antcar's is ours, not the paper's: photoreceptor compression (gamma 0.25) and a
-#: gain control per elevation row after the Sobel filter (`eye.row_gain_control`), so that the nearby grass and
-#: stones, not the far field alone, decide which KCs fire (docs/virtual_ant.md, "Models")
-MODEL_EYES = {"antcar": EyeParams(gamma=0.25, row_gain=True), "ardin": EyeParams(), "perfect_memory": EyeParams()}
+#: the eye each model sees with. The MB models' are ours, not the papers': a gain control per elevation row after
+#: the Sobel filter (`eye.row_gain_control`), and for Antcar photoreceptor compression (gamma 0.25), so that the
+#: nearby grass and stones, not the far field alone, decide which KCs fire (docs/virtual_ant.md, "Models")
+MODEL_EYES = {"antcar": EyeParams(gamma=0.25, row_gain=True), "ardin": EyeParams(row_gain=True),
+              "perfect_memory": EyeParams()}
 #: model parameters of the route-following experiments, unless given: Antcar's oscillation amplitude A = 20 deg
 #: is ours (the paper's 45 deg is the model's default; docs/virtual_ant.md, "Models")
 MODEL_PARAMS = {"antcar": {"amplitude_deg": 20.0}, "ardin": {}, "perfect_memory": {}}
