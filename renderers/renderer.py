@@ -495,10 +495,10 @@ class Renderer:
     def _undo(self, edit: tuple) -> tuple | None:
         """The far-layer edit that restores what `edit`, not made here, changed in the builder; None where the
         renderer draws its far field from a texture (no far field table to restore)."""
-        kind, name = edit[0], edit[1]
-        if kind == "far":
+        if edit[0] == "far":
             return None if self._table is None else ("far", self._table)
-        if kind == "hide":
+        name = edit[1]
+        if edit[0] == "hide":
             return ("show", name)
         current = self.scene.objects.get(name)  # "move": where the object is now (gone: hidden)
         return ("hide", name) if current is None else ("move", name, current)
