@@ -178,12 +178,12 @@ class Link(ABC):
             self.send(d)
 
     def hello(self, wait_s: float = 0.0) -> dict | None:
-        """Ask for the distributor's VERSION reply; returns it if it arrives within `wait_s`."""
+        """Ask for the distributor's VERSION reply; returns it if the answer to this HELLO (its tag) arrives
+        within `wait_s`, else None (also when an earlier HELLO was answered)."""
         self._tag = (self._tag + 1) % 256
         self.send(encode_hello(self._tag))
         self._last_hello_t = time.monotonic()
-        self._drain(wait_s, until={OP_VERSION})
-        return self._status.get("version")
+        return self._status.get("version") if self._drain(wait_s, until={OP_VERSION}, tag=self._tag) else None
 
     def telemetry(self, wait_s: float = 0.0) -> dict:
         """Latest upstream status, JSON-serialisable.
@@ -216,14 +216,15 @@ class Link(ABC):
             out["age_s"] = time.monotonic() - self._last_reply_t
         return out
 
-    def _drain(self, wait_s: float, until: set[int], tag: int | None = None) -> None:
-        """Read replies until every opcode in `until` (with `tag`, if given) arrived or `wait_s` passed."""
+    def _drain(self, wait_s: float, until: set[int], tag: int | None = None) -> bool:
+        """Read replies until every opcode in `until` (with `tag`, if given) arrived or `wait_s` passed; whether
+        they all arrived."""
         deadline = time.monotonic() + wait_s
         seen: set[int] = set()
         while True:
             data = self._receive(max(0.0, deadline - time.monotonic()))
             if data is None:
-                return
+                return False
             try:
                 reply = decode_reply(data)
             except ProtocolError:
@@ -235,7 +236,7 @@ class Link(ABC):
             if tag is None or reply.tag == tag:
                 seen.add(reply.opcode)
             if until <= seen:
-                return
+                return True
 
     def _absorb(self, opcode: int, f: dict) -> None:
         s = self._status

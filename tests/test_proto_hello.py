@@ -75,3 +75,15 @@ def test_an_incompatible_distributor_gets_no_frames_and_a_clear_reason(monkeypat
     with pytest.raises(IncompatibleDistributor, match="protocol version 2; this host speaks 1"):
         link.send_frame(np.zeros((20350, 2), np.uint16))
     assert link.counters["frames_sent"] == 0
+
+
+def test_hello_says_no_answer_when_this_hello_has_none():
+    """`hello(wait_s)` returns the VERSION that answers this HELLO, or None: not the one an earlier HELLO got
+    (until 2026-11-26 a distributor that had answered once was reported answering ever after)."""
+    link = LatePeer()
+    link.up = True
+    assert link.hello(wait_s=0.05)["n_panels"] == 55
+    link.up = False  # the distributor is gone
+    assert link.hello(wait_s=0.05) is None
+    link.up = True
+    assert link.hello(wait_s=0.05)["protocol_version"] == 1
