@@ -94,7 +94,6 @@ def test_a_config_that_cannot_serve_the_ant_is_refused_naming_the_key(tmp_path, 
         served_config(config)
 
 
-
 def test_the_ant_dome_settles_on_every_frame_sent_before_it():
     """`DomeHost.settle` returns once the dome handled every datagram queued before it: of frames a link sent in
     a burst, the last is shown (the served ant reads its view only after this); a dome that does not answer in
@@ -108,11 +107,12 @@ def test_the_ant_dome_settles_on_every_frame_sent_before_it():
     link = UdpLink(dome.host, dome.port)
     try:
         rng = np.random.default_rng(3)
-        frames = [rng.integers(0, 32768, (20350, 2), dtype=np.uint16) for _ in range(20)]
+        # three frames (190 kB): within a default socket receive buffer, so none is dropped on any machine
+        frames = [rng.integers(0, 32768, (20350, 2), dtype=np.uint16) for _ in range(3)]
         for frame in frames:
             link.send_frame(frame)
         dome.settle(5.0)
-        assert dome.stats()["frames_latched"] == 20
+        assert dome.stats()["frames_latched"] == 3
         np.testing.assert_array_equal(dome.led_values(), decode_frame(encode_frame(frames[-1], 0)))
         with dome._lock, pytest.raises(RuntimeError, match="did not answer in 0.2 s"):  # the dome busy throughout
             dome.settle(0.2)
