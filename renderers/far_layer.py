@@ -361,8 +361,9 @@ class FarLayer:
 
     def withdraw(self, edit: tuple, undo: tuple) -> None:
         """Async: the edit sent ahead (`edit_ahead`) will not be made after all: the builder gets `undo`, the edit
-        that restores what `edit` changed, if it had `edit` already. Nothing when `edit` is not the one ahead."""
-        if self._ahead_edit is not edit:
+        that restores what `edit` changed, if it had `edit` already. Nothing when `edit` does not do what the one
+        ahead does (`same_edit`)."""
+        if self._ahead_edit is None or not same_edit(edit, self._ahead_edit):
             return
         sent = self._edit_sent
         self._ahead_edit = self._ahead = self._ahead_eye = None

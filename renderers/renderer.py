@@ -395,8 +395,9 @@ class Renderer:
     def withdraw_far(self, prepared) -> None:
         """A prefetched far field that will not be shown: the far layer's builder goes back to the current one.
         Rendering thread."""
-        if self._layer is not None and prepared.table is not None and self._table is not None:
-            self._layer.withdraw(("far", prepared.table), ("far", self._table))
+        edit = ("far", prepared.table)
+        if self._layer is not None and prepared.table is not None and (undo := self._undo(edit)) is not None:
+            self._layer.withdraw(edit, undo)
 
     def _current(self, prepared) -> bool:
         """Whether a `PreparedFar` was made for the scene and footprint now in use."""

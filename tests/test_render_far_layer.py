@@ -440,6 +440,24 @@ def test_another_edit_withdraws_an_edit_sent_ahead_first(dome, monkeypatch, kind
     assert builder.sent[-1] == ("edit", ahead)
 
 
+def test_a_new_sky_withdrawn_by_the_renderer_is_undone_in_the_builder(dome, monkeypatch):
+    """`Renderer.withdraw_far` (a sky change that will not be made) gives the builder the field on the dome back.
+    Until 2026-11-26 it named the edit ahead by a tuple of its own, which `FarLayer.withdraw` did not take for the
+    one ahead (it compared identities): nothing was withdrawn, and the layers went on with a sky never shown."""
+    from antarium.renderers import far_layer
+    from antarium.renderers.farfield import FarFieldTable, TableGrid
+
+    layer, builder, eye = _async_layer(dome, monkeypatch)
+    grid = TableGrid(dome.directions, math.radians(3.0))
+    shown, new = (FarFieldTable(grid, *far_layer._empty_tables(grid)) for _ in range(2))
+    r = Renderer.__new__(Renderer)  # the renderer's bookkeeping only: its layer and table
+    r._layer, r._table = layer, shown
+    assert layer.edit_ahead(("far", new), eye)
+    assert layer.current(eye) is not None and builder.sent[-2] == ("edit", ("far", new))
+    r.withdraw_far(SimpleNamespace(table=new))
+    assert builder.sent[-1] == ("edit", ("far", shown)) and layer.ahead is None
+
+
 def test_a_hidden_object_is_shown_again_by_the_builder(dome):
     """The builder's "show" edit undoes its "hide": a tree beyond the near radius (drawn by the far layer alone)
     removed, then shown again in the layer, gives the frame from before."""
