@@ -112,6 +112,12 @@ def _kth_largest(a, n, k):
     return a[target]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _bin(v, lo, scale, bins):
+    """The histogram bin of value `v`: bins of width 1 / scale from `lo`, the last one closed."""
+    return min(bins - 1, int((v - np.float64(lo)) * scale))
+
+
 @njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
 def _lower_bound(values, k, counts):
     """A value that at least k of `values` (k <= len) reach, close below their k-th largest: the smallest of those
@@ -128,7 +134,7 @@ def _lower_bound(values, k, counts):
     scale = bins / (np.float64(hi) - np.float64(lo))
     counts[:] = 0
     for i in range(n):
-        counts[min(bins - 1, int((values[i] - np.float64(lo)) * scale))] += 1
+        counts[_bin(values[i], lo, scale, bins)] += 1
     first, total = 0, 0
     for b in range(bins - 1, -1, -1):
         total += counts[b]
@@ -137,7 +143,7 @@ def _lower_bound(values, k, counts):
             break
     low = hi
     for i in range(n):
-        if min(bins - 1, int((values[i] - np.float64(lo)) * scale)) >= first:
+        if _bin(values[i], lo, scale, bins) >= first:
             low = min(low, values[i])
     return low
 
