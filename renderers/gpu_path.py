@@ -16,6 +16,9 @@ Three GL 4.3 compute passes over the same data as the CPU path (`kernels`, `outp
 
 The CPU reads back one buffer (81,400 frame bytes + 61,160 datagram bytes) into preallocated memory. moderngl 5.13
 has no fence objects, so the read-back waits for the GPU (`Buffer.read_into`).
+
+Between frames, `busy()` runs one small work group (tens of microseconds at full clock), so that a loop may keep
+the GPU from lowering its clocks while it waits for the next frame's slot (`FrameLoop(keep_gpu_busy=True)`).
 """
 
 from __future__ import annotations
@@ -201,6 +204,19 @@ void main() {{
 """
 
 
+#: iterations of the busy pass's dependent multiply-add chain: about 40 us on one work group at 2 GHz
+BUSY_ITERATIONS = 20_000
+BUSY_CS = _header(_GROUP) + """
+layout(std430, binding = 10) buffer Busy { float busy[]; };
+uniform int iterations;
+void main() {
+    float x = float(gl_LocalInvocationID.x);
+    for (int k = 0; k < iterations; ++k) x = x * 0.999 + 0.5;
+    busy[gl_LocalInvocationID.x] = x;
+}
+"""
+
+
 def default_path(renderer_string: str) -> str:
     """'cpu' for a software GL driver (llvmpipe, softpipe, swrast), else 'gpu'."""
     s = renderer_string.lower()
@@ -231,6 +247,8 @@ class GpuFramePath:
         self._mean = ctx.compute_shader(MEAN_CS)
         self._convert = ctx.compute_shader(CONVERT_CS)
         self._pack = ctx.compute_shader(PACK_CS)
+        self._busy = ctx.compute_shader(BUSY_CS)
+        self._busy["iterations"].value = BUSY_ITERATIONS
         self._sample["atlas"].value = 3
         n = N_PIXELS
         self._far = ctx.buffer(reserve=n * 8)
@@ -238,6 +256,7 @@ class GpuFramePath:
         self._means = ctx.buffer(reserve=16)
         self._gain = ctx.buffer(reserve=n * 8)
         self._out = ctx.buffer(reserve=n * 4 + _WORDS * 4)
+        self._busy_out = ctx.buffer(reserve=_GROUP * 4)
         self._matrix = None
         self._table = self._cells = None
         self._table_source, self._n_cols = None, 0
@@ -253,7 +272,8 @@ class GpuFramePath:
         return sum(b.size for b in self._buffers())
 
     def _buffers(self) -> list:
-        return [b for b in (self._far, self._pairs, self._means, self._gain, self._out, *(self._matrix or ()),
+        return [b for b in (self._far, self._pairs, self._means, self._gain, self._out, self._busy_out,
+                            *(self._matrix or ()),
                             self._table, self._cells) if b is not None]
 
     def set_matrix(self, key, indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray) -> None:
@@ -340,8 +360,14 @@ class GpuFramePath:
         self._out.read_into(self.host)
         return self.frame
 
+    def busy(self) -> None:
+        """Run the busy pass (one work group writing a scratch buffer nothing reads) and wait for it."""
+        self._busy_out.bind_to_storage_buffer(10)
+        self._busy.run(1)
+        self.ctx.finish()
+
     def release(self) -> None:
         for b in self._buffers():
             b.release()
-        for p in (self._sample, self._mean, self._convert, self._pack):
+        for p in (self._sample, self._mean, self._convert, self._pack, self._busy):
             p.release()

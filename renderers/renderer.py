@@ -189,6 +189,7 @@ class Renderer:
                 raise RuntimeError(f"the gpu render path needs OpenGL 4.3 compute shaders, which {self.gl_renderer} "
                                    f"does not give ({exc}); use path 'cpu'") from exc
             self._gain_version = None
+        self._busy_s = 1e-3  # the longest recent busy pass (s), decaying from a safe first guess
         from .kernels import warm_up
 
         warm_up()
@@ -743,6 +744,24 @@ class Renderer:
         """The last frame's 55 VIDEO datagrams, (55, 1112) uint8 with INFO 0 (set the sequence before sending), as
         packed on the GPU path; None on the CPU path (encode with `firmware_proto.video.encode_frame`)."""
         return None if self._gpu is None else self._gpu.datagrams
+
+    @_gl_current
+    def keep_gpu_busy(self, clock, until: float) -> int:
+        """GPU path: run the busy pass again and again until `until` (s on `clock`), so that the GPU keeps its
+        clocks between frames; stops one (longest recent) pass early and yields the GIL after each, and after one
+        pass on a clock that did not move. Returns the passes run; none on the CPU path."""
+        if self._gpu is None:
+            return 0
+        runs = 0
+        while clock.now() + self._busy_s < until:
+            t0 = clock.now()
+            self._gpu.busy()
+            runs += 1
+            if clock.now() <= t0:  # a simulated clock does not move while the GPU works: nothing to wait for
+                break
+            self._busy_s = max(0.99 * self._busy_s, clock.now() - t0)
+            time.sleep(0)
+        return runs
 
     def _finish(self, future, fn, *args) -> None:
         """Wait for work handed to the helper thread; if it has not even started (the helper held off its CPU or

@@ -246,3 +246,58 @@ def test_the_frame_loop_sends_the_gpu_paths_packed_datagrams(pair):
         expected[:, 1] = 2  # the third frame's sequence
         assert np.array_equal(link.emulator.led_values(), decode_frame(expected))
         assert np.array_equal(loop.last_frame, gpu.render(loop.pose, t=gpu.clock.now() - gpu._t0))
+
+
+class _Recorder:
+    """A renderer seam that records the loop's busy-wait calls and renders through the real GPU path."""
+
+    def __init__(self, renderer):
+        self.renderer, self.calls = renderer, []
+
+    def __getattr__(self, name):
+        return getattr(self.renderer, name)
+
+    def keep_gpu_busy(self, clock, until):
+        self.calls.append((clock.now(), until))
+        return self.renderer.keep_gpu_busy(clock, until)
+
+
+def test_keep_gpu_busy_runs_between_frames_and_leaves_them_unchanged(pair):
+    from antarium.core.clock import MonotonicClock, SimulatedClock
+    from antarium.firmware_proto.link import open_link
+    from antarium.server.frame_loop import GPU_BUSY_MARGIN_S, FrameLoop
+
+    cpu, gpu = pair
+    clock = MonotonicClock()
+    assert gpu.keep_gpu_busy(clock, clock.now() + 0.02) >= 1
+    assert cpu.keep_gpu_busy(clock, clock.now() + 0.02) == 0  # nothing to keep busy
+    assert gpu.keep_gpu_busy(SimulatedClock(), 1.0) == 1  # a clock that stands still ends it after one pass
+
+    gpu.set_scene("sky")
+    frames = {}
+    for busy in (False, True):
+        rec = _Recorder(gpu)
+        sim = SimulatedClock()
+        with open_link("virtual") as link:
+            loop = FrameLoop(clock=sim, source=None, renderer=rec, link=link, closed_loop=False, keep_gpu_busy=busy)
+            targets = []
+            for _ in range(3):
+                targets.append(loop._next_t if loop._next_t is not None else sim.now())
+                loop.step()
+            frames[busy] = link.emulator.led_values().copy()
+        assert [u for _, u in rec.calls] == ([t - GPU_BUSY_MARGIN_S for t in targets] if busy else [])
+    assert np.array_equal(frames[False], frames[True])
+
+
+def test_keep_gpu_busy_from_the_rig_config():
+    from antarium.config import ConfigError, resolve
+    from antarium.core.clock import SimulatedClock
+    from antarium.server.frame_loop import FrameLoop
+
+    for value in (False, True):
+        loop = FrameLoop.from_config(resolve({"loop": {"keep_gpu_busy": value}}).loop, clock=SimulatedClock(),
+                                     source=None)
+        assert loop.keep_gpu_busy is value
+    assert FrameLoop.from_config(resolve({}).loop, clock=SimulatedClock(), source=None).keep_gpu_busy is False
+    with pytest.raises(ConfigError, match=r"\[loop\] keep_gpu_busy"):
+        resolve({"loop": {"keep_gpu_busy": "yes"}})

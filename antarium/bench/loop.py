@@ -105,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
         gl = gl_renderer_string()
         chosen = config.render.path
         print(f"GL renderer: {gl}; per-LED path: {default_path(gl) if chosen == 'auto' else chosen}"
-              f"{' (auto)' if chosen == 'auto' else ''}")
+              f"{' (auto)' if chosen == 'auto' else ''}"
+              f"{'; GPU kept busy between frames' if config.loop.keep_gpu_busy else ''}")
         _run_one(args, config, seconds)
     return 0
 
@@ -136,6 +137,7 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None)
         result["link_outages"] = server.final_stats.get("link_outages", 0)
         result["far_layer"] = server.final_stats.get("far_layer")
         result["config"] = {"render": config.render.model_dump(), "loop_rate_hz": config.loop.rate_hz,
+                            "keep_gpu_busy": config.loop.keep_gpu_busy,
                             "link": config.link.interface, "locomotion": config.locomotion.source}
     _print(result)
     if args.json_out:

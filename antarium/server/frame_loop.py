@@ -57,6 +57,8 @@ LINK_TIMEOUT_S = 0.5
 LINK_STARTUP_S = 5.0
 #: `when_idle` work runs after a frame only when at least this much time (s) is left before the next slot
 IDLE_MARGIN_S = 2.5e-3
+#: with keep_gpu_busy, the GPU's busy work stops this long (s) before a frame's slot
+GPU_BUSY_MARGIN_S = 0.5e-3
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,12 +115,12 @@ class FrameLoop:
         origin = Pose(loop.start_x_m, loop.start_y_m, loop.eye_height_m, math.radians(loop.start_heading_deg))
         return cls(rate_hz=loop.rate_hz, closed_loop=loop.closed_loop, tether=loop.tether,
                    gain_translation=loop.gain_translation, gain_rotation=loop.gain_rotation, origin=origin,
-                   ball_radius=loop.ball_radius_m, **parts)
+                   ball_radius=loop.ball_radius_m, keep_gpu_busy=loop.keep_gpu_busy, **parts)
 
     def __init__(self, *, clock: Clock, source: LocomotionSource | None, renderer=None, link=None,
                  rate_hz: float = DOME_RATE_HZ, closed_loop: bool = True, tether: str = "free_yaw",
                  gain_translation: float = 1.0, gain_rotation: float = 1.0, origin: Pose | None = None,
-                 ball_radius: float = BALL_RADIUS_M, log=None,
+                 ball_radius: float = BALL_RADIUS_M, keep_gpu_busy: bool = False, log=None,
                  on_frame: Callable[[FrameRecord], None] | None = None,
                  on_event: Callable[[float, str, dict], None] | None = None) -> None:
         if not isinstance(rate_hz, (int, float)) or not 1.0 <= rate_hz <= 2000.0:
@@ -135,6 +137,7 @@ class FrameLoop:
         self.pose = self.origin
         self.scene_rotation = 0.0
         self.ball_radius = float(ball_radius)
+        self.keep_gpu_busy = bool(keep_gpu_busy)
         self.log = log
         self.on_frame = on_frame
         self.on_event = on_event
@@ -387,6 +390,15 @@ class FrameLoop:
             self._polariser_heading = pose.heading
         return sent
 
+    def _busy_gpu(self, until: float) -> None:
+        """Keep the renderer's GPU busy until `until` (its clocks drop while it idles between frames)."""
+        busy = getattr(self.renderer, "keep_gpu_busy", None)
+        if busy is not None:
+            try:
+                busy(self.clock, until)
+            except Exception as exc:  # counted like a render error; the frame is still rendered
+                self.fault("render", self.clock.now(), exc)
+
     def step(self) -> FrameRecord:
         """Run one frame (waiting for its slot on the clock) and return what happened."""
         self._run_pending()
@@ -394,6 +406,8 @@ class FrameLoop:
         if self._next_t is None:
             self._next_t = clock.now()
         t_target = self._next_t
+        if self.keep_gpu_busy and self.renderer is not None:
+            self._busy_gpu(t_target - GPU_BUSY_MARGIN_S)
         clock.sleep_until(t_target)
         t_start = clock.now()
         if self._t_first is None:
