@@ -92,9 +92,11 @@ class LoopSection(Section):
     pose_every_frames: int = Field(1, ge=1, le=100_000, description="publish the pose every N frames")
     realtime_priority: int = Field(10, ge=0, le=99, description="SCHED_FIFO for the frame loop (0: off)")
     cpu: int | str = Field("auto", description='a CPU for the frame loop alone: a number, "auto" or "off"')
-    keep_gpu_busy: bool = Field(False, description="GPU path: small GPU work while waiting for a frame's slot, so "
-                                "that the GPU keeps its clocks")
-    ALLOWED: ClassVar[dict[str, str]] = {"cpu": 'a CPU number (>= 0), "auto" or "off"'}
+    keep_gpu_busy: bool | Literal["auto"] = Field(
+        "auto", description="small GPU work while waiting for a frame's slot, so that the GPU keeps its clocks; "
+        '"auto": when the frame path runs on a hardware GPU')
+    ALLOWED: ClassVar[dict[str, str]] = {"cpu": 'a CPU number (>= 0), "auto" or "off"',
+                                         "keep_gpu_busy": 'true, false or "auto"'}
 
     @field_validator("cpu")
     @classmethod

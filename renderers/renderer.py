@@ -745,6 +745,11 @@ class Renderer:
         packed on the GPU path; None on the CPU path (encode with `firmware_proto.video.encode_frame`)."""
         return None if self._gpu is None else self._gpu.datagrams
 
+    @property
+    def on_hardware_gpu(self) -> bool:
+        """Whether the per-LED path runs on the GL device and that device is not a software driver."""
+        return self._gpu is not None and default_path(self.gl_renderer) == "gpu"
+
     @_gl_current
     def keep_gpu_busy(self, clock, until: float) -> int:
         """GPU path: run the busy pass again and again until `until` (s on `clock`), so that the GPU keeps its

@@ -249,10 +249,11 @@ def test_the_frame_loop_sends_the_gpu_paths_packed_datagrams(pair):
 
 
 class _Recorder:
-    """A renderer seam that records the loop's busy-wait calls and renders through the real GPU path."""
+    """A renderer seam that records the loop's busy-wait calls and renders through the real GPU path; `hardware`
+    stands for the GL renderer string of a hardware GPU (this machine's is llvmpipe)."""
 
-    def __init__(self, renderer):
-        self.renderer, self.calls = renderer, []
+    def __init__(self, renderer, hardware: bool = False):
+        self.renderer, self.calls, self.on_hardware_gpu = renderer, [], hardware
 
     def __getattr__(self, name):
         return getattr(self.renderer, name)
@@ -272,21 +273,31 @@ def test_keep_gpu_busy_runs_between_frames_and_leaves_them_unchanged(pair):
     assert gpu.keep_gpu_busy(clock, clock.now() + 0.02) >= 1
     assert cpu.keep_gpu_busy(clock, clock.now() + 0.02) == 0  # nothing to keep busy
     assert gpu.keep_gpu_busy(SimulatedClock(), 1.0) == 1  # a clock that stands still ends it after one pass
+    assert not gpu.on_hardware_gpu and not cpu.on_hardware_gpu  # llvmpipe
 
     gpu.set_scene("sky")
     frames = {}
-    for busy in (False, True):
-        rec = _Recorder(gpu)
+    for busy, hardware, realtime, kept in ((False, True, True, False), (True, False, False, True),
+                                           ("auto", False, True, False), ("auto", True, False, False),
+                                           ("auto", True, True, True)):
+        rec = _Recorder(gpu, hardware)
         sim = SimulatedClock()
+        sim.realtime = realtime  # stands for wall time in "auto"; the frames still run on simulated time
         with open_link("virtual") as link:
             loop = FrameLoop(clock=sim, source=None, renderer=rec, link=link, closed_loop=False, keep_gpu_busy=busy)
+            assert loop.gpu_kept_busy is kept
             targets = []
             for _ in range(3):
                 targets.append(loop._next_t if loop._next_t is not None else sim.now())
                 loop.step()
-            frames[busy] = link.emulator.led_values().copy()
-        assert [u for _, u in rec.calls] == ([t - GPU_BUSY_MARGIN_S for t in targets] if busy else [])
-    assert np.array_equal(frames[False], frames[True])
+            frames[busy, hardware, realtime] = link.emulator.led_values().copy()
+        assert [u for _, u in rec.calls] == ([t - GPU_BUSY_MARGIN_S for t in targets] if kept else [])
+        # the first frame's slot is now; then one pass before each, as the simulated clock stands still
+        assert loop.stats()["gpu_busy_passes"] == (2 if kept else 0)
+    first = frames[False, True, True]
+    assert all(np.array_equal(first, f) for f in frames.values())
+    with pytest.raises(ValueError, match='keep_gpu_busy must be true, false or "auto", got \'on\''):
+        FrameLoop(clock=SimulatedClock(), source=None, keep_gpu_busy="on")
 
 
 def test_keep_gpu_busy_from_the_rig_config():
@@ -294,10 +305,10 @@ def test_keep_gpu_busy_from_the_rig_config():
     from antarium.core.clock import SimulatedClock
     from antarium.server.frame_loop import FrameLoop
 
-    for value in (False, True):
+    assert resolve({}).loop.keep_gpu_busy == "auto"
+    for value in (False, True, "auto"):
         loop = FrameLoop.from_config(resolve({"loop": {"keep_gpu_busy": value}}).loop, clock=SimulatedClock(),
                                      source=None)
-        assert loop.keep_gpu_busy is value
-    assert FrameLoop.from_config(resolve({}).loop, clock=SimulatedClock(), source=None).keep_gpu_busy is False
-    with pytest.raises(ConfigError, match=r"\[loop\] keep_gpu_busy"):
+        assert loop.keep_gpu_busy == value and loop.gpu_kept_busy is (value is True)  # no renderer: "auto" is off
+    with pytest.raises(ConfigError, match=r"\[loop\] keep_gpu_busy must be true, false or \"auto\", got 'yes'"):
         resolve({"loop": {"keep_gpu_busy": "yes"}})

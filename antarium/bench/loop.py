@@ -105,8 +105,7 @@ def run(args: argparse.Namespace) -> int:
         gl = gl_renderer_string()
         chosen = config.render.path
         print(f"GL renderer: {gl}; per-LED path: {default_path(gl) if chosen == 'auto' else chosen}"
-              f"{' (auto)' if chosen == 'auto' else ''}"
-              f"{'; GPU kept busy between frames' if config.loop.keep_gpu_busy else ''}")
+              f"{' (auto)' if chosen == 'auto' else ''}")
         _run_one(args, config, seconds)
     return 0
 
@@ -136,6 +135,7 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None)
         result["rejected_frames"] = server.final_stats.get("rejected_frames", 0)
         result["link_outages"] = server.final_stats.get("link_outages", 0)
         result["far_layer"] = server.final_stats.get("far_layer")
+        result["gpu_busy_passes"] = server.final_stats.get("gpu_busy_passes", 0)
         result["config"] = {"render": config.render.model_dump(), "loop_rate_hz": config.loop.rate_hz,
                             "keep_gpu_busy": config.loop.keep_gpu_busy,
                             "link": config.link.interface, "locomotion": config.locomotion.source}
@@ -263,6 +263,10 @@ def _print(r: dict[str, Any]) -> None:
         error = f", ERROR {layer['error']}" if layer["error"] else ""
         print(f"  far layer       {layer['mode']}: {layer['layer_frames']} frames with it, "
               f"{layer['full_frames']} in full (start-up, edits, eye jumps), {layer['builds']} layers built{error}")
+    busy = r["config"]["keep_gpu_busy"]
+    if r["gpu_busy_passes"] or busy is True:
+        print(f"  GPU kept busy   {r['gpu_busy_passes']} busy passes between frames ([loop] keep_gpu_busy = "
+              f"{json.dumps(busy)})")
     ratio = r["latency_p99_over_period"]
     print(f"  latency         {_fmt(r['latency'])}"
           + ("" if ratio is None else f"   (p99 = {ratio:.2f} x the {period_ms:.2f} ms frame period)"))

@@ -11,6 +11,9 @@ from typing import Protocol
 
 
 class Clock(Protocol):
+    #: whether waiting on it takes real time (wall time), not a simulated jump
+    realtime: bool
+
     def now(self) -> float:
         """Seconds on a monotonic time base."""
 
@@ -20,6 +23,8 @@ class Clock(Protocol):
 
 class MonotonicClock:
     """`time.monotonic` with precise waits: sleep coarsely, then spin the last `spin_s` seconds."""
+
+    realtime = True
 
     def __init__(self, spin_s: float = 0.0005) -> None:
         self.spin_s = spin_s
@@ -37,6 +42,8 @@ class MonotonicClock:
 
 class SimulatedClock:
     """A clock that jumps forward to whatever time it is asked to sleep until."""
+
+    realtime = False
 
     def __init__(self, start: float = 0.0) -> None:
         self._t = float(start)

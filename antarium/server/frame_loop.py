@@ -120,7 +120,7 @@ class FrameLoop:
     def __init__(self, *, clock: Clock, source: LocomotionSource | None, renderer=None, link=None,
                  rate_hz: float = DOME_RATE_HZ, closed_loop: bool = True, tether: str = "free_yaw",
                  gain_translation: float = 1.0, gain_rotation: float = 1.0, origin: Pose | None = None,
-                 ball_radius: float = BALL_RADIUS_M, keep_gpu_busy: bool = False, log=None,
+                 ball_radius: float = BALL_RADIUS_M, keep_gpu_busy: bool | str = False, log=None,
                  on_frame: Callable[[FrameRecord], None] | None = None,
                  on_event: Callable[[float, str, dict], None] | None = None) -> None:
         if not isinstance(rate_hz, (int, float)) or not 1.0 <= rate_hz <= 2000.0:
@@ -137,7 +137,10 @@ class FrameLoop:
         self.pose = self.origin
         self.scene_rotation = 0.0
         self.ball_radius = float(ball_radius)
-        self.keep_gpu_busy = bool(keep_gpu_busy)
+        if keep_gpu_busy not in (True, False, "auto"):
+            raise ValueError(f'keep_gpu_busy must be true, false or "auto", got {keep_gpu_busy!r}')
+        self.keep_gpu_busy = keep_gpu_busy
+        self.gpu_busy_passes = 0
         self.log = log
         self.on_frame = on_frame
         self.on_event = on_event
@@ -390,12 +393,21 @@ class FrameLoop:
             self._polariser_heading = pose.heading
         return sent
 
+    @property
+    def gpu_kept_busy(self) -> bool:
+        """Whether the loop keeps the renderer's GPU busy between frames: `keep_gpu_busy`, where "auto" is on when
+        the renderer's frame path runs on a hardware GPU and the clock is wall time (an idle GPU lowers its
+        clocks, and a frame then takes several times as long on it; a simulated clock does not wait)."""
+        if self.keep_gpu_busy == "auto":
+            return bool(getattr(self.clock, "realtime", False) and getattr(self.renderer, "on_hardware_gpu", False))
+        return self.keep_gpu_busy
+
     def _busy_gpu(self, until: float) -> None:
-        """Keep the renderer's GPU busy until `until` (its clocks drop while it idles between frames)."""
+        """Keep the renderer's GPU busy until `until` (s on the loop's clock)."""
         busy = getattr(self.renderer, "keep_gpu_busy", None)
         if busy is not None:
             try:
-                busy(self.clock, until)
+                self.gpu_busy_passes += busy(self.clock, until)
             except Exception as exc:  # counted like a render error; the frame is still rendered
                 self.fault("render", self.clock.now(), exc)
 
@@ -406,7 +418,7 @@ class FrameLoop:
         if self._next_t is None:
             self._next_t = clock.now()
         t_target = self._next_t
-        if self.keep_gpu_busy and self.renderer is not None:
+        if self.renderer is not None and self.gpu_kept_busy:
             self._busy_gpu(t_target - GPU_BUSY_MARGIN_S)
         clock.sleep_until(t_target)
         t_start = clock.now()
@@ -536,7 +548,8 @@ class FrameLoop:
                                "skipped_frames": self.skipped_frames, "target_rate_hz": self.rate_hz,
                                "frame_rate_hz": None, "locomotion_connected": self.locomotion_connected,
                                "link_ok": self.link_ok, "link_outages": self.link_outages,
-                               "rejected_frames": self.rejected_frames, "faults": dict(self.faults)}
+                               "rejected_frames": self.rejected_frames, "faults": dict(self.faults),
+                               "gpu_busy_passes": self.gpu_busy_passes}
         if n >= 2:
             t = window[:, 0]
             span = float(np.nanmax(t) - np.nanmin(t))
