@@ -74,3 +74,24 @@ def test_arena_trips_run_through_the_dome(tmp_path):
 def test_one_ring_weights_are_checked():
     with pytest.raises(ValueError, match="sum to 1"):
         make_model("one_ring", 800, k_cx=0.9, k_mb=0.2, k_of=0.2)
+    for swing in (-0.1, 4.0, float("nan")):
+        with pytest.raises(ValueError, match=r"flow_swing must be in \[0, pi\] rad"):
+            make_model("one_ring", 800, flow_swing=swing)
+
+
+@pytest.mark.parametrize("heading", [0.0, 2.0, -2.5])
+def test_one_ring_codes_the_avoidance_as_a_heading_on_the_ring(heading):
+    """The flow's desired heading: `share` of `flow_swing` off the compass heading, the bump as high as the
+    share, peaking opposite (CPU1 steers away from CPU4's vector); flat without flow."""
+    from antarium.ant.central_complex import N_COLUMNS, PREFS
+    from antarium.ant.navigation import heading_bump
+
+    swing = math.pi / 2
+    for share in (1.0, -1.0, 0.5):
+        bump = heading_bump(heading + share * swing, abs(share))
+        assert np.array_equal(bump[:N_COLUMNS], bump[N_COLUMNS:])
+        peak = PREFS[np.argmax(bump[:N_COLUMNS])]
+        opposite = heading + share * swing + math.pi
+        assert abs(math.remainder(peak - opposite, math.tau)) <= math.pi / N_COLUMNS + 1e-9
+        assert bump.max() - bump.min() == pytest.approx(abs(share), abs=0.3)
+    assert np.all(heading_bump(heading, 0.0) == 0.5)

@@ -197,18 +197,27 @@ class OneRingParams(CXMBParams):
     k_cx: float = 0.6
     k_mb: float = 0.2
     k_of: float = 0.2
+    flow_swing: float = math.pi / 2   # rad off the heading the flow's bump points to at full imbalance
 
     def __post_init__(self) -> None:
         CXMBParams.__post_init__(self)
         w = (self.k_cx, self.k_mb, self.k_of)
         if min(w) < 0 or not math.isclose(sum(w), 1.0, abs_tol=1e-9):
             raise ValueError(f"One Ring weights k_cx, k_mb, k_of must be >= 0 and sum to 1, got {w}")
+        if not 0.0 <= self.flow_swing <= math.pi:
+            raise ValueError(f"One Ring flow_swing must be in [0, pi] rad, got {self.flow_swing!r}")
+
+
+def heading_bump(desired: float, height: float) -> np.ndarray:
+    """(16,) float64: a desired heading `desired` (rad) as CPU1's memory input, like the MBONs': a cosine bump of
+    `height` (0..1) about 0.5, peaking opposite `desired`, as CPU1 steers away from the vector CPU4 holds."""
+    return np.tile(0.5 + 0.5 * height * np.cos(PREFS - (desired + math.pi)), 2)
 
 
 class OneRingModel(CXMBModel):
-    """Path integration, visual memory and collision avoidance combined at CPU1. The optic-flow turn becomes a
-    desired heading (compass heading + turn), coded on the ring like the MBONs' (a cosine bump whose height is the
-    turn's share of its gain; flat without flow)."""
+    """Path integration, visual memory and collision avoidance combined at CPU1. The optic-flow avoidance becomes
+    a desired heading coded on the ring (`heading_bump`): away from the side with more flow, up to `flow_swing`
+    off the compass heading, and as high as the imbalance (its turn's share of `flow_gain`; flat without flow)."""
 
     kind = "one_ring"
 
@@ -218,9 +227,8 @@ class OneRingModel(CXMBModel):
         p = self.params
         mb, trace = self.mbon_input(senses.view)
         flow_turn, flow_trace = self.avoidance(senses)
-        strength = min(1.0, abs(flow_turn) / p.flow_gain)
-        desired = senses.compass.heading + flow_turn
-        of = np.tile(0.5 + 0.5 * strength * np.cos(PREFS - (desired + math.pi)), 2)
+        share = flow_turn / p.flow_gain  # -1 (all flow on the left: turn right) .. 1
+        of = heading_bump(senses.compass.heading + share * p.flow_swing, min(1.0, abs(share)))
         rest = p.k_mb + p.k_of
         extra = (p.k_mb * mb + p.k_of * of) / rest if rest > 0 else None
         return extra, p.k_cx, {**trace, **flow_trace}
