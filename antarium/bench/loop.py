@@ -104,13 +104,18 @@ def run(args: argparse.Namespace) -> int:
             config.render.path = path
         gl = gl_renderer_string()
         chosen = config.render.path
-        print(f"GL renderer: {gl}; per-LED path: {default_path(gl) if chosen == 'auto' else chosen}"
-              f"{' (auto)' if chosen == 'auto' else ''}")
-        _run_one(args, config, seconds)
+        used = default_path(gl) if chosen == "auto" else chosen
+        print(f"GL renderer: {gl}; per-LED path: {used}{' (auto)' if chosen == 'auto' else ''}")
+        json_out = args.json_out
+        if json_out and len(paths) > 1:  # one file per path: loop.json -> loop-gpu.json, loop-cpu.json
+            root, ext = os.path.splitext(json_out)
+            json_out = f"{root}-{path}{ext}"
+        _run_one(args, config, seconds, {"gl_renderer": gl, "path": used}, json_out)
     return 0
 
 
-def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None) -> None:
+def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None, device: dict[str, str],
+             json_out: str | None) -> None:
     from antarium.bus import free_tcp_endpoint
     from antarium.server import Server
     from antarium.trial_log import read_table
@@ -136,13 +141,15 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None)
         result["link_outages"] = server.final_stats.get("link_outages", 0)
         result["far_layer"] = server.final_stats.get("far_layer")
         result["gpu_busy_passes"] = server.final_stats.get("gpu_busy_passes", 0)
+        result["device"] = device
         result["config"] = {"render": config.render.model_dump(), "loop_rate_hz": config.loop.rate_hz,
                             "keep_gpu_busy": config.loop.keep_gpu_busy,
                             "link": config.link.interface, "locomotion": config.locomotion.source}
     _print(result)
-    if args.json_out:
-        with open(args.json_out, "w") as fh:
+    if json_out:
+        with open(json_out, "w") as fh:
             json.dump(result, fh, indent=2)
+        print(f"  figures written to {json_out}")
 
 
 #: after a scripted command's reply, its late frames are counted for this long (s)

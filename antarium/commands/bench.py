@@ -32,7 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--browser-idle", action="store_true",
                         help="monitor: run the headless browser SCHED_IDLE, so that it gets only the CPU time the loop "
                              "leaves, as if it ran on the experimenter's computer")
-    parser.add_argument("--json", dest="json_out", default=None, help="also write the results to this JSON file")
+    parser.add_argument("--json", dest="json_out", default=None,
+                        help="also write the results to this JSON file (loop with several --path: one file per path, "
+                             "NAME-gpu.json and NAME-cpu.json)")
 
 
 def run(args: argparse.Namespace) -> int:
