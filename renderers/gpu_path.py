@@ -17,8 +17,8 @@ Three GL 4.3 compute passes over the same data as the CPU path (`kernels`, `outp
 The CPU reads back one buffer (81,400 frame bytes + 61,160 datagram bytes) into preallocated memory. moderngl 5.13
 has no fence objects, so the read-back waits for the GPU (`Buffer.read_into`).
 
-Between frames, `busy()` runs one small work group (tens of microseconds at full clock), so that a loop may keep
-the GPU from lowering its clocks while it waits for the next frame's slot (`FrameLoop(keep_gpu_busy=True)`).
+Between frames, `busy()` runs one small work group (`BUSY_ITERATIONS`), so that a loop may keep the GPU from
+lowering its clocks while it waits for the next frame's slot (`FrameLoop(keep_gpu_busy=...)`).
 """
 
 from __future__ import annotations
@@ -204,7 +204,8 @@ void main() {{
 """
 
 
-#: iterations of the busy pass's dependent multiply-add chain: about 40 us on one work group at 2 GHz
+#: iterations of the busy pass's dependent multiply-add chain: some 40 us at 2 GHz by count (a few cycles each);
+#: not timed on a GPU (llvmpipe here: 0.47 ms)
 BUSY_ITERATIONS = 20_000
 BUSY_CS = _header(_GROUP) + """
 layout(std430, binding = 10) buffer Busy { float busy[]; };
@@ -273,8 +274,7 @@ class GpuFramePath:
 
     def _buffers(self) -> list:
         return [b for b in (self._far, self._pairs, self._means, self._gain, self._out, self._busy_out,
-                            *(self._matrix or ()),
-                            self._table, self._cells) if b is not None]
+                            *(self._matrix or ()), self._table, self._cells) if b is not None]
 
     def set_matrix(self, key, indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray) -> None:
         """Upload a CSR footprint matrix (weights in radiance per 16-bit texel unit), unless `key` is the current."""

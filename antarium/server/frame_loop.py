@@ -120,7 +120,7 @@ class FrameLoop:
     def __init__(self, *, clock: Clock, source: LocomotionSource | None, renderer=None, link=None,
                  rate_hz: float = DOME_RATE_HZ, closed_loop: bool = True, tether: str = "free_yaw",
                  gain_translation: float = 1.0, gain_rotation: float = 1.0, origin: Pose | None = None,
-                 ball_radius: float = BALL_RADIUS_M, keep_gpu_busy: bool | str = False, log=None,
+                 ball_radius: float = BALL_RADIUS_M, keep_gpu_busy: bool | str = "auto", log=None,
                  on_frame: Callable[[FrameRecord], None] | None = None,
                  on_event: Callable[[float, str, dict], None] | None = None) -> None:
         if not isinstance(rate_hz, (int, float)) or not 1.0 <= rate_hz <= 2000.0:
