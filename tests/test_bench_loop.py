@@ -20,18 +20,6 @@ def test_loop_bench_reports_and_writes_its_figures(tmp_path, capsys, monkeypatch
     assert f"GL renderer: {result['device']['gl_renderer']}; per-LED path: {result['device']['path']}" in text
 
 
-def test_loop_bench_writes_one_file_per_path_compared(tmp_path, capsys, monkeypatch):
-    monkeypatch.delenv("ANTARIUM_RIG_CONFIG", raising=False)
-    out = tmp_path / "loop.json"
-    assert main(["bench", "loop", "--seconds", "1", "--path", "cpu", "--path", "gpu", "--json", str(out)]) == 0
-    text = capsys.readouterr().out
-    assert not out.exists()
-    for path in ("cpu", "gpu"):
-        result = json.loads((tmp_path / f"loop-{path}.json").read_text())
-        assert result["device"]["path"] == path and result["config"]["render"]["path"] == path
-        assert result["frames"] > 0 and f"figures written to {tmp_path / f'loop-{path}.json'}" in text
-
-
 def test_a_command_cut_short_by_the_runs_end_is_no_error_and_no_reply_time():
     import numpy as np
 

@@ -30,6 +30,9 @@ if TYPE_CHECKING:
 
 import numpy as np
 
+from antarium.bench.gpu_clocks import GpuClocks
+from antarium.bench.gpu_clocks import describe as describe_clocks
+
 WARMUP_S = 1.0
 
 
@@ -129,11 +132,13 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None,
             else None
         script = ScriptedCommands(server, config.render.scene,
                                   {kind: getattr(args, option, None) for kind, option in SCRIPTED.items()})
+        clocks = GpuClocks().start() if device["path"] == "gpu" else None
         try:
             server.run(seconds=seconds, frames=args.frames)
         finally:
             stalls = probes.stop() if probes is not None else None
             script.stop()
+            gpu_clocks = clocks.stop() if clocks is not None else None
         frames = read_table(server.trial_paths[0], "frames")
         result = summarise(frames, config.loop.rate_hz, stalls)
         result["commands"] = script.summary(frames)
@@ -141,7 +146,7 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None,
         result["link_outages"] = server.final_stats.get("link_outages", 0)
         result["far_layer"] = server.final_stats.get("far_layer")
         result["gpu_busy_passes"] = server.final_stats.get("gpu_busy_passes", 0)
-        result["device"] = device
+        result["device"] = {**device, "gpu_clocks": gpu_clocks}
         result["config"] = {"render": config.render.model_dump(), "loop_rate_hz": config.loop.rate_hz,
                             "keep_gpu_busy": config.loop.keep_gpu_busy,
                             "link": config.link.interface, "locomotion": config.locomotion.source}
@@ -270,6 +275,8 @@ def _print(r: dict[str, Any]) -> None:
         error = f", ERROR {layer['error']}" if layer["error"] else ""
         print(f"  far layer       {layer['mode']}: {layer['layer_frames']} frames with it, "
               f"{layer['full_frames']} in full (start-up, edits, eye jumps), {layer['builds']} layers built{error}")
+    for line in describe_clocks(r["device"]["gpu_clocks"]):
+        print(f"  {line}")
     busy = r["config"]["keep_gpu_busy"]
     if r["gpu_busy_passes"] or busy is True:
         print(f"  GPU kept busy   {r['gpu_busy_passes']} busy passes between frames ([loop] keep_gpu_busy = "
