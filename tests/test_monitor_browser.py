@@ -175,6 +175,16 @@ def test_the_page_shows_the_dome_the_path_and_the_stats_live(browser, rig):
         assert view["frame"] == snap["frame"] and facing.sum() > 40, (view["frame"], snap["frame"], facing.sum())
         agree = (np.abs(seen - got[facing]).max(axis=1) <= 1).mean()
         assert agree >= 0.9, f"the 3D view agrees with the map at {agree:.0%} of the LEDs it faces"
+        # turned (as by a drag), it shows the LEDs that now face it, in the same frame's colours
+        snap, turned = browser.execute_script(
+            "const M = window.antariumMonitor; M.turn(3.0, 0.0); return [M.snapshot(arguments[0]), "
+            "M.snapshot3d(arguments[1])];", leds, _on_panels(leds).tolist())
+        facing_now = np.array([v["facing"] for v in turned["views"]]) > 0.3
+        seen = np.asarray([v["colour"] for v in turned["views"]], float)[facing_now]
+        got = np.asarray(snap["colours"], float)
+        assert turned["frame"] == snap["frame"] and facing_now.sum() > 40 and (facing_now & ~facing).sum() > 20
+        agree = (np.abs(seen - got[facing_now]).max(axis=1) <= 1).mean()
+        assert agree >= 0.9, f"turned, the 3D view agrees with the map at {agree:.0%} of the LEDs it faces"
 
         # the path grows while the walker moves, the stats update
         before = _state(browser)
@@ -183,6 +193,21 @@ def test_the_page_shows_the_dome_the_path_and_the_stats_live(browser, rig):
         assert after["path"] > before["path"]
         assert after["status"] > before["status"] and after["stats"] > before["stats"]
         assert after["frame"] > before["frame"]
+        # the path view adds the new poses to what it drew: the same path as drawing it all again, but where the
+        # strokes' edges meet
+        incremental, whole = browser.execute_script(
+            "drawPath(); const W = 360, a = pathCtx.getImageData(0, 0, W, W).data; pathBox = null; drawPath(); "
+            "const b = pathCtx.getImageData(0, 0, W, W).data, blue = (d) => { const m = []; "
+            "for (let k = 0; k < d.length; k += 4) m.push(d[k] < 150 && d[k + 2] > 120 ? 1 : 0); return m; }; "
+            "return [blue(a), blue(b)];")
+        incremental, whole = (np.asarray(m, bool).reshape(360, 360) for m in (incremental, whole))
+        assert whole.sum() > 20, whole.sum()
+        for this, other in ((incremental, whole), (whole, incremental)):
+            near = np.zeros_like(other)  # within a pixel of the other picture's path
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    near |= np.roll(np.roll(other, dy, 0), dx, 1)
+            assert (this & ~near).sum() == 0, f"{(this & ~near).sum()} path pixels not in the other picture"
 
         # the rig goes away: the page says so
         _stop(serve)
