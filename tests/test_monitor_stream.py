@@ -1,6 +1,8 @@
 """The decimated LED stream (`antarium/<rig>/leds`): golden bytes, refusals, and what the server publishes is what
 the (virtual) dome shows; the `[monitor]` section's checks."""
 
+import asyncio
+import json
 import os
 import threading
 
@@ -101,8 +103,17 @@ def test_serve_starts_and_stops_the_monitor_when_the_config_enables_it(tmp_path)
         except OSError:
             return False
 
+    async def websocket():  # a browser offers compression; the monitor sends LED frames as they are
+        import aiohttp
+
+        url = f"ws://127.0.0.1:{port}/ws"
+        async with aiohttp.ClientSession() as session, session.ws_connect(url, compress=15) as ws:
+            return ws.compress, json.loads((await ws.receive()).data)
+
     with Server(config, renderer_factory=None, link=False, echo=lambda line: None).start_thread() as server:
         assert wait_for(page, 30.0)
+        compress, hello = asyncio.run(websocket())
+        assert compress == 0 and hello["type"] == "hello" and hello["rig"] == "tspawn", (compress, hello)
         pid = server.monitor.child.pid
     with pytest.raises(ProcessLookupError):  # ended and reaped with the server
         os.kill(pid, 0)

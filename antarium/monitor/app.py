@@ -114,7 +114,8 @@ def make_app(session, rig: str, settings: MonitorSection):
         return web.Response(text=geometry, content_type="application/json")
 
     async def websocket(request):
-        ws = web.WebSocketResponse(max_msg_size=1 << 22)
+        # not compressed: deflating an LED frame (to 65 %) took the monitor 2 ms of the rig's CPU (docs/monitor.md)
+        ws = web.WebSocketResponse(max_msg_size=1 << 22, compress=False)
         await ws.prepare(request)
         await ws.send_str(json.dumps({"type": "hello", "rig": rig, "commands": settings.commands,
                                       "page_commands": list(PAGE_COMMANDS)}))
