@@ -63,6 +63,15 @@ def test_the_operator_confirms_each_panel(tmp_path, monkeypatch, capsys):
     assert "FAIL panel mapping: panels [30] not where expected" in out
 
 
+def test_no_answer_is_not_a_confirmation(tmp_path, monkeypatch, capsys):
+    rig = _rig(tmp_path, 'interface = "virtual"')
+    monkeypatch.setattr("sys.stdin", io.StringIO("\n"))  # panel 7 confirmed, then the input ends
+    assert main(["check", "--config", rig, "--panels", "7,30,31", "--min-free-gb", "0.01"]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL panel mapping: no answer for panel 30 (the input ended)" in out
+    assert "panel 31 (" not in out  # not lit once nobody answers
+
+
 def test_a_usb_trackball_that_is_absent_fails(tmp_path, capsys):
     rig = _rig(tmp_path, 'interface = "virtual"',
                '[locomotion]\nsource = "usb"\n[trackball]\nvendor_id = 0xfffe\nproduct_id = 0xfffd\n')

@@ -229,15 +229,23 @@ def check_mapping(report: Report, link, panels: list[int], confirm: Callable[[in
 
     dome = load_dome()
     before = link.telemetry(wait_s=timeout_s).get("counters", {}).get("frames_latched", 0)
-    wrong = []
+    wrong, unanswered = [], None
     for p in panels:
         link.send_frame(panel_pattern(p))
         outward = -dome.panel_normals[p]
         where = (f"pentagon {p // 5} slot {p % 5}, azimuth {math.degrees(math.atan2(outward[1], outward[0])):.0f}°, "
                  f"elevation {math.degrees(math.asin(np.clip(outward[2], -1, 1))):.0f}°")
-        if confirm is not None and not confirm(p, where):
-            wrong.append(p)
+        if confirm is not None:
+            try:
+                if not confirm(p, where):
+                    wrong.append(p)
+            except NoAnswer:
+                unanswered = p
+                break
     link.send_frame(np.zeros((dome.positions.shape[0], 2), np.uint16))
+    if unanswered is not None:
+        return report.fail("panel mapping", f"no answer for panel {unanswered} (the input ended): run it at a "
+                                            "terminal to confirm each panel by eye, or with --auto")
     if confirm is None:
         time.sleep(0.05)
         after = link.telemetry(wait_s=timeout_s).get("counters", {}).get("frames_latched", 0)
@@ -253,10 +261,19 @@ def check_mapping(report: Report, link, panels: list[int], confirm: Callable[[in
     return report.passed("panel mapping", f"{len(panels)} panels confirmed by the operator")
 
 
+class NoAnswer(Exception):
+    """The operator's input ended before an answer (stdin closed or not a terminal)."""
+
+
 def _ask_operator(panel: int, where: str) -> bool:
+    """True when the operator answers that `panel` is lit where expected; `NoAnswer` at the end of the input."""
     print(f"  panel {panel} ({where}) should be lit green alone: Enter if so, n + Enter if not: ",
           end="", flush=True)
-    return not sys.stdin.readline().strip().lower().startswith("n")
+    answer = sys.stdin.readline()
+    if not answer:
+        print(flush=True)
+        raise NoAnswer
+    return not answer.strip().lower().startswith("n")
 
 
 def _panel_list(text: str) -> list[int]:
