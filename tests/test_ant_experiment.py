@@ -120,6 +120,26 @@ def test_route_file_heading_column_sets_the_release_heading(field):
     assert r1 and all(abs(r.route_heading_deg) < 0.1 for r in r1)   # the file's heading is the route's own
 
 
+def test_route_files_are_read_and_bad_ones_named_by_line(tmp_path):
+    def route(name, text):
+        (tmp_path / name).write_text(text)
+        return tmp_path / name
+
+    plain = load_route(route("plain.txt", "# a comment, with a comma\n0 0\n0.5 0\n1.0 0.1\n"))
+    headed = load_route(route("headed.csv", "# field 3\ny_m, x_m\n\n0, 0\n0, 0.5\n0.1, 1.0\n"))
+    np.testing.assert_allclose(headed.route.points, plain.route.points)
+    assert plain.release_heading is None
+    for name, text, message in [
+        ("bad.csv", "x_m,y_m\n0,0\n\n1,abc\n", "bad.csv, line 4: 'abc' is not a number; a route file holds x_m"),
+        ("ragged.csv", "0,0\n1,0,5\n", "ragged.csv, line 2: 3 columns where the rows before have 2"),
+        ("header.csv", "x_m,y_m\n", "header.csv: a header and no points"),
+        ("one.csv", "0\n1\n", "one.csv: a route file needs columns x_m, y_m (metres), got 1 column"),
+    ]:
+        with pytest.raises(RouteError) as err:
+            load_route(route(name, text))
+        assert message in str(err.value)
+
+
 EXAMPLE_SPECS = sorted((Path(__file__).resolve().parent.parent / "examples" / "experiment").glob("*.toml"))
 #: runs each example spec names in its comment (models x routes x grid points)
 EXAMPLE_RUNS = {"ardin_eye": 1 * 13 * 4, "heldout_habitat": 3 * 6, "heldout_habitat_8m": 3 * 13, "sweep": 3 * 10 * 3}

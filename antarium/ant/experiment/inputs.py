@@ -209,27 +209,37 @@ class RouteInput:
 
 
 def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
-    text = path.read_text()
-    delimiter = "," if "," in text else None
-    lines = [ln for ln in text.splitlines() if ln.strip()]
+    lines = [(n, ln) for n, ln in enumerate(path.read_text().splitlines(), 1)
+             if ln.strip() and not ln.lstrip().startswith("#")]
+    delimiter = "," if any("," in ln for _, ln in lines) else None
     if not lines:
         raise RouteError(f"{path}: empty route file; expected columns x_m, y_m (and optionally heading_deg)")
-    first = lines[0]
+    first = lines[0][1]
     has_header = any(c.isalpha() and c not in "eE" for c in first)
     columns = [0, 1]
     heading_col = None
     if has_header:
-        names = [h.strip().lower() for h in (first.split(",") if delimiter else first.split())]
+        names = [h.strip().lower() for h in first.split(delimiter)]
         if "x_m" in names and "y_m" in names:
             columns = [names.index("x_m"), names.index("y_m")]
             heading_col = names.index("heading_deg") if "heading_deg" in names else None
         elif len(names) >= 3 and names[2] == "heading_deg":
             heading_col = 2
-    try:
-        data = np.loadtxt(path, delimiter=delimiter, skiprows=int(has_header), ndmin=2)
-    except ValueError as exc:
-        raise RouteError(f"{path}: not a route file of x_m, y_m[, heading_deg] numbers ({exc})") from None
-    if data.shape[1] < 2:
+    rows = []
+    for n, line in lines[int(has_header):]:
+        fields = [f.strip() for f in line.split(delimiter)]
+        try:
+            rows.append([float(f) for f in fields])
+        except ValueError:
+            bad = next(f for f in fields if not _is_number(f))
+            raise RouteError(f"{path}, line {n}: {bad!r} is not a number; a route file holds x_m, y_m[, heading_deg] "
+                             "numbers (metres, degrees), with an optional header row") from None
+        if len(rows[-1]) != len(rows[0]):
+            raise RouteError(f"{path}, line {n}: {len(rows[-1])} columns where the rows before have {len(rows[0])}")
+    if not rows:
+        raise RouteError(f"{path}: a header and no points; expected rows of x_m, y_m (and optionally heading_deg)")
+    data = np.array(rows, np.float64)
+    if data.shape[1] < 2 or data.shape[1] <= max(columns + [heading_col or 0]):
         raise RouteError(f"{path}: a route file needs columns x_m, y_m (metres), got {data.shape[1]} column(s)")
     heading = None
     if heading_col is not None:
@@ -238,6 +248,14 @@ def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
             raise RouteError(f"{path}: heading_deg must be finite degrees")
         heading = math.radians(float(h[0]))
     return data[:, columns], heading
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def load_route(path: str | Path) -> RouteInput:
