@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from antarium.cli import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,6 +29,22 @@ def test_every_ant_option_has_help():
                for a in p._actions
                if not isinstance(a, argparse._HelpAction | argparse._SubParsersAction) and not a.help]
     assert missing == []
+
+
+#: every option that takes a duration in seconds, with what else its command needs to get that far
+DURATIONS = [("serve", "--seconds"), ("emulate", "--seconds"), ("bench", "loop", "--seconds"),
+             ("servosphere", "--simulate", "--seconds"), ("trackball", "--emulate", "--seconds"),
+             ("trackball", "--emulate", "--unplug-at"), ("trackball", "--emulate", "--replug-after"),
+             ("check", "--timeout-s")]
+
+
+@pytest.mark.parametrize("value", ["-1", "0", "nan"])
+@pytest.mark.parametrize("command", DURATIONS, ids=" ".join)
+def test_a_duration_that_is_not_positive_is_refused_in_one_line(command, value, capsys):
+    assert main([*command, value]) == 2
+    err = capsys.readouterr().err.strip()
+    shown = "nan" if value == "nan" else f"{float(value):g}"
+    assert err == f"antarium {command[0]}: error: {command[-1]} must be a positive number of seconds, got {shown}"
 
 
 def test_calibrate_dry_run_needs_no_config(capsys):

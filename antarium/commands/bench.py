@@ -7,6 +7,7 @@ import math
 from importlib import import_module
 
 from antarium.bench import TARGETS
+from antarium.commands import require_seconds
 
 HELP = "run a benchmark and report it against the dome's 190 frames/s (5.3 ms frame period)"
 
@@ -38,8 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.seconds is not None and not (math.isfinite(args.seconds) and args.seconds > 0):
-        raise ValueError(f"--seconds must be a positive number of seconds, got {args.seconds:g}")
+    require_seconds(args, "seconds")
     if args.frames is not None and args.frames < 1:
         raise ValueError(f"--frames must be at least 1, got {args.frames}")
     if not (math.isfinite(args.work_ms) and args.work_ms >= 0):

@@ -21,6 +21,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from antarium.commands import require_seconds
+
 HELP = "first-run checklist of a rig: distributor, panels, trackball, real time, disk, panel mapping"
 
 #: test-pattern drive of a lit panel's green LEDs (of 65535): bright enough to see, far below full current
@@ -291,8 +293,7 @@ def _panel_list(text: str) -> list[int]:
 def run(args: argparse.Namespace) -> int:
     from antarium.config import load_config
 
-    if not args.timeout_s > 0:
-        raise ValueError(f"--timeout-s must be > 0, got {args.timeout_s}")
+    require_seconds(args, "timeout_s")
     panels = _panel_list(args.panels)
     config = load_config(args.config)
     report = Report()

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from antarium.commands import require_seconds
+
 HELP = "run the dome emulator (distributor + 55 panels) on UDP, as the real board would"
 
 
@@ -27,6 +29,7 @@ def _parse_fault(spec: str) -> tuple[int, int, str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    require_seconds(args, "seconds")
     from antarium.firmware_proto.emulator import Emulator
     from antarium.firmware_proto.server import format_stats, serve
 

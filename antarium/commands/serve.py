@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from antarium.commands import require_seconds
+
 HELP = "run the stimulus server: frame loop, closed loop, bus commands and trial logs"
 
 
@@ -70,8 +72,7 @@ def run(args: argparse.Namespace) -> int:
 
         print(tomli_w.dumps(config.to_toml_dict()), end="")
         return 0
-    if args.seconds is not None and not args.seconds > 0:
-        raise ValueError(f"--seconds must be > 0, got {args.seconds}")
+    require_seconds(args, "seconds")
     server = Server(config, record=args.record)
 
     def stop(signum, frame):

@@ -12,6 +12,8 @@ import math
 import sys
 import time
 
+from antarium.commands import require_seconds
+
 HELP = "run the servosphere (free ant on a motion-compensating ball); --simulate for the simulated rig"
 
 
@@ -37,8 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from antarium.core.clock import MonotonicClock, SimulatedClock
     from antarium.locomotion import open_source
 
-    if not math.isfinite(args.seconds) or args.seconds <= 0:
-        raise ValueError(f"--seconds must be a positive number, got {args.seconds}")
+    require_seconds(args, "seconds")
     simulated = args.simulate and not args.realtime
     clock = SimulatedClock() if simulated else MonotonicClock()
     if args.simulate:

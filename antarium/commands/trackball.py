@@ -19,6 +19,8 @@ import sys
 import time
 from typing import Any
 
+from antarium.commands import require_seconds
+
 HELP = "run the USB trackball or FicTrac input and publish it on the bus; `calibrate` the ball's sensors"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -191,6 +193,7 @@ def _turn_by_hand(driver, axis: str, turns: float) -> list[int]:
 
 
 def run(args: argparse.Namespace) -> int:
+    require_seconds(args, "seconds", "unplug_at", "replug_after")
     if args.action == "calibrate":
         return _calibrate(args)
     return _run(args)
