@@ -14,6 +14,17 @@ def test_layout_export_writes_only_the_table(tmp_path, monkeypatch, capsys):
     assert "picture:" not in capsys.readouterr().out
 
 
+def test_layout_export_to_a_bad_name_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["layout", "--export", "missing/leds.csv"]) == 2
+    assert main(["layout", "--export", "leds.txt"]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""  # no summary printed before the refusal
+    assert err.splitlines() == ["antarium layout: error: --export: folder 'missing' does not exist",
+                                "antarium layout: error: --export file must end in .csv or .json, got 'leds.txt'"]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_layout_draws_pictures_by_default_and_with_out(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["layout", "--export", "leds.csv", "--out", "pics"]) == 0

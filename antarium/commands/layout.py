@@ -44,6 +44,12 @@ def run(args: argparse.Namespace) -> int:
     from antarium.geometry.layout import SHIPPED_LAYOUT, save_layout
     from antarium.geometry.spacing import layout_summary
 
+    if args.export:
+        export = Path(args.export)
+        if export.suffix.lower() not in (".csv", ".json"):
+            raise ValueError(f"--export file must end in .csv or .json, got {export.name!r}")
+        if not export.parent.is_dir():
+            raise ValueError(f"--export: folder {str(export.parent)!r} does not exist")
     layout_path = None
     if args.regenerate:
         kw = {}
