@@ -227,13 +227,14 @@ def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
             heading_col = 2
     rows = []
     for n, line in lines[int(has_header):]:
-        fields = [f.strip() for f in line.split(delimiter)]
-        try:
-            rows.append([float(f) for f in fields])
-        except ValueError:
-            bad = next(f for f in fields if not _is_number(f))
-            raise RouteError(f"{path}, line {n}: {bad!r} is not a number; a route file holds x_m, y_m[, heading_deg] "
-                             "numbers (metres, degrees), with an optional header row") from None
+        row = []
+        for field in (f.strip() for f in line.split(delimiter)):
+            try:
+                row.append(float(field))
+            except ValueError:
+                raise RouteError(f"{path}, line {n}: {field!r} is not a number; a route file holds x_m, y_m"
+                                 "[, heading_deg] numbers (metres, degrees), with an optional header row") from None
+        rows.append(row)
         if len(rows[-1]) != len(rows[0]):
             raise RouteError(f"{path}, line {n}: {len(rows[-1])} columns where the rows before have {len(rows[0])}")
     if not rows:
@@ -248,14 +249,6 @@ def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
             raise RouteError(f"{path}: heading_deg must be finite degrees")
         heading = math.radians(float(h[0]))
     return data[:, columns], heading
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def load_route(path: str | Path) -> RouteInput:
