@@ -100,13 +100,19 @@ class Link(ABC):
         `last_timings` then holds the seconds spent to "encode" and "send" (for the virtual link "send" includes
         the emulator's work).
 
-        Raises ValueError on a bad frame (nothing sent); never raises for transport problems (counted).
+        Raises ValueError on a bad frame and IncompatibleDistributor when the distributor speaks another protocol
+        version (nothing sent); never raises for transport problems (counted).
         """
-        if self.incompatible:
-            raise IncompatibleDistributor(self.incompatible)
         seq = self._seq
         t0 = time.perf_counter()
         encode_frame(frame, seq, out=self._frame_buf)
+        return self._send_encoded(seq, t0)
+
+    def _send_encoded(self, seq: int, t0: float) -> int:
+        """Send the frame encoded in `_frame_buf` since `t0` (perf_counter s) and its LATCH; count it. Nothing to a
+        distributor of another protocol version (IncompatibleDistributor)."""
+        if self.incompatible:
+            raise IncompatibleDistributor(self.incompatible)
         t1 = time.perf_counter()
         self._send_frame_datagrams(encode_latch(seq))
         self.last_timings = {"encode": t1 - t0, "send": time.perf_counter() - t1}
@@ -117,7 +123,8 @@ class Link(ABC):
     def send_packed(self, datagrams: np.ndarray) -> int:
         """Send a frame packed elsewhere (the renderer's GPU path): its 55 VIDEO datagrams, (55, 1112) uint8 with
         TD and pixels set; the sequence goes into every INFO byte here, then the LATCH. Returns the sequence, like
-        `send_frame`. Raises ValueError on a wrong shape or a TD that is not VIDEO panel 0..54 in order."""
+        `send_frame`. Raises ValueError on a wrong shape or a TD that is not VIDEO panel 0..54 in order, and
+        IncompatibleDistributor as `send_frame` does."""
         d = datagrams
         if not isinstance(d, np.ndarray) or d.shape != self._frame_buf.shape or d.dtype != np.uint8:
             got = f"{d.shape} {d.dtype}" if isinstance(d, np.ndarray) else type(d).__name__
@@ -128,12 +135,7 @@ class Link(ABC):
         t0 = time.perf_counter()
         np.copyto(self._frame_buf, d)
         self._frame_buf[:, 1] = video_info(seq)
-        t1 = time.perf_counter()
-        self._send_frame_datagrams(encode_latch(seq))
-        self.last_timings = {"encode": t1 - t0, "send": time.perf_counter() - t1}
-        self._seq = (seq + 1) % SEQ_MODULO
-        self.counters["frames_sent"] += 1
-        return seq
+        return self._send_encoded(seq, t0)
 
     def _send_frame_datagrams(self, latch: bytes) -> None:
         """The frame in `_frame_buf`, then its LATCH, one datagram at a time (a back-end may batch them)."""

@@ -8,6 +8,7 @@ import pytest
 from antarium.firmware_proto.emulator import Emulator
 from antarium.firmware_proto.link import HELLO_RETRY_S, OUTAGE_S, IncompatibleDistributor, Link
 from antarium.firmware_proto.replies import OP_VERSION, VERSION_BODY, _reply
+from antarium.firmware_proto.video import encode_frame
 
 
 class LatePeer(Link):
@@ -72,9 +73,13 @@ def test_an_incompatible_distributor_gets_no_frames_and_a_clear_reason(monkeypat
     _later(monkeypatch, HELLO_RETRY_S)
     status = link.telemetry(wait_s=0.1)
     assert "protocol version 2" in status["incompatible"]
+    frame = np.zeros((20350, 2), np.uint16)
+    sent = link.counters["datagrams_sent"]
     with pytest.raises(IncompatibleDistributor, match="protocol version 2; this host speaks 1"):
-        link.send_frame(np.zeros((20350, 2), np.uint16))
-    assert link.counters["frames_sent"] == 0
+        link.send_frame(frame)
+    with pytest.raises(IncompatibleDistributor, match="protocol version 2"):  # the GPU path's packed frames too
+        link.send_packed(encode_frame(frame, seq=0))
+    assert link.counters["frames_sent"] == 0 and link.counters["datagrams_sent"] == sent
 
 
 def test_hello_says_no_answer_when_this_hello_has_none():
