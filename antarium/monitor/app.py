@@ -91,6 +91,15 @@ def refusal(address: str | None, rig: str, allow: list[str]) -> str:
             f"{', '.join(allow)} ([monitor] allow in the rig config)")
 
 
+def foreign_origin(origin: str | None, own: str) -> str | None:
+    """Why a request named an origin other than the monitor's own `own` ("http://host:port"), or None. Access goes
+    by address, so a page of another site open in an allowed browser could reach the monitor too: browsers name
+    that page's origin on a POST and a websocket, and send it JSON only after a CORS check this server never passes."""
+    if origin is not None and origin != own:
+        return f"a page from {origin} may not use the monitor; only its own page ({own}) may"
+    return None
+
+
 def make_app(session, rig: str, settings: MonitorSection):
     """The aiohttp application for rig `rig` on an open zenoh client `session`."""
     from aiohttp import WSMsgType, web
@@ -115,6 +124,9 @@ def make_app(session, rig: str, settings: MonitorSection):
 
     async def websocket(request):
         # not compressed: deflating an LED frame (to 65 %) took the monitor 2 ms of the rig's CPU (docs/monitor.md)
+        refused = foreign_origin(request.headers.get("Origin"), f"{request.scheme}://{request.host}")
+        if refused:
+            return web.Response(status=403, text=f"antarium monitor: {refused}")
         ws = web.WebSocketResponse(max_msg_size=1 << 22, compress=False)
         await ws.prepare(request)
         await ws.send_str(json.dumps({"type": "hello", "rig": rig, "commands": settings.commands,
@@ -149,6 +161,12 @@ def make_app(session, rig: str, settings: MonitorSection):
         if name not in PAGE_COMMANDS:
             return web.json_response({"error": f"{name!r} cannot be sent from the page; allowed: "
                                       f"{', '.join(PAGE_COMMANDS)}"}, status=400)
+        refused = foreign_origin(request.headers.get("Origin"), f"{request.scheme}://{request.host}")
+        if refused:
+            return web.json_response({"error": f"{name}: {refused}"}, status=403)
+        if request.content_type != "application/json":
+            return web.json_response({"error": f"{name}: commands are sent as JSON (Content-Type: application/json), "
+                                      f"got {request.content_type!r}"}, status=415)
         try:
             params = await request.json() if request.can_read_body else {}
         except ValueError as exc:
@@ -185,11 +203,13 @@ def make_app(session, rig: str, settings: MonitorSection):
                     seen.pop(ws, None)
                     sending.pop(ws, None)
 
+    pump_task = web.AppKey("pump", asyncio.Task)
+
     async def start_pump(app):
-        app["pump"] = asyncio.create_task(pump(app))
+        app[pump_task] = asyncio.create_task(pump(app))
 
     async def stop_pump(app):
-        app["pump"].cancel()
+        app[pump_task].cancel()
         for ws in list(clients):
             await ws.close()
         hub.close()
