@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import numbers
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -29,6 +30,9 @@ from typing import Any
 
 from antarium import bus
 from antarium.core.pose import Pose
+
+#: the longest `Rig.wait` (s): a day; anything longer is a typo
+WAIT_MAX_S = 86_400.0
 
 
 class RigError(RuntimeError):
@@ -202,9 +206,11 @@ class Rig:
             params["z"] = z
         return self.call("set_pose", **params)
 
-    def reset_origin(self, x: float | None = None, y: float | None = None, heading_deg: float | None = None) -> dict:
-        """Back to the virtual origin; with x, y (and heading) make that the new origin first."""
-        params = {k: v for k, v in (("x", x), ("y", y), ("heading_deg", heading_deg)) if v is not None}
+    def reset_origin(self, x: float | None = None, y: float | None = None, heading_deg: float | None = None,
+                     z: float | None = None) -> dict:
+        """Back to the virtual origin; with x, y (m; and heading, degrees; eye height z, m) make that the new origin
+        first."""
+        params = {k: v for k, v in (("x", x), ("y", y), ("heading_deg", heading_deg), ("z", z)) if v is not None}
         return self.call("reset_origin", **params)
 
     def scene_edit(self, op: str, **args: Any) -> dict:
@@ -292,12 +298,16 @@ class Rig:
 
     @staticmethod
     def wait(seconds: float) -> None:
-        """Wait `seconds` of wall time (the dome keeps running)."""
-        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not seconds >= 0 \
-                or not math.isfinite(seconds):
-            shown = float(seconds) if isinstance(seconds, (int, float)) else repr(seconds)
-            raise RigError(f"wait needs a finite number of seconds >= 0, got {shown}")
-        time.sleep(seconds)
+        """Wait `seconds` of wall time (the dome keeps running), at most `WAIT_MAX_S` in one call."""
+        real = isinstance(seconds, numbers.Real) and not isinstance(seconds, bool)  # numpy's numbers too
+        try:
+            value = float(seconds) if real else math.nan
+            shown = repr(value) if real else repr(seconds)[:60]
+        except OverflowError:
+            value, shown = math.inf, repr(seconds)[:60]
+        if not 0 <= value <= WAIT_MAX_S:
+            raise RigError(f"wait needs a number of seconds in [0, {WAIT_MAX_S:g}], got {shown}")
+        time.sleep(value)
 
 
 # -- helpers for experiment scripts ----------------------------------------------------------------------

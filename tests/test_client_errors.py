@@ -27,10 +27,10 @@ def rig(tmp_path_factory):
 
 @pytest.mark.parametrize("call, message", [
     (lambda rig: rig.polarisers("x"), "polarisers: parameter 'angles_deg' must be a (nested) list of numbers"),
-    (lambda rig: rig.polarisers([[1.0, 2.0]]), "55 x 9"),
+    (lambda rig: rig.polarisers([[1.0, 2.0]]), "55 lists of 9 numbers"),
     (lambda rig: rig.gains(translation=np.float32(500.0)), "must be in [-100, 100], got 500.0"),
     (lambda rig: rig.set_pose(np.float64(1.0), np.int64(2), heading_deg=np.float64(1e5)), "got 100000.0"),
-    (lambda rig: rig.wait(np.float64(-5.0)), "seconds >= 0, got -5.0"),
+    (lambda rig: rig.wait(np.float64(-5.0)), "seconds in [0, 86400], got -5.0"),
     (lambda rig: rig.rotate_scene(object()), "a parameter cannot be sent"),
 ])
 def test_every_refusal_is_a_rig_error_with_plain_numbers(rig, call, message):

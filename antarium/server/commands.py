@@ -10,6 +10,7 @@ what is allowed; nothing is changed before a command is fully valid. The server 
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -28,13 +29,14 @@ class CommandError(ValueError):
 
 @dataclass(frozen=True)
 class Param:
-    kind: str  # "number", "bool", "str", "object", "scene", "number_list"
+    kind: str  # "number", "bool", "str", "object", "scene", "number_list", "xyz" (a list of 3 numbers)
     required: bool = False
     default: Any = None
     lo: float | None = None
     hi: float | None = None
     choices: tuple | None = None
     doc: str = ""
+    nullable: bool = False  # null is a value of its own (e.g. "off")
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,9 @@ class Command:
     handler: Callable[[Server, dict[str, Any]], Any]
     in_loop: bool = True
     prepare: Callable[[Server, dict[str, Any]], Any] | None = None
+
+
+_XY = 1e6  # metres: anything farther is a typo, not a world
 
 
 # -- handlers: run with checked parameters; a handler that raises changes nothing --------------------------------
@@ -90,8 +95,8 @@ def _reset_origin(server: Server, p: dict[str, Any]) -> None:
     origin = None
     if p["x"] is not None:
         o = server.loop.origin
-        origin = Pose(p["x"], p["y"], o.z if p["z"] is None else p["z"],
-                      o.heading if p["heading_deg"] is None else math.radians(p["heading_deg"]))
+        heading = o.heading if p["heading_deg"] is None else math.radians(p["heading_deg"])
+        origin = Pose(p["x"], p["y"], o.z if p["z"] is None else p["z"], math.remainder(heading, math.tau))
     server.loop.reset_origin(origin)
 
 
@@ -100,47 +105,42 @@ def _polarisers(server: Server, p: dict[str, Any]) -> None:
 
     if server.link is None:
         raise RuntimeError("polarisers: this rig has no dome link")
+    server.require_renderer("polarisers")  # the updates go out with the rendered frames
     server.loop.set_polarisers(None if p["angles_deg"] is None else np.radians(p["angles_deg"]))
 
 
-def _as_position(v: Any) -> list[float]:
-    return [float(c) for c in v]
-
-
-def _deg_to_rad(v: Any) -> float:
-    return math.radians(float(v))
-
-
-def _optional_float(v: Any) -> float | None:
-    return None if v is None else float(v)
-
-
-#: scene_edit operation -> (renderer method, {argument on the bus: (renderer argument, converter)})
-SCENE_EDITS: dict[str, tuple[str, dict[str, tuple[str, Callable[[Any], Any]]]]] = {
-    "move_object": ("move_object", {"name": ("name", str), "position": ("position", _as_position),
-                                    "yaw_deg": ("yaw", _deg_to_rad)}),
-    "remove_object": ("remove_object", {"name": ("name", str)}),
-    "scale_channel": ("scale_channel", {"channel": ("channel", str), "factor": ("factor", float)}),
-    "swap_green_blue": ("swap_green_blue", {"swap": ("swap", bool)}),
-    "set_lowpass": ("set_lowpass", {"cutoff_deg": ("cutoff_deg", _optional_float)}),
-    "set_contrast": ("set_contrast", {"contrast": ("contrast", float)}),
-    "set_brightness": ("set_brightness", {"brightness": ("brightness", float)}),
+#: scene_edit operation -> (renderer method, {argument on the bus: (renderer argument, declaration)}); a `_deg`
+#: argument reaches the renderer in radians
+SCENE_EDITS: dict[str, tuple[str, dict[str, tuple[str, Param]]]] = {
+    "move_object": ("move_object", {"name": ("name", Param("str", True)),
+                                    "position": ("position", Param("xyz", False, None, lo=-_XY, hi=_XY, doc="m")),
+                                    "yaw_deg": ("yaw", Param("number", False, None, lo=-3600, hi=3600))}),
+    "remove_object": ("remove_object", {"name": ("name", Param("str", True))}),
+    "scale_channel": ("scale_channel", {"channel": ("channel", Param("str", True)),
+                                        "factor": ("factor", Param("number", True))}),
+    "swap_green_blue": ("swap_green_blue", {"swap": ("swap", Param("bool", True))}),
+    "set_lowpass": ("set_lowpass", {"cutoff_deg": ("cutoff_deg", Param("number", True, nullable=True,
+                                                                       doc="null: off"))}),
+    "set_contrast": ("set_contrast", {"contrast": ("contrast", Param("number", True))}),
+    "set_brightness": ("set_brightness", {"brightness": ("brightness", Param("number", True))}),
 }
 
 
 def _edit_kwargs(op: str, args: dict[str, Any]) -> dict[str, Any]:
-    """The renderer method's keyword arguments of a scene_edit, converted; CommandError naming what was wrong."""
+    """The renderer method's keyword arguments of a scene_edit, checked as command parameters are; CommandError
+    naming what was wrong."""
     _, allowed = SCENE_EDITS[op]
     unknown = sorted(set(args) - set(allowed))
     if unknown:
         raise CommandError(f"scene_edit {op}: unknown argument(s) {unknown}; allowed: {sorted(allowed)}")
+    checked = _checked(f"scene_edit {op}", {key: decl for key, (_, decl) in allowed.items()}, args)
+    if op == "move_object" and checked["position"] is None and checked["yaw_deg"] is None:
+        raise CommandError("scene_edit move_object: give 'position' [x, y, z] (m) and/or 'yaw_deg'")
     kwargs = {}
-    for key, value in args.items():
-        target, convert = allowed[key]
-        try:
-            kwargs[target] = convert(value)
-        except (TypeError, ValueError):
-            raise CommandError(f"scene_edit {op}: argument {key!r} has a wrong type: {value!r}") from None
+    for key, value in checked.items():
+        if key in args:
+            target = allowed[key][0]
+            kwargs[target] = math.radians(value) if key.endswith("_deg") and target != key else value
     return kwargs
 
 
@@ -229,7 +229,6 @@ def _sky(server: Server, p: dict[str, Any]) -> None:
     server.loop.event("sky", **{k: p[k] for k in p if p[k] is not None and k != "prepared"})
 
 
-_XY = 1e6  # metres: anything farther is a typo, not a world
 #: command name -> its parameters and handler (the one table: the bus, the Rig client and docs/bus.md follow it)
 COMMANDS: dict[str, Command] = {
     "load_scene": Command(
@@ -282,32 +281,80 @@ COMMANDS: dict[str, Command] = {
 }
 
 
+def _shown(value: Any) -> str:
+    """`value` as a refusal shows it: its repr, cut to 60 characters."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _number(value: Any) -> float:
+    """`value` as a float if it is a JSON number (not a boolean), else NaN; an integer too large for a float: inf."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return math.nan
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf
+
+
 def _check(command: str, name: str, p: Param, value: Any) -> Any:
     where = f"{command}: parameter {name!r}"
+    if value is None and p.nullable:
+        return None
     if p.kind == "number":
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise CommandError(f"{where} must be a finite number, got {value!r}")
-        value = float(value)
-        if (p.lo is not None and value < p.lo) or (p.hi is not None and value > p.hi):
-            raise CommandError(f"{where} must be in [{p.lo}, {p.hi}], got {value!r}")
+        value = _range(where, p, _number(value), value)
+    elif p.kind == "xyz":
+        xyz = [_number(v) for v in value] if isinstance(value, list) and len(value) == 3 else None
+        if xyz is None or not all(math.isfinite(v) for v in xyz):
+            raise CommandError(f"{where} must be a list of 3 finite numbers [x, y, z], got {_shown(value)}")
+        value = [_range(where, p, v, v) for v in xyz]
     elif p.kind == "bool":
         if not isinstance(value, bool):
-            raise CommandError(f"{where} must be true or false, got {value!r}")
+            raise CommandError(f"{where} must be true or false, got {_shown(value)}")
     elif p.kind == "str":
         if not isinstance(value, str) or not value:
-            raise CommandError(f"{where} must be a non-empty string, got {value!r}")
+            raise CommandError(f"{where} must be a non-empty string, got {_shown(value)}")
         if p.choices is not None and value not in p.choices:
-            raise CommandError(f"{where} must be one of {', '.join(map(repr, p.choices))}, got {value!r}")
+            raise CommandError(f"{where} must be one of {', '.join(map(repr, p.choices))}, got {_shown(value)}")
     elif p.kind == "object":
         if not isinstance(value, dict):
-            raise CommandError(f"{where} must be a JSON object, got {value!r}")
+            raise CommandError(f"{where} must be a JSON object, got {_shown(value)}")
+        try:
+            json.dumps(value, allow_nan=False)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise CommandError(f"{where} must be plain JSON (no NaN or infinities): {exc}") from None
     elif p.kind == "scene":
         if not (isinstance(value, str) and value) and not (isinstance(value, dict) and "scene" in value):
-            raise CommandError(f"{where} must be a scene name, a file path or an object with 'scene', got {value!r}")
+            raise CommandError(f"{where} must be a scene name, a file path or an object with 'scene', got "
+                               f"{_shown(value)}")
     elif p.kind == "number_list":
         if value is not None and not isinstance(value, list):
             raise CommandError(f"{where} must be a (nested) list of numbers, got {type(value).__name__}")
     return value
+
+
+def _range(where: str, p: Param, number: float, given: Any) -> float:
+    """`number` if finite and within the declaration's range, else CommandError showing what was `given`."""
+    if not math.isfinite(number):
+        raise CommandError(f"{where} must be a finite number, got {_shown(given)}")
+    lo = -math.inf if p.lo is None else p.lo
+    hi = math.inf if p.hi is None else p.hi
+    if not lo <= number <= hi:
+        raise CommandError(f"{where} must be in [{lo:g}, {hi:g}], got {number!r}")
+    return number
+
+
+def _checked(command: str, decl: dict[str, Param], params: dict[str, Any]) -> dict[str, Any]:
+    """Every declared parameter, checked (defaults filled); CommandError naming a missing or wrong one."""
+    out = {}
+    for name, p in decl.items():
+        if name not in params:
+            if p.required:
+                raise CommandError(f"{command}: missing parameter {name!r} ({p.kind}{', ' + p.doc if p.doc else ''})")
+            out[name] = p.default
+        else:
+            out[name] = _check(command, name, p, params[name])
+    return out
 
 
 def parse_command(command: str, params: Any) -> dict[str, Any]:
@@ -323,24 +370,26 @@ def parse_command(command: str, params: Any) -> dict[str, Any]:
     unknown = sorted(set(params) - set(decl))
     if unknown:
         raise CommandError(f"{command}: unknown parameter(s) {unknown}; allowed: {sorted(decl) or 'none'}")
-    out = {}
-    for name, p in decl.items():
-        if name not in params:
-            if p.required:
-                raise CommandError(f"{command}: missing parameter {name!r} ({p.kind}{', ' + p.doc if p.doc else ''})")
-            out[name] = p.default
-        else:
-            out[name] = _check(command, name, p, params[name])
-    if command == "reset_origin" and (out["x"] is None) != (out["y"] is None):
-        raise CommandError("reset_origin: give both 'x' and 'y' for a new origin, or neither")
+    out = _checked(command, decl, params)
+    if command == "reset_origin" and ((out["x"] is None) != (out["y"] is None) or (
+            out["x"] is None and (out["z"] is not None or out["heading_deg"] is not None))):
+        raise CommandError("reset_origin: give 'x' and 'y' (and optionally 'z', 'heading_deg') for a new origin, or "
+                           "none of them")
+    if command == "gains" and out["translation"] is None and out["rotation"] is None:
+        raise CommandError("gains: give 'translation' and/or 'rotation'")
     if command == "polarisers" and out["angles_deg"] is not None:
         import numpy as np
 
-        try:
-            angles = np.asarray(out["angles_deg"], dtype=np.float64)
-        except (TypeError, ValueError):
-            raise CommandError("polarisers: 'angles_deg' must be 55 lists of 9 numbers (degrees)") from None
-        if angles.shape != (55, 9) or not np.all(np.isfinite(angles)):
-            raise CommandError(f"polarisers: 'angles_deg' must be 55 x 9 finite numbers, got shape {angles.shape}")
-        out["angles_deg"] = angles
+        rows = out["angles_deg"]
+        angles = [[_number(v) for v in row] if isinstance(row, list) else [] for row in rows]
+        shape = (len(angles), *sorted({len(row) for row in angles}))
+        wanted = "55 lists of 9 numbers in [-3600, 3600] (degrees)"
+        if shape != (55, 9):
+            raise CommandError(f"polarisers: 'angles_deg' must be {wanted}, got lists of lengths {shape}")
+        for i, row in enumerate(angles):
+            for j, v in enumerate(row):
+                if not abs(v) <= 3600:
+                    raise CommandError(f"polarisers: 'angles_deg' must be {wanted}; panel {i}, polariser {j} is "
+                                       f"{_shown(rows[i][j])}")
+        out["angles_deg"] = np.array(angles, np.float64)
     return out

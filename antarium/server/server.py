@@ -251,7 +251,11 @@ class Server:
             raise
         command = COMMANDS[name]
         if not command.in_loop:
-            return command.handler(self, checked)
+            try:
+                return command.handler(self, checked)
+            except (CommandError, ValueError, RuntimeError, OSError) as exc:
+                self._log_command(name, params, {"error": str(exc)}, False)
+                raise
         if self.loop is None or not self._loop_running():
             raise RuntimeError(f"{name}: the server is not running")
         if command.prepare is not None:
