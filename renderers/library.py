@@ -28,8 +28,8 @@ def _deg(params: dict, key: str, default=None, suffix: str = "_deg"):
         return default
     try:
         value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{key}{suffix} must be a number of degrees, got {value!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{key}{suffix} must be a number of degrees, got {repr(value)[:60]}") from None
     if not math.isfinite(value):
         raise ValueError(f"{key}{suffix} must be finite, got {value!r}")
     return math.radians(value)

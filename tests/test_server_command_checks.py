@@ -103,3 +103,21 @@ def test_wait_refuses_what_is_not_a_duration_with_a_rig_error(seconds, shown):
         Rig.wait(seconds)
     assert type(info.value) is RigError
     assert str(info.value).startswith(f"wait needs a number of seconds in [0, {WAIT_MAX_S:g}], got {shown}")
+
+
+def test_a_scene_parameter_too_large_for_a_float_fails_the_load_and_keeps_the_scene():
+    def small_renderer(render_cfg, clock=None):
+        from antarium.renderers import Renderer
+
+        return Renderer(face_size=32, clock=clock)
+
+    config = resolve({"bus": {"enabled": False}, "link": {"interface": "virtual"}, "render": {"scene": "uniform"}})
+    server = Server(config, renderer_factory=small_renderer).start_thread()
+    try:
+        with pytest.raises(RuntimeError) as info:
+            server.command("load_scene", {"scene": {"scene": "grating", "period_deg": 10 ** 400}})
+        assert "period_deg must be a number of degrees" in str(info.value)
+        assert "the current scene 'uniform' stays on the dome" in str(info.value)
+        assert server.scene_name == "uniform"
+    finally:
+        server.stop()

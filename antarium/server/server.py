@@ -311,7 +311,7 @@ class Server:
         loop = self.loop
         try:
             prepared = renderer.prepare_scene(scene, pose=lambda: loop.pose)
-        except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
+        except (OSError, ValueError, RuntimeError, KeyError, TypeError, ArithmeticError) as exc:
             raise self._scene_failed(scene, exc) from None
         try:
             while not loop.when_idle(renderer.upload_step, prepared).result(UPLOAD_STEP_WAIT_S):
@@ -331,7 +331,7 @@ class Server:
         digest = _scene_sha256(scene)
         try:
             renderer.set_scene(scene if prepared is None else prepared)
-        except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
+        except (OSError, ValueError, RuntimeError, KeyError, TypeError, ArithmeticError) as exc:
             raise self._scene_failed(scene, exc) from None
         self.scene_name = scene if isinstance(scene, str) else json.dumps(scene, sort_keys=True)
         self._scene_digest = digest
