@@ -19,7 +19,7 @@ def _circle_samples(radius_m, turn_per_step, n, ball_radius=0.05):
 def test_a_quarter_circle_ends_on_the_circle():
     loop = FrameLoop(clock=SimulatedClock(), source=None, tether="fixed", origin=Pose(0.0, 0.0, 0.01, 0.0))
     turn, radius = math.radians(3.0), 0.1
-    loop._integrate(_circle_samples(radius, turn, 30))   # 30 x 3 deg = a quarter turn
+    loop._integrate(_circle_samples(radius, turn, 30), 0.0)   # 30 x 3 deg = a quarter turn
     # Starting at the origin facing +x and turning left, the centre is (0, r): the end is (r, r).
     assert (loop.pose.x, loop.pose.y) == pytest.approx((radius, radius), abs=1e-9)
     assert math.degrees(loop.pose.heading) == pytest.approx(90.0, abs=1e-9)
@@ -35,5 +35,5 @@ def test_the_position_matches_a_fictrac_style_midpoint_integration():
         samples.append(BallSample(0.0, i, (0.0, -step / 0.05, -turn), None, 1.0))
         x, y = x + step * math.cos(h + turn / 2), y + step * math.sin(h + turn / 2)
         h += turn
-    loop._integrate(samples)
+    loop._integrate(samples, 0.0)
     assert math.hypot(loop.pose.x - x, loop.pose.y - y) < 1e-5

@@ -282,13 +282,22 @@ class FrameLoop:
         self.event("polarisers", mode="sky" if angles is None else "fixed")
 
     # -- the frame -------------------------------------------------------------------------------------
-    def _integrate(self, samples) -> None:
+    def _integrate(self, samples, t: float) -> None:
+        """Move the pose by the samples' ball rotations; a sample that would make it non-finite (a NaN or an
+        absurd rotation from a source) is skipped and counted as a locomotion fault, never ends the loop."""
         x, y, heading = self.pose.x, self.pose.y, self.pose.heading
         gt, gr, fixed = self.gain_translation, self.gain_rotation, self.tether == "fixed"
+        skipped = 0
         for s in samples:
             dx, dy, dyaw = pole_motion(s.rotation, self.ball_radius)
-            wx, wy, heading = arc_step(heading, gt * dx, gt * dy, gr * dyaw if fixed else 0.0)
-            x, y = x + wx, y + wy
+            wx, wy, h = arc_step(heading, gt * dx, gt * dy, gr * dyaw if fixed else 0.0)
+            if not (math.isfinite(x + wx) and math.isfinite(y + wy) and math.isfinite(h)):
+                skipped += 1
+                continue
+            x, y, heading = x + wx, y + wy, h
+        if skipped:
+            self.fault("locomotion", t, ValueError(f"{skipped} sample(s) skipped: a rotation that is not a finite "
+                                                   "number of radians"))
         self.pose = Pose(x, y, self.pose.z, math.remainder(heading, math.tau))
 
     def _check_locomotion(self, now: float) -> None:
@@ -433,8 +442,10 @@ class FrameLoop:
             self.samples_used += len(samples)
             if self.log is not None:
                 self.log.add_samples(samples)
+            if not self.locomotion_connected and not self._source_failing:
+                self._check_locomotion(t_start)  # samples again: a replugged source is taken at once
             if self.closed_loop and self.locomotion_connected:
-                self._integrate(samples)
+                self._integrate(samples, t_start)
         pose = self.pose
         render = sample = convert = encode = send = math.nan
         full_render = False
