@@ -15,7 +15,9 @@ import atexit
 import datetime as _dt
 import hashlib
 import json
+import math
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -65,7 +67,8 @@ def _text_dtypes():
 
 
 class LogError(RuntimeError):
-    """A trial log that cannot be created (bad path, no permission); raised before anything starts."""
+    """A trial log that cannot be created (bad path, no permission, a bad name or metadata); raised before anything
+    starts."""
 
 
 def file_sha256(path: str | Path) -> str:
@@ -78,7 +81,55 @@ def file_sha256(path: str | Path) -> str:
 
 
 def _json(value: Any) -> str:
-    return json.dumps(value, sort_keys=True, default=str)
+    """`value` as strict JSON text (RFC 8259): NaN and ±Infinity as null, values JSON has no type for as their str()."""
+    try:
+        return json.dumps(value, sort_keys=True, default=str, allow_nan=False)
+    except ValueError:  # a non-finite float in it: only this rare case pays for the copy
+        return json.dumps(_finite(value), sort_keys=True, default=str, allow_nan=False)
+
+
+def _finite(value: Any) -> Any:
+    """`value` with every non-finite float in it (in dicts, lists and tuples, at any depth) replaced by None."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: _finite(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(item) for item in value]
+    return value
+
+
+def _check_text(what: str, value: Any, error: type[Exception] = ValueError) -> None:
+    """Raise `error` naming `what` and `value` unless it is text HDF5 stores: a str without NUL, encodable as UTF-8."""
+    problem = None
+    if not isinstance(value, str):
+        problem = f"is of type {type(value).__name__}, not str"
+    elif "\x00" in value:
+        problem = "holds a NUL character"
+    else:
+        try:
+            value.encode()
+        except UnicodeEncodeError as exc:
+            problem = f"holds {value[exc.start]!r}, which UTF-8 cannot encode (a lone surrogate)"
+    if problem:
+        raise error(f"{what} {value!r} {problem}; allowed: a str without NUL characters, encodable as UTF-8")
+
+
+def _metadata_json(metadata: Any) -> str:
+    """Trial metadata (None: none) as strict JSON text; `LogError` naming the key at fault unless it is a dict with
+    str keys and JSON values (str, finite numbers, bools, None, lists, dicts)."""
+    allowed = "allowed: a dict with str keys and JSON values (str, finite numbers, bools, None, lists, dicts)"
+    metadata = {} if metadata is None else metadata
+    if not isinstance(metadata, dict):
+        raise LogError(f"trial metadata {metadata!r} is of type {type(metadata).__name__}, not an object; {allowed}")
+    for key, value in metadata.items():
+        if not isinstance(key, str):
+            raise LogError(f"trial metadata key {key!r} is of type {type(key).__name__}, not str; {allowed}")
+        try:
+            json.dumps(value, sort_keys=True, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise LogError(f"trial metadata {key!r} must be JSON-serialisable: {value!r}: {exc}; {allowed}") from None
+    return json.dumps(metadata, sort_keys=True, allow_nan=False)
 
 
 class TrialLog:
@@ -87,7 +138,8 @@ class TrialLog:
     path:     the .h5 file to create (its folder must exist and be writable; an existing file is refused)
     config:   the resolved rig config as TOML tables (`RigConfig.to_toml_dict()`; stored as JSON in the
               `config` attribute)
-    name:     trial name; metadata: JSON-serialisable dict stored in the `metadata` attribute
+    name:     trial name (a str without NUL, encodable as UTF-8); metadata: dict with str keys and JSON values
+              (no NaN or Infinity) stored as JSON in the `metadata` attribute (None: {})
     flush_s:  seconds between hand-overs to the writer, which appends and flushes to disk (at most 1 s)
 
     The writer is a process of its own so that HDF5 never holds the frame loop's GIL and a failing disk
@@ -101,13 +153,11 @@ class TrialLog:
 
         if not 0 < flush_s <= 1.0:
             raise ValueError(f"flush_s must be in (0, 1] seconds, got {flush_s}")
+        _check_text("trial name", name, LogError)
+        metadata_json = _metadata_json(metadata)
         self.path = Path(path)
         if self.path.exists():
             raise LogError(f"trial log {str(self.path)!r} already exists; a recording never overwrites one")
-        try:
-            metadata_json = json.dumps(metadata or {}, sort_keys=True)
-        except (TypeError, ValueError) as exc:
-            raise LogError(f"trial metadata must be JSON-serialisable: {exc}") from None
         attrs = {"format": "antarium-trial-log", "format_version": FORMAT_VERSION, "software_version": __version__,
                  "created_utc": _dt.datetime.now(_dt.UTC).isoformat(), "trial_name": name,
                  "metadata": metadata_json, "config": _json(config)}
@@ -119,9 +169,9 @@ class TrialLog:
                 raise LogError(f"trial log writer for {str(self.path)!r} did not answer within {start_timeout_s} s")
             kind, detail = self._conn.recv()
         except (OSError, EOFError) as exc:
+            output = self._proc.output()  # what it printed (a traceback), read before kill() releases it
             self._proc.kill()
-            raise LogError(f"trial log writer for {str(self.path)!r} failed to start: {exc}; "
-                           f"{self._proc.output()}") from None
+            raise LogError(f"trial log writer for {str(self.path)!r} failed to start: {exc}; {output}") from None
         except LogError:
             self._proc.kill()
             raise
@@ -134,7 +184,11 @@ class TrialLog:
         self._lock = threading.Lock()
         self._send_lock = threading.Lock()
         self.rows_written = dict.fromkeys(self._tables, 0)
-        self.rows_lost = 0
+        self._lost_here = 0  # rows lost in this process: added after close(), or never handed over
+        self._writer_lost = 0  # as the writer last reported
+        self._batch = 0  # number of the last batch (or close) handed to the writer
+        self._confirmed = 0  # number of the last one it reported on
+        self._rows_sent = 0
         self.error: str | None = None
         self._closed = False
         self._stop = threading.Event()
@@ -157,52 +211,72 @@ class TrialLog:
         self._append("servosphere", row)
 
     def add_event(self, t: float, kind: str, data: Any = None) -> None:
+        """`kind`: text (ValueError otherwise, see `_check_text`); `data` stored as strict JSON."""
+        _check_text("event kind", kind)
         self._append("events", (t, kind, _json(data)))
 
     def add_command(self, t: float, name: str, request: Any, reply: Any, ok: bool) -> None:
+        """`name`: text (ValueError otherwise); `request` and `reply` stored as strict JSON."""
+        _check_text("command name", name)
         self._append("commands", (t, name, _json(request), _json(reply), int(ok)))
 
     def add_scene(self, t: float, name: str, sha256: str) -> None:
+        """`name` and `sha256`: text (ValueError otherwise)."""
+        _check_text("scene name", name)
+        _check_text("scene sha256", sha256)
         self._append("scenes", (t, name, sha256))
 
     def _append(self, table: str, row: tuple) -> None:
         with self._lock:
-            if not self._closed:
+            if self._closed:
+                self._lost_here += 1
+            else:
                 self._pending[table].append(row)
+
+    @property
+    def rows_lost(self) -> int:
+        """Rows not written: refused by the writer (bad values, a write error) or added after `close()`."""
+        return self._lost_here + self._writer_lost
 
     # -- handing rows to the writer --------------------------------------------------------------------
     def _sender(self) -> None:
         while not self._stop.wait(self.flush_s):
             self.flush()
 
-    def _collect_replies(self) -> None:
-        while self._conn.poll():
-            kind, detail = self._conn.recv()
-            if kind == "written":
-                for table, n in detail["rows_written"].items():
-                    self.rows_written[table] = n
-                self.rows_lost = detail["rows_lost"]
-                self.error = detail["error"] or self.error
+    def _collect_replies(self, batch: int = 0, timeout_s: float = 0.0) -> bool:
+        """Take in the writer's reports, waiting up to `timeout_s` seconds for the one on batch number `batch`;
+        True once that is in."""
+        deadline = time.monotonic() + timeout_s
+        while self._conn.poll(max(0.0, deadline - time.monotonic()) if self._confirmed < batch else 0.0):
+            kind, report = self._conn.recv()
+            self.rows_written.update(report["rows_written"])
+            self._writer_lost = report["rows_lost"]
+            self.error = report["error"] or self.error
+            self._confirmed = report["batch"]
+            if kind == "closed":  # its last word: the pipe's end follows
+                break
+        return self._confirmed >= batch
 
     def flush(self, wait: bool = False) -> None:
-        """Hand every pending row to the writer (which appends and flushes it); with `wait`, until it is on disk."""
+        """Hand every pending row to the writer (which appends and flushes it); with `wait`, wait (up to 30 s) for
+        its report on them: then they are on disk or counted in `rows_lost`."""
         with self._lock:
             pending, self._pending = self._pending, {table: [] for table in self._tables}
         with self._send_lock:
             if self._conn is None:
                 return
-            n = sum(len(rows) for rows in pending.values())
+            rows = {table: table_rows for table, table_rows in pending.items() if table_rows}
+            n = sum(len(table_rows) for table_rows in rows.values())
             try:
-                self._collect_replies()
-                if n or wait:
-                    self._conn.send(("rows", {t: rows for t, rows in pending.items() if rows}))
-                if wait:
-                    if self._conn.poll(30.0):
-                        self._collect_replies()
+                if n:
+                    self._conn.send(("rows", self._batch + 1, rows))
+                    self._batch += 1
+                    self._rows_sent, n = self._rows_sent + n, 0
+                self._collect_replies(self._batch if wait else 0, 30.0)
             except (OSError, EOFError, ValueError) as exc:
                 code = self._proc.exitcode
                 self.error = self.error or f"trial log writer for {str(self.path)!r} died (exit {code}): {exc}"
-                self.rows_lost += n
+                self._lost_here += n  # rows it never got; those it got but never reported on count at close()
 
     def status(self) -> dict[str, Any]:
         """Path, rows written and lost so far, and the error, if any. Never waits: while a batch is being handed
@@ -219,31 +293,34 @@ class TrialLog:
                 "error": self.error}
 
     def close(self, timeout_s: float = 30.0) -> None:
-        """Hand over what is pending, wait until it is written and end the writer. Safe twice."""
-        if self._closed:
-            return
+        """Hand over what is pending, wait up to `timeout_s` seconds until it is written and end the writer. Rows
+        added from now on, and rows the writer has not reported on by then, are counted in `rows_lost`; a writer
+        that has not finished in time is killed and named in `error`. Safe twice."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
         self._stop.set()
         if self._thread is not threading.current_thread():
             self._thread.join()
         self.flush()
-        with self._lock:
-            self._closed = True
+        timed_out = False
         with self._send_lock:
             try:
-                self._conn.send(("close", None))
-                while self._conn.poll(timeout_s):
-                    kind, detail = self._conn.recv()
-                    if kind in ("written", "closed"):
-                        self.rows_written.update(detail["rows_written"])
-                        self.rows_lost = detail["rows_lost"]
-                        self.error = detail["error"] or self.error
-                    if kind == "closed":
-                        break
+                self._conn.send(("close", self._batch + 1, {}))
+                self._batch += 1
+                timed_out = not self._collect_replies(self._batch, timeout_s)
             except (OSError, EOFError) as exc:
                 self.error = self.error or f"trial log writer for {str(self.path)!r} died before closing: {exc}"
+            unconfirmed = self._rows_sent - sum(self.rows_written.values()) - self._writer_lost
+            self._lost_here += unconfirmed  # 0 once the writer has reported on every row
+            if timed_out:
+                self.error = (f"trial log writer for {str(self.path)!r} did not finish within {timeout_s} s; "
+                              f"{unconfirmed} rows not confirmed written, counted lost")
             self._conn.close()
             self._conn = None
-        self._proc.wait(timeout_s)
+        if not timed_out:
+            self._proc.wait(timeout_s)
         self._proc.kill()  # only if it has not ended; releases its output file
 
     def __enter__(self) -> TrialLog:
@@ -316,12 +393,46 @@ def _open_for_append(path: str):
     return f
 
 
+#: what a row that does not fit its table raises: numpy for a wrong number or type of fields or a value out of its
+#: column's range (OverflowError, an ArithmeticError), `_check_text` for text HDF5 cannot store
+_BAD_ROW = (ValueError, TypeError, ArithmeticError)
+
+
+def _table_array(table: str, rows: list, dtype: np.dtype) -> np.ndarray:
+    """`rows` as an array of `dtype`, text fields checked (HDF5 would refuse bad text only while writing)."""
+    data = np.array(rows, dtype=dtype)
+    for field in dtype.names:
+        if dtype[field].kind == "O":
+            for value in data[field]:
+                _check_text(f"{table}.{field}", value)
+    return data
+
+
+def _convert(table: str, rows: list, dtype: np.dtype) -> tuple[np.ndarray, list[str]]:
+    """The rows that fit `dtype`, as an array, and each row that does not with the reason; the batch is converted
+    at once, row by row only when that fails."""
+    try:
+        return _table_array(table, rows, dtype), []
+    except _BAD_ROW:
+        pass
+    good, bad = [], []
+    for row in rows:
+        try:
+            _table_array(table, [row], dtype)
+            good.append(row)
+        except _BAD_ROW as exc:
+            bad.append(f"{row!r} ({exc})")
+    return _table_array(table, good, dtype), bad
+
+
 def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
     """The writer process: create the file, then for each batch of rows it receives: open, append, close.
 
     The file is closed between batches (a batch takes about a millisecond), so a SIGKILL or crash almost
     always finds it closed: its superblock's status flags are clear and any HDF5 >= 1.10 opens it (MATLAB
     without `h5clear`). A kill during a batch leaves the SWMR flags set; `open_log` still opens it.
+    Each table's rows are converted on their own: a row that does not fit its table is left out and counted lost,
+    named in `error`, and everything else is written. Only an HDF5 error while writing stops the writing for good.
     """
     import os
 
@@ -329,29 +440,44 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
 
     dtypes = {"frames": FRAME_DTYPE, "locomotion": SAMPLE_DTYPE, **_text_dtypes(), "servosphere": SERVOSPHERE_DTYPE}
     try:
-        with h5py.File(path, "w-", libver=LIBVER, locking=False) as f:
+        f = h5py.File(path, "w-", libver=LIBVER, locking=False)
+    except (OSError, ValueError) as exc:  # it exists, or its folder is missing or not writable
+        conn.send(("error", str(exc)))
+        return
+    try:
+        with f:
             for key, value in attrs.items():
                 f.attrs[key] = value
             for table, dtype in dtypes.items():
                 f.create_dataset(table, shape=(0,), maxshape=(None,), dtype=dtype,
                                  chunks=(1024 if table in ("frames", "locomotion", "servosphere") else 64,))
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, TypeError) as exc:  # no half-made log is left behind
+        Path(path).unlink(missing_ok=True)
         conn.send(("error", str(exc)))
         return
     conn.send(("ready", None))
     written = dict.fromkeys(dtypes, 0)
-    lost = 0
+    lost = number = 0
     error = None
+    failed = False
     while True:
         try:
-            kind, batch = conn.recv()
+            kind, number, batch = conn.recv()
         except (EOFError, OSError):  # the server died: what is written stays, the file is closed
             break
         if kind == "close":
             break
-        if error is None:
-            try:
-                arrays = {table: np.array(rows, dtype=dtypes[table]) for table, rows in batch.items()}
+        if failed:
+            lost += sum(len(rows) for rows in batch.values())
+        else:
+            arrays = {}
+            for table, rows in batch.items():
+                arrays[table], bad = _convert(table, rows, dtypes[table])
+                if bad:
+                    lost += len(bad)
+                    error = (f"trial log {path!r}: {len(bad)} row(s) of table {table!r} not written, the first "
+                             f"{bad[0]}; allowed: values of the table's column types (docs/logs.md)")
+            try:  # the rows fit their tables: only HDF5 can fail here (disk full)
                 f = _open_for_append(path)
                 for table, data in arrays.items():
                     ds = f[table]
@@ -359,22 +485,21 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
                     ds.resize((n + len(data),))
                     ds[n:] = data
                 f.close()  # flushes: only now is the batch in the file
-                for table, rows in batch.items():
-                    written[table] += len(rows)
-                    rows.clear()
-            except (OSError, RuntimeError, ValueError, TypeError) as exc:
+                for table, data in arrays.items():
+                    written[table] += len(data)
+            except (OSError, RuntimeError, ValueError, TypeError) as exc:  # `f` stays open and referenced until
+                # os._exit below: closing a file whose write failed (even by garbage collection) can crash HDF5
+                failed = True
                 error = f"writing trial log {path!r} failed: {exc}"
-        if error is not None:
-            lost += sum(len(rows) for rows in batch.values())
+                lost += sum(len(data) for data in arrays.values())
         try:
-            conn.send(("written", {"rows_written": written, "rows_lost": lost, "error": error}))
+            conn.send(("written", {"batch": number, "rows_written": written, "rows_lost": lost, "error": error}))
         except (OSError, EOFError):
             break
-    if error is not None:  # HDF5 cannot close a file whose writes failed without risking a crash: keep what is
-        # on disk (readable as after a crash), tell the parent, and leave without HDF5's shutdown
-        _send_quietly(conn, ("closed", {"rows_written": written, "rows_lost": lost, "error": error}))
+    _send_quietly(conn, ("closed", {"batch": number, "rows_written": written, "rows_lost": lost, "error": error}))
+    if failed:  # HDF5 cannot shut down after a failed write without risking a crash: what is on disk stays
+        # (readable as after a crash), the parent has been told, leave without HDF5's shutdown
         os._exit(0)
-    _send_quietly(conn, ("closed", {"rows_written": written, "rows_lost": lost, "error": error}))
 
 
 def _send_quietly(conn, message) -> None:
@@ -400,7 +525,7 @@ def check_log_dir(folder: str | Path) -> Path:
 def log_path(folder: str | Path, rig: str, name: str, when: _dt.datetime | None = None) -> Path:
     """`<folder>/<rig>_<UTC yyyymmdd-hhmmss>_<name>.h5` (name reduced to [A-Za-z0-9_-]; a suffix if taken)."""
     when = when or _dt.datetime.now(_dt.UTC)
-    safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in name)[:64] or "trial"
+    safe = "".join(c if c.isascii() and c.isalnum() or c in "-_" else "_" for c in name)[:64] or "trial"
     base = Path(folder) / f"{rig}_{when:%Y%m%d-%H%M%S}_{safe}"
     path, k = base.with_suffix(".h5"), 1
     while path.exists():

@@ -1,21 +1,50 @@
-"""Trial logs: self-describing tables, nothing lost on SIGKILL, clear errors, disk full keeps going."""
+"""Trial logs: self-describing tables, nothing lost on SIGKILL, clear errors, a bad value costs only itself, disk full
+keeps going."""
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import textwrap
 import time
+from multiprocessing import Pipe
 
 import h5py
 import numpy as np
 import pytest
 
+from antarium.core.childproc import ChildProcess
 from antarium.core.clock import SimulatedClock
 from antarium.locomotion import open_source
 from antarium.server.frame_loop import FrameLoop
-from antarium.trial_log import FRAME_DTYPE, LogError, TrialLog, check_log_dir, log_path, open_log, read_table
+from antarium.trial_log import (
+    FRAME_DTYPE,
+    SERVOSPHERE_DTYPE,
+    LogError,
+    TrialLog,
+    _writer_main,
+    check_log_dir,
+    log_path,
+    open_log,
+    read_table,
+)
+
+SERVO_ROW = np.zeros((), SERVOSPHERE_DTYPE).item()
+
+
+def frame_row(frame: int) -> tuple:
+    """A `FRAME_DTYPE` row: frame number `frame`, zeros elsewhere."""
+    return (frame, *np.zeros((), FRAME_DTYPE).item()[1:])
+
+
+def quiet_log(path, name: str) -> TrialLog:
+    """A TrialLog whose rows reach the writer only when the test flushes (its sender thread ended)."""
+    log = TrialLog(path, {}, name)
+    log._stop.set()
+    log._thread.join()
+    return log
 
 
 def test_loop_log_holds_frames_samples_events_commands_config(tmp_path):
@@ -65,6 +94,162 @@ def test_log_path_is_unique(tmp_path):
     assert log_path(tmp_path, "rig1", "homing/run 1", when=None) != a
 
 
+def test_log_path_keeps_only_ascii_letters_digits_dash_and_underscore(tmp_path):
+    assert log_path(tmp_path, "rig1", "fourmi_é-ß 1").name.endswith("_fourmi__-__1.h5")
+
+
+@pytest.mark.parametrize("name", ["a\x00b", "\udc80x", None])
+def test_a_bad_trial_name_fails_before_a_file_is_made(tmp_path, name):
+    with pytest.raises(LogError, match=re.escape(f"trial name {name!r} ") + ".*allowed: a str without NUL"):
+        TrialLog(tmp_path / "n.h5", {}, name)
+    assert not (tmp_path / "n.h5").exists()
+
+
+def test_a_writer_that_cannot_make_its_file_removes_it(tmp_path):
+    ours, writers = Pipe()
+    _writer_main(writers, str(tmp_path / "w.h5"), {"note": "a\x00b"})  # an attribute HDF5 refuses
+    kind, detail = ours.recv()
+    assert kind == "error" and "NUL" in detail
+    assert not (tmp_path / "w.h5").exists()
+
+
+def test_a_writer_that_dies_at_start_is_named_with_its_output(tmp_path, monkeypatch):
+    monkeypatch.setattr("antarium.trial_log._take_writer", lambda: ChildProcess("antarium.no_writer", connect=True))
+    with pytest.raises(LogError, match="failed to start: .*No module named antarium.no_writer"):
+        TrialLog(tmp_path / "d.h5", {}, "dies")
+
+
+@pytest.mark.parametrize(("metadata", "message"), [
+    ([], "trial metadata [] is of type list, not an object"),
+    (0, "trial metadata 0 is of type int, not an object"),
+    ({"ant": 1, 7: "x"}, "trial metadata key 7 is of type int, not str"),
+    ({"ant": 1, "w_mg": float("nan")}, "trial metadata 'w_mg' must be JSON-serialisable: nan"),
+])
+def test_metadata_must_be_a_json_object_with_str_keys(tmp_path, metadata, message):
+    with pytest.raises(LogError, match=re.escape(message) + ".*allowed: a dict with str keys and JSON values"):
+        TrialLog(tmp_path / "m.h5", {}, "m", metadata)
+    assert not (tmp_path / "m.h5").exists()
+
+
+def test_events_and_commands_hold_strict_json(tmp_path):
+    with TrialLog(tmp_path / "j.h5", {}, "json") as log:
+        log.add_event(0.0, "weighed", {"w_mg": float("nan"), "dose": [float("inf"), 1.5]})
+        log.add_command(0.0, "note", {"x": -float("inf")}, {"result": None}, True)
+    strict = {"parse_constant": lambda c: pytest.fail(f"not JSON: {c}")}
+    assert json.loads(read_table(tmp_path / "j.h5", "events")["data"][0], **strict) == {"dose": [None, 1.5],
+                                                                                         "w_mg": None}
+    assert json.loads(read_table(tmp_path / "j.h5", "commands")["request"][0], **strict) == {"x": None}
+
+
+@pytest.mark.parametrize(("table", "bad", "named"), [
+    ("servosphere", SERVO_ROW[:-1] + (-1,), "Python integer -1 out of bounds for uint32"),
+    ("scenes", (1.0, "a\x00b", ""), "scenes.name 'a\\x00b' holds a NUL character"),
+    ("scenes", (1.0, "scene_\udce9.json", ""), "scenes.name 'scene_\\udce9.json' holds '\\udce9'"),
+], ids=["out-of-range", "nul", "surrogate"])
+def test_a_bad_row_is_left_out_counted_and_named_and_the_rest_written(tmp_path, table, bad, named):
+    path = tmp_path / "b.h5"
+    with TrialLog(path, {}, "bad row") as log:
+        for frame in range(100):
+            log.add_frame(frame_row(frame))
+        log.add_servosphere(SERVO_ROW)
+        log._append(table, bad)  # as the writer gets it: past add_*'s checks, where there are any
+        log.add_scene(1.0, "habitat", "")
+        log.flush(wait=True)
+        for frame in range(100, 200):
+            log.add_frame(frame_row(frame))
+    status = log.status()
+    assert status["rows_lost"] == 1 and f"row(s) of table {table!r} not written" in status["error"]
+    assert named in status["error"]
+    assert {t: status["rows_written"][t] for t in ("frames", "servosphere", "scenes")} == \
+        {"frames": 200, "servosphere": 1, "scenes": 1}
+    with h5py.File(path, "r") as f:  # a plain reader: the file was closed
+        assert list(f["frames"]["frame"]) == list(range(200))
+        assert len(f["servosphere"]) == 1 and list(f["scenes"]["name"]) == [b"habitat"]
+
+
+@pytest.mark.parametrize("add", [
+    lambda log, text: log.add_scene(1.0, text, ""),
+    lambda log, text: log.add_scene(1.0, "habitat", text),
+    lambda log, text: log.add_event(1.0, text, {}),
+    lambda log, text: log.add_command(1.0, text, {}, {}, True),
+], ids=["scene name", "scene sha256", "event kind", "command name"])
+@pytest.mark.parametrize(("text", "problem"), [
+    ("a\x00b", "holds a NUL character"),
+    ("scene_\udce9.json", "holds '\\udce9', which UTF-8 cannot encode"),
+    (b"habitat", "is of type bytes, not str"),
+], ids=["nul", "surrogate", "bytes"])
+def test_bad_text_is_refused_at_the_call_and_loses_nothing(tmp_path, add, text, problem):
+    with TrialLog(tmp_path / "t.h5", {}, "text") as log:
+        with pytest.raises(ValueError, match=re.escape(f"{text!r} {problem}") + ".*allowed: a str without NUL"):
+            add(log, text)
+        log.add_scene(1.0, "habitat", "")
+    assert log.status()["rows_lost"] == 0 and log.status()["error"] is None
+    assert list(read_table(tmp_path / "t.h5", "scenes")["name"]) == ["habitat"]
+
+
+def test_rows_added_while_closing_are_counted_lost(tmp_path):
+    log = quiet_log(tmp_path / "c.h5", "closing")
+    hand_over = log.flush
+
+    def flush_as_a_row_arrives(wait: bool = False) -> None:
+        hand_over(wait)
+        log.add_frame(frame_row(1))  # another thread's row, right after close()'s last hand-over
+
+    log.flush = flush_as_a_row_arrives
+    log.add_frame(frame_row(0))
+    log.close()
+    log.add_event(2.0, "late")
+    assert log.status()["rows_lost"] == 2 and log.status()["rows_written"]["frames"] == 1
+    assert list(read_table(tmp_path / "c.h5", "frames")["frame"]) == [0]
+
+
+def test_a_close_that_times_out_is_an_error_and_counts_the_rows(tmp_path):
+    path = tmp_path / "s.h5"
+    log = quiet_log(path, "stuck")
+    for frame in range(3):
+        log.add_frame(frame_row(frame))
+    log.flush(wait=True)
+    log.add_frame(frame_row(3))
+    log.add_frame(frame_row(4))
+    os.kill(log._proc.pid, signal.SIGSTOP)  # a writer that does not answer (a hung disk)
+    log.close(timeout_s=0.5)
+    status = log.status()
+    assert status["rows_written"]["frames"] == 3 and status["rows_lost"] == 2
+    assert status["error"] == (f"trial log writer for {str(path)!r} did not finish within 0.5 s; "
+                               "2 rows not confirmed written, counted lost")
+
+
+class _ResumeOnSend:
+    """A connection that resumes the stopped process `pid` (SIGCONT) as it sends a message."""
+
+    def __init__(self, conn, pid: int) -> None:
+        self._conn, self._pid = conn, pid
+
+    def send(self, message) -> None:
+        os.kill(self._pid, signal.SIGCONT)
+        self._conn.send(message)
+
+    def __getattr__(self, name: str):
+        return getattr(self._conn, name)
+
+
+def test_flush_wait_returns_once_its_own_rows_are_on_disk(tmp_path):
+    path = tmp_path / "w.h5"
+    log = quiet_log(path, "wait")
+    log.add_event(0.0, "first")
+    os.kill(log._proc.pid, signal.SIGSTOP)
+    log.flush()  # batch 1, not reported on before the next flush has handed its own batch over
+    log.add_event(1.0, "marker")
+    for frame in range(50_000):
+        log.add_frame(frame_row(frame))
+    log._conn = _ResumeOnSend(log._conn, log._proc.pid)
+    log.flush(wait=True)
+    assert log.rows_written["frames"] == 50_000 and log.rows_written["events"] == 2
+    with open_log(path) as f:
+        assert len(f["frames"]) == 50_000 and len(f["events"]) == 2
+    log.close()
+
+
 _WRITER = textwrap.dedent("""
     import sys, time
     from antarium.core.clock import MonotonicClock
@@ -105,8 +290,9 @@ _FILLER = textwrap.dedent("""
     from antarium.server import Server
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     resource.setrlimit(resource.RLIMIT_FSIZE, (1_000_000, 1_000_000))  # the disk "fills" after 1 MB, some batches in
+    # (2 kHz of samples: a batch stays far below 1 MB even when a loaded machine holds the sender for a second)
     config = resolve({"rig": {"name": "full"}, "bus": {"enabled": False}, "log": {"dir": sys.argv[1], "flush_s": 0.05},
-                      "loop": {"rate_hz": 1000.0}, "locomotion": {"source": "scripted", "rate_hz": 20000.0}})
+                      "loop": {"rate_hz": 1000.0}, "locomotion": {"source": "scripted", "rate_hz": 2000.0}})
     alarms = []
     server = Server(config, renderer_factory=None, link=False, record="full", echo=alarms.append).start_thread()
     deadline = time.monotonic() + 30
