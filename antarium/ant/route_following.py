@@ -155,7 +155,7 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
     model = make_model(kind, eye_params.n_pn, **{**MODEL_PARAMS[kind], **(model_params or {})})
     out = Path(out_dir) if out_dir is not None else None
     log_path = out / f"{name}.h5" if out is not None else None
-    spacing = learn_spacing or LEARN_SPACING_M[kind]
+    spacing = LEARN_SPACING_M[kind] if learn_spacing is None else learn_spacing
     with virtual_rig(model, scene=scene, eye_params=eye_params, tether=tether, log_path=log_path,
                      log_metadata={"route": route.points.tolist(), "model": kind},
                      renderer_kwargs={"face_size": face_size}, eye_height=eye_height, renderer=renderer) as ant:

@@ -15,17 +15,22 @@ import time
 import traceback
 from functools import lru_cache
 
-from antarium.ant.experiment.inputs import cached_world, load_route
+from antarium.ant.experiment.inputs import cached_world, load_route, route_digest
 from antarium.ant.experiment.spec import PROTOCOLS, Run
-from antarium.ant.routes import Route, curved_route
+from antarium.ant.routes import Route, RouteError, curved_route
 
 
 @lru_cache(maxsize=256)
-def _route(source: str) -> Route:
+def _route(source: str, digest: str = "") -> Route:
+    """The route of `source`, checked against the SHA-1 of its points when the spec was read (`digest`)."""
     if source.startswith("curved:"):
         _, seed, length = source.split(":")
-        return curved_route(int(seed), length=float(length))
-    return load_route(source).route
+        route = curved_route(int(seed), length=float(length))
+    else:
+        route = load_route(source).route
+    if digest and route_digest(route) != digest:
+        raise RouteError(f"route {source!r} changed since the spec was read; read the spec again")
+    return route
 
 
 _RENDERERS: dict = {}
@@ -74,7 +79,7 @@ def run_row(run: Run) -> dict:
     row.update({f"param.{k}": v for k, v in run.params})
     t0 = time.perf_counter()
     try:
-        route = _route(run.route_source)
+        route = _route(run.route_source, run.route_sha1)
         eye_params, overrides, spacing = _model_args(run)
         scene = cached_world(run.world)
         renderer = _renderer(run.face_size, scene, *route.start, run.eye_z_m)

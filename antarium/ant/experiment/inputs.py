@@ -9,7 +9,10 @@ of the first row is the heading the ant is released with (degrees CCW from +x); 
 from __future__ import annotations
 
 import glob
+import hashlib
+import itertools
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,7 +38,9 @@ class WorldError(ValueError):
 class WorldSpec:
     """A world as an experiment names it: a scene name or file, its scale (world metres per file unit), which
     file axis is up (GLB/GLTF are +y up by their standard and converted on loading: give "y" or leave the
-    default), and the eye's height above the ground under the route's start (m)."""
+    default), and the eye's height above the ground under the route's start (m). `digest`: the SHA-1 of the
+    scene file when the spec was read ("" for a named scene), so that an edited file is another world (another
+    run id, not a stale cached one)."""
 
     scene: str
     name: str = ""
@@ -43,6 +48,7 @@ class WorldSpec:
     up: str = "z"
     eye_height_m: float = 0.01
     params: tuple = ()          # extra scene parameters (key, value) pairs, e.g. (("seed", 3),) for the habitat
+    digest: str = ""
 
     def __post_init__(self) -> None:
         if self.up not in UP_AXES:
@@ -53,6 +59,20 @@ class WorldSpec:
             raise WorldError(f"world {self.scene!r}: eye_height_m must be > 0 m, got {self.eye_height_m!r}")
         if not self.name:
             object.__setattr__(self, "name", Path(self.scene).stem)
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-1 (hex) of a file's bytes."""
+    h = hashlib.sha1()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def route_digest(route: Route) -> str:
+    """SHA-1 (hex) of a route's points (float64 x, y in metres): what a run learns and is released on."""
+    return hashlib.sha1(np.ascontiguousarray(route.points, np.float64).tobytes()).hexdigest()
 
 
 def _is_gltf(scene: str) -> bool:
@@ -66,6 +86,8 @@ def build_world(world: WorldSpec):
 
     if _is_gltf(world.scene) and world.up != "y":
         raise WorldError(f"world {world.scene}: GLB/GLTF files are +y up by their standard; give up = \"y\"")
+    if world.digest and Path(world.scene).is_file() and file_digest(world.scene) != world.digest:
+        raise WorldError(f"world {world.scene!r}: the file changed since the spec was read; read the spec again")
     try:
         scene = build_scene({"scene": world.scene, **dict(world.params)})
     except (ValueError, FileNotFoundError) as exc:
@@ -200,12 +222,17 @@ def eye_z(world: WorldSpec, route: Route, geometry: WorldGeometry | None = None)
 
 @dataclass(frozen=True)
 class RouteInput:
-    """A route of a route set: its name (file stem), where it came from, and its release heading (rad) or None."""
+    """A route of a route set: its name (its path relative to the set's folder, without the suffix), where it came
+    from (an absolute path, or curved:SEED:LENGTH), and its release heading (rad) or None."""
 
     name: str
     source: str
     route: Route
     release_heading: float | None = None
+
+    @property
+    def digest(self) -> str:
+        return route_digest(self.route)
 
 
 def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
@@ -251,16 +278,18 @@ def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
     return data[:, columns], heading
 
 
-def load_route(path: str | Path) -> RouteInput:
-    """One route file (CSV/whitespace x_m, y_m[, heading_deg] or a trial log .h5). Raises RouteError naming it."""
+def load_route(path: str | Path, name: str | None = None) -> RouteInput:
+    """One route file (CSV/whitespace x_m, y_m[, heading_deg] or a trial log .h5), named `name` (default: the file's
+    stem). Raises RouteError naming it."""
     from antarium.ant.route_following import route_from_log
 
     path = Path(path)
+    name = path.stem if name is None else name
     if not path.is_file():
         raise FileNotFoundError(f"route file {str(path)!r} not found")
     if path.suffix.lower() in (".h5", ".hdf5"):
         try:
-            return RouteInput(path.stem, str(path), route_from_log(path))
+            return RouteInput(name, str(path), route_from_log(path))
         except (KeyError, ValueError, OSError) as exc:
             raise RouteError(f"{path}: not a trial log with a frames table of poses ({exc})") from None
     xy, heading = _read_csv(path)
@@ -268,20 +297,31 @@ def load_route(path: str | Path) -> RouteInput:
         route = Route(xy)
     except RouteError as exc:
         raise RouteError(f"{path}: {exc}") from None
-    return RouteInput(path.stem, str(path), route, heading)
+    return RouteInput(name, str(path), route, heading)
 
 
-def route_files(pattern: str | Path, base: Path | None = None) -> list[Path]:
-    """Route files named by a folder (its files with a route suffix) or a glob, relative to `base`; sorted.
-    Raises FileNotFoundError when it names none."""
+def route_files(pattern: str | Path, base: Path | None = None) -> tuple[Path, list[Path]]:
+    """The set's folder and its route files: a folder (its files with a route suffix) or a glob, relative to
+    `base`; absolute paths, sorted. The set's folder is the folder named, or the glob's leading part without
+    wildcards (routes/*.csv: routes; day*/r1.csv: the spec's folder). Raises FileNotFoundError when it names none."""
     p = Path(pattern)
     if not p.is_absolute() and base is not None:
         p = base / p
+    p = Path(os.path.abspath(p))
     if p.is_dir():
+        folder = p
         files = sorted(f for f in p.iterdir() if f.suffix.lower() in ROUTE_SUFFIXES)
     else:
+        fixed = list(itertools.takewhile(lambda part: not any(c in part for c in "*?["), p.parts))
+        folder = Path(*fixed) if len(fixed) < len(p.parts) else p.parent
         files = sorted(Path(f) for f in glob.glob(str(p)) if Path(f).suffix.lower() in ROUTE_SUFFIXES)
     if not files:
         raise FileNotFoundError(f"route set {str(pattern)!r} names no route files ({', '.join(ROUTE_SUFFIXES)}); "
                                 f"give a folder or a glob such as routes/*.csv")
-    return files
+    return folder, files
+
+
+def route_name(path: Path, folder: Path) -> str:
+    """A route's name: its path relative to its set's folder, without the suffix (routes/r1.csv -> r1;
+    day1/r1.csv under the spec's folder -> day1/r1)."""
+    return path.relative_to(folder).with_suffix("").as_posix()

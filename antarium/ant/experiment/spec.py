@@ -2,21 +2,23 @@
 
     [experiment]
     protocols = ["ardin"]              # ardin: put back at 20 cm and counted; antcar: never put back
-    seeds = [0, 1]                     # the mushroom bodies' random PN->KC wiring (perfect memory has none)
+    seeds = [0, 1]                     # the mushroom bodies' random PN->KC wiring (a model without one runs once)
     releases = [{lateral_cm = 0, heading_deg = 0}, {lateral_cm = 5, heading_deg = 20}]
-    face_size = 64                     # the renderer's cube-face side
+    face_size = 64                     # the renderer's cube-face side (an integer >= 1)
     max_decisions = 0                  # 0: three times the route length in steps
     eye = {cols = 50, rows = 16}       # eye parameters over each model's own (optional)
     metrics = ["errors", "lateral_median_m"]   # the summary's metrics (default: all)
 
     [[worlds]]
     scene = "habitat"                  # a scene name, a mesh or a panorama file (relative to the spec)
+    name = "habitat_seed7"             # the world's name in the results (default: the scene's file stem)
+    seed = 7                           # other keys are the scene's own parameters
     scale = 1.0                        # metres per file unit
     up = "z"                           # the file's up axis: z, or y
     eye_height_m = 0.01
 
     [[route_sets]]
-    paths = "routes/*.csv"             # a folder or a glob of route files (CSV, trial logs)
+    paths = "routes/*.csv"             # a folder or a glob of route files (CSV, trial logs), relative to the spec
     # or: curved = {seeds = [0, 1, 2], length_m = 10}
 
     [models.antcar]
@@ -24,21 +26,38 @@
     "eye.cols" = [25, 50]              # eye.* keys set the eye; learn_spacing_m the learning walk's spacing
     [models.perfect_memory]
 
+Every value is checked against its declaration (`_schema`: the spec's own keys here, the models' and the eye's
+parameters from their dataclasses' field types) before anything is built: a wrong type, a value out of range,
+an unknown key or an empty list is a SpecError naming the key, the value and what is allowed.
+
 Every combination of world x route x model x grid point x release x seed x protocol is one `Run`, named by a
-hash of its contents (`run_id`), so a rerun of the same spec finds the runs already done.
+hash of its contents (`run_id`: the world, its file's SHA-1, the route file's absolute path and the SHA-1 of its
+points, the parameters, ...), so a rerun of the same spec finds the runs already done, and an edited route or
+world file is a new run.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import itertools
 import json
 import math
 import tomllib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
-from antarium.ant.experiment.inputs import RouteInput, WorldSpec, eye_z, load_route, route_files, world_geometry
+from antarium.ant.experiment.inputs import (
+    UP_AXES,
+    RouteInput,
+    WorldSpec,
+    eye_z,
+    file_digest,
+    load_route,
+    route_files,
+    route_name,
+    world_geometry,
+)
 from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M
 from antarium.ant.routes import curved_route
 
@@ -49,7 +68,6 @@ PROTOCOLS = {"ardin": ARDIN_ERROR_DISTANCE_M, "antcar": math.inf}
 METRICS = ("lateral_median_m", "lateral_mad_m", "angular_median_deg", "angular_mad_deg", "arrived", "errors",
            "decisions", "distance_m", "ms_per_decision_model", "ms_per_decision_loop", "memory_bytes",
            "learned_views")
-SPECIAL_KEYS = ("learn_spacing_m",)
 
 
 class SpecError(ValueError):
@@ -62,8 +80,8 @@ class Run:
 
     world: WorldSpec
     route_set: str
-    route: str                     # route name (file stem or curved:SEED)
-    route_source: str              # path of the route file, or curved:SEED:LENGTH
+    route: str                     # route name (path relative to the set's folder, no suffix; or curved:SEED)
+    route_source: str              # absolute path of the route file, or curved:SEED:LENGTH
     model: str
     params: tuple                  # sorted (key, value) pairs: model parameters, eye.* and learn_spacing_m
     lateral_cm: float
@@ -74,6 +92,7 @@ class Run:
     max_decisions: int
     eye_z_m: float
     route_heading_deg: float = 0.0   # the route file's release heading minus the route's own (deg, CCW)
+    route_sha1: str = ""             # SHA-1 of the route's points (`inputs.route_digest`)
 
     @property
     def run_id(self) -> str:
@@ -95,60 +114,259 @@ class Experiment:
     routes: dict[tuple[str, str], RouteInput] = field(default_factory=dict)
 
 
-def _list(value, key: str, kind) -> list:
-    values = value if isinstance(value, list) else [value]
-    for v in values:
-        if not isinstance(v, kind) or isinstance(v, bool) and kind is not bool:
-            raise SpecError(f"{key}: expected {kind.__name__ if isinstance(kind, type) else 'a value'}(s), "
-                            f"got {v!r}")
-    return values
+class Check:
+    """A kind of spec value, declared once: `check(key, value)` returns the value normalised (numbers that are
+    equal are equal: 10 and 10.0 of a float parameter are both 10.0) or raises SpecError naming the key, the value
+    and what is allowed."""
+
+    what = "a value"
+
+    def __call__(self, key: str, value):
+        raise NotImplementedError
+
+    def fail(self, key: str, value):
+        raise SpecError(f"{key}: expected {self.what}, got {value!r}")
 
 
-def _grid(kind: str, table: dict) -> list[tuple]:
+def _is_number(value) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+@dataclass(frozen=True)
+class Integer(Check):
+    """An integer (not a float, not a boolean), >= `min` when given."""
+
+    min: int | None = None
+
+    @property
+    def what(self) -> str:
+        return "an integer" + (f" >= {self.min}" if self.min is not None else "")
+
+    def __call__(self, key: str, value) -> int:
+        if not (isinstance(value, int) and not isinstance(value, bool)) or self.min is not None and value < self.min:
+            self.fail(key, value)
+        return int(value)
+
+
+@dataclass(frozen=True)
+class Number(Check):
+    """A finite number (an integer or a float, not a boolean), > `gt` when given; normalised to a float."""
+
+    gt: float | None = None
+
+    @property
+    def what(self) -> str:
+        return "a finite number" + (f" > {self.gt:g}" if self.gt is not None else "")
+
+    def __call__(self, key: str, value) -> float:
+        if not _is_number(value) or not math.isfinite(value) or self.gt is not None and not value > self.gt:
+            self.fail(key, value)
+        return float(value)
+
+
+@dataclass(frozen=True)
+class Boolean(Check):
+    what = "true or false"
+
+    def __call__(self, key: str, value) -> bool:
+        if not isinstance(value, bool):
+            self.fail(key, value)
+        return value
+
+
+@dataclass(frozen=True)
+class String(Check):
+    """A string, one of `choices` when given."""
+
+    choices: tuple[str, ...] = ()
+
+    @property
+    def what(self) -> str:
+        return f"one of {', '.join(self.choices)}" if self.choices else "a string"
+
+    def __call__(self, key: str, value) -> str:
+        if not isinstance(value, str) or self.choices and value not in self.choices:
+            self.fail(key, value)
+        return value
+
+
+@dataclass(frozen=True)
+class Scalar(Check):
+    """A number, a string or a boolean (a parameter whose type the spec does not know: an integer stays one)."""
+
+    what = "a finite number, a string or true/false"
+
+    def __call__(self, key: str, value):
+        if isinstance(value, bool | str | int) or isinstance(value, float) and math.isfinite(value):
+            return value
+        self.fail(key, value)
+
+
+@dataclass(frozen=True)
+class ListOf(Check):
+    """A non-empty list (an empty one gives no runs) of `item`s, each given once."""
+
+    item: Check
+
+    @property
+    def what(self) -> str:
+        return f"a list, each item {self.item.what}"
+
+    def __call__(self, key: str, value) -> list:
+        if not isinstance(value, list):
+            self.fail(key, value)
+        if not value:
+            raise SpecError(f"{key}: an empty list gives no runs; give at least one item ({self.item.what})")
+        out = []
+        for j, v in enumerate(value):
+            v = self.item(f"{key}[{j}]", v)
+            if v in out:
+                i = out.index(v)
+                raise SpecError(f"{key}[{j}]: {value[j]!r} repeats {key}[{i}] = {value[i]!r} (the same value); "
+                                "give each once")
+            out.append(v)
+        return out
+
+
+@dataclass(frozen=True)
+class Axis(Check):
+    """A grid axis: a list of `item`s (ListOf), or one item (a fixed value); always a list."""
+
+    item: Check
+
+    @property
+    def what(self) -> str:
+        return f"{self.item.what}, or a list of them (a grid axis)"
+
+    def __call__(self, key: str, value) -> list:
+        return ListOf(self.item)(key, value) if isinstance(value, list) else [self.item(key, value)]
+
+
+@dataclass(frozen=True)
+class Table(Check):
+    """A table of the keys `fields` (each its Check; others refused, or checked by `extra` when given), with
+    `defaults` for the keys not given and `required` keys."""
+
+    fields: dict
+    defaults: dict = field(default_factory=dict)
+    required: tuple[str, ...] = ()
+    extra: Check | None = None
+    noun: str = "key"
+
+    @property
+    def what(self) -> str:
+        return f"a table of {', '.join(self.fields)}"
+
+    def __call__(self, key: str, value) -> dict:
+        if not isinstance(value, dict):
+            self.fail(key or "spec", value)
+        out = dict(self.defaults)
+        for k, v in value.items():
+            sub = f"{key}.{k}" if key else k
+            if k in self.fields:
+                out[k] = self.fields[k](sub, v)
+            elif self.extra is not None:
+                out[k] = self.extra(sub, v)
+            else:
+                raise SpecError(f"{key or 'spec'}: unknown {self.noun} {k!r}; allowed: {', '.join(self.fields)}")
+        for k in self.required:
+            if k not in value:
+                raise SpecError(f"{key}: {k} is required ({self.fields[k].what})")
+        return out
+
+
+#: a model parameter's or an eye parameter's declared field type -> its check
+_FIELD_CHECKS = {"int": Integer(), "float": Number(), "bool": Boolean(), "str": String()}
+
+
+def declared(params_cls, exclude: tuple[str, ...] = ()) -> dict[str, Check]:
+    """Checks of a parameter dataclass's fields, from their declared types (a type the spec does not know takes
+    any number, string or boolean; the model checks it when it is made)."""
+    out = {}
+    for f in fields(params_cls):
+        if f.name not in exclude:
+            t = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+            out[f.name] = _FIELD_CHECKS.get(t, Scalar())
+    return out
+
+
+@functools.cache
+def _schema() -> Table:
+    """The spec's declaration: every key, its type, its range and its default."""
     from antarium.ant.eye import EyeParams
     from antarium.ant.models import MODELS
 
-    params_cls = MODELS[kind][1]
-    allowed = set(params_cls.__dataclass_fields__) | {f"eye.{k}" for k in EyeParams.__dataclass_fields__}
-    allowed |= set(SPECIAL_KEYS)
-    axes = []
-    for key, value in table.items():
-        if key not in allowed:
-            raise SpecError(f"models.{kind}: unknown parameter {key!r}; allowed: {', '.join(sorted(allowed))}")
-        values = value if isinstance(value, list) else [value]
-        if not values:
-            raise SpecError(f"models.{kind}.{key}: an empty list gives no runs")
-        axes.append([(key, v) for v in values])
-    return [tuple(sorted(combo)) for combo in itertools.product(*axes)] if axes else [()]
+    eye = {k: Axis(c) for k, c in declared(EyeParams).items()}
+    special = {"learn_spacing_m": Axis(Number(gt=0.0))}
+    models = {kind: Table({**{k: Axis(c) for k, c in declared(cls, exclude=("seed",)).items()},
+                           **{f"eye.{k}": c for k, c in eye.items()}, **special}, noun="parameter")
+              for kind, (_, cls) in MODELS.items()}
+    release = Table({"lateral_cm": Number(), "heading_deg": Number()},
+                    defaults={"lateral_cm": 0.0, "heading_deg": 0.0})
+    experiment = Table(
+        {"protocols": ListOf(String(tuple(PROTOCOLS))), "seeds": ListOf(Integer(min=0)), "releases": ListOf(release),
+         "face_size": Integer(min=1), "max_decisions": Integer(min=0), "eye": Table(eye, noun="eye parameter"),
+         "metrics": ListOf(String(METRICS))},
+        defaults={"protocols": ["ardin"], "seeds": [0], "releases": [{"lateral_cm": 0.0, "heading_deg": 0.0}],
+                  "face_size": 64, "max_decisions": 0, "eye": {}, "metrics": list(METRICS)})
+    world = Table({"scene": String(), "name": String(), "scale": Number(gt=0.0), "up": String(UP_AXES),
+                   "eye_height_m": Number(gt=0.0)}, required=("scene",), extra=Scalar())
+    curved = Table({"seeds": ListOf(Integer(min=0)), "length_m": Number(gt=0.0)},
+                   defaults={"seeds": [0], "length_m": 10.0})
+    route_set = Table({"name": String(), "paths": String(), "curved": curved})
+    return Table({"experiment": experiment, "worlds": ListOf(world), "route_sets": ListOf(route_set),
+                  "models": Table(models, noun="model")},
+                 defaults={"experiment": experiment("experiment", {}), "worlds": [{"scene": "habitat"}]},
+                 noun="table")
+
+
+def _grid(axes: dict[str, list]) -> list[tuple]:
+    """Every combination of the axes' values: sorted (key, value) tuples."""
+    return [tuple(sorted(combo)) for combo in itertools.product(*([(k, v) for v in vs] for k, vs in axes.items()))]
 
 
 def _route_set(i: int, table: dict, base: Path) -> tuple[str, list[RouteInput]]:
-    if not isinstance(table, dict):
-        raise SpecError(f"route_sets[{i}] must be a table with paths = \"...\" or curved = {{...}}")
+    key = f"route_sets[{i}]"
+    if ("paths" in table) == ("curved" in table):
+        raise SpecError(f"{key}: give one of paths = \"folder or glob\" or curved = {{seeds = [...], length_m = ...}}")
     name = table.get("name")
     if "paths" in table:
-        files = route_files(table["paths"], base)
-        return name or str(table["paths"]), [load_route(f) for f in files]
-    if "curved" in table:
-        c = table["curved"]
-        seeds = _list(c.get("seeds", [0]), f"route_sets[{i}].curved.seeds", int)
-        length = float(c.get("length_m", 10.0))
-        if not length > 0:
-            raise SpecError(f"route_sets[{i}].curved.length_m must be > 0 m, got {length}")
-        return name or f"curved{length:g}m", [RouteInput(f"curved:{s}", f"curved:{s}:{length}",
-                                                         curved_route(s, length=length)) for s in seeds]
-    raise SpecError(f"route_sets[{i}]: give paths = \"folder or glob\" or curved = {{seeds = [...], length_m = ...}}")
+        folder, files = route_files(table["paths"], base)
+        inputs, seen = [], {}
+        for f in files:
+            n = route_name(f, folder)
+            if n in seen:
+                raise SpecError(f"{key}.paths = {table['paths']!r}: {seen[n]} and {f} are both route {n!r}; "
+                                "rename one, or put them in route sets of their own")
+            seen[n] = f
+            inputs.append(load_route(f, n))
+        return name or table["paths"], inputs
+    c = table["curved"]
+    length = c["length_m"]
+    return name or f"curved{length:g}m", [RouteInput(f"curved:{s}", f"curved:{s}:{length}",
+                                                     curved_route(s, length=length)) for s in c["seeds"]]
 
 
-def _world(i: int, table: dict, base: Path) -> WorldSpec:
-    if not isinstance(table, dict) or "scene" not in table:
-        raise SpecError(f"worlds[{i}] must be a table with scene = \"habitat\" or a mesh/panorama file")
+def _world(table: dict, base: Path) -> WorldSpec:
     t = dict(table)
-    scene = str(t.pop("scene"))
-    if Path(scene).suffix and not Path(scene).is_absolute():
-        scene = str((base / scene).resolve())
+    scene = t.pop("scene")
+    digest = ""
+    if Path(scene).suffix:
+        if not Path(scene).is_absolute():
+            scene = str((base / scene).resolve())
+        if Path(scene).is_file():
+            digest = file_digest(scene)
     kw = {k: t.pop(k) for k in ("name", "scale", "up", "eye_height_m") if k in t}
-    return WorldSpec(scene, params=tuple(sorted(t.items())), **kw)
+    return WorldSpec(scene, params=tuple(sorted(t.items())), digest=digest, **kw)
+
+
+def _unique_names(key: str, names: list[str], what: list[str], table: str) -> None:
+    """SpecError when two of `names` are the same (naming what they are)."""
+    for j, n in enumerate(names):
+        if n in names[:j]:
+            i = names.index(n)
+            raise SpecError(f"{key}[{i}] ({what[i]}) and {key}[{j}] ({what[j]}) are both named {n!r}: their runs "
+                            f"would be one condition; give each [[{table}]] its own name = \"...\"")
 
 
 def load_spec(path: str | Path) -> Experiment:
@@ -164,44 +382,32 @@ def load_spec(path: str | Path) -> Experiment:
 
 
 def expand(data: dict, base: Path = Path(".")) -> Experiment:
-    """Runs of a spec's tables (see the module docstring); paths relative to `base`."""
+    """Runs of a spec's tables (see the module docstring); paths relative to `base` (the spec's folder), made
+    absolute. Raises SpecError for a spec that breaks its declaration (`_schema`)."""
     from antarium.ant.models import MODELS
 
-    unknown = set(data) - {"experiment", "worlds", "route_sets", "models"}
-    if unknown:
-        raise SpecError(f"unknown spec table(s) {', '.join(sorted(unknown))}; allowed: experiment, worlds, "
-                        f"route_sets, models")
-    exp = dict(data.get("experiment", {}))
-    protocols = _list(exp.pop("protocols", ["ardin"]), "experiment.protocols", str)
-    for p in protocols:
-        if p not in PROTOCOLS:
-            raise SpecError(f"experiment.protocols: unknown {p!r}; allowed: {', '.join(PROTOCOLS)}")
-    seeds = _list(exp.pop("seeds", [0]), "experiment.seeds", int)
-    releases = exp.pop("releases", [{"lateral_cm": 0.0, "heading_deg": 0.0}])
-    releases = [(float(r.get("lateral_cm", 0.0)), float(r.get("heading_deg", 0.0))) for r in releases]
-    face_size = int(exp.pop("face_size", 64))
-    max_decisions = int(exp.pop("max_decisions", 0))
-    eye = exp.pop("eye", {})
-    metrics = tuple(exp.pop("metrics", METRICS))
-    bad = [m for m in metrics if m not in METRICS]
-    if bad:
-        raise SpecError(f"experiment.metrics: unknown {bad}; allowed: {', '.join(METRICS)}")
-    if exp:
-        raise SpecError(f"experiment: unknown key(s) {', '.join(sorted(exp))}; allowed: protocols, seeds, releases, "
-                        f"face_size, max_decisions, eye, metrics")
-    worlds = [_world(i, w, base) for i, w in enumerate(data.get("worlds", [{"scene": "habitat"}]))]
-    sets = [_route_set(i, t, base) for i, t in enumerate(data.get("route_sets", []))]
-    if not sets:
+    base = Path(base).resolve()
+    spec = _schema()("", data)
+    exp = spec["experiment"]
+    if "route_sets" not in spec:
         raise SpecError("the spec needs at least one [[route_sets]] (paths = \"routes/*.csv\" or curved = {...})")
-    models = data.get("models", {})
-    if not models:
+    if not spec.get("models"):
         raise SpecError(f"the spec needs at least one [models.<kind>] table; kinds: {', '.join(MODELS)}")
-    grids = {}
-    for kind, table in models.items():
-        if kind not in MODELS:
-            raise SpecError(f"models: unknown model {kind!r}; allowed: {', '.join(MODELS)}")
-        eye_table = {f"eye.{k}": v for k, v in eye.items()}
-        grids[kind] = _grid(kind, {**eye_table, **(table or {})})
+    worlds = [_world(w, base) for w in spec["worlds"]]
+    _unique_names("worlds", [w.name for w in worlds],
+                  [" ".join([w.scene, *(f"{k}={v}" for k, v in w.params)]) for w in worlds], "worlds")
+    sets = [_route_set(i, t, base) for i, t in enumerate(spec["route_sets"])]
+    _unique_names("route_sets", [name for name, _ in sets],
+                  [f"paths = {t['paths']!r}" if "paths" in t else
+                   f"curved = {{seeds = {t['curved']['seeds']}, length_m = {t['curved']['length_m']:g}}}"
+                   for t in spec["route_sets"]], "route_sets")
+    eye = {f"eye.{k}": v for k, v in exp["eye"].items()}
+    grids, seeds = {}, {}
+    for kind, axes in spec["models"].items():
+        grids[kind] = _grid({**eye, **axes})
+        # the seed is the model's random wiring: a model without one runs once per condition (seed 0)
+        seeds[kind] = exp["seeds"] if "seed" in MODELS[kind][1].__dataclass_fields__ else [0]
+    releases = [(r["lateral_cm"], r["heading_deg"]) for r in exp["releases"]]
     runs, routes = [], {}
     for world in worlds:
         geometry = world_geometry(world)
@@ -209,15 +415,17 @@ def expand(data: dict, base: Path = Path(".")) -> Experiment:
             for ri in inputs:
                 z = eye_z(world, ri.route, geometry)
                 routes[(set_name, ri.name)] = ri
+                digest = ri.digest
                 extra = 0.0
                 if ri.release_heading is not None:
                     extra = math.degrees(math.remainder(ri.release_heading - float(ri.route.at([0.0])[1][0]),
                                                         math.tau))
                 for kind, grid in grids.items():
-                    for params, (lat, hdg), seed, protocol in itertools.product(grid, releases, seeds, protocols):
+                    for params, (lat, hdg), seed, protocol in itertools.product(grid, releases, seeds[kind],
+                                                                                exp["protocols"]):
                         runs.append(Run(world, set_name, ri.name, ri.source, kind, params, lat, hdg, seed,
-                                        protocol, face_size, max_decisions, z, extra))
+                                        protocol, exp["face_size"], exp["max_decisions"], z, extra, digest))
     ids = [r.run_id for r in runs]
     if len(set(ids)) != len(ids):
-        raise SpecError("the spec names the same run twice (a repeated route, seed or parameter value)")
-    return Experiment(runs, metrics, routes)
+        raise SpecError("the spec names the same run twice (a repeated world, route set or route)")
+    return Experiment(runs, tuple(exp["metrics"]), routes)
