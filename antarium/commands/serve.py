@@ -66,13 +66,13 @@ def run(args: argparse.Namespace) -> int:
     from antarium.server import Server
     from antarium.server.config_check import check_config
 
+    require_seconds(args, "seconds")  # before the config's checks, which look at this machine's ports
     config = check_config(load_config(args.config))
     if args.print_config:
         import tomli_w
 
         print(tomli_w.dumps(config.to_toml_dict()), end="")
         return 0
-    require_seconds(args, "seconds")
     server = Server(config, record=args.record)
 
     def stop(signum, frame):
