@@ -19,3 +19,15 @@ def test_bad_arguments_name_what_is_wrong(capsys):
     assert "--seconds must be a positive number" in capsys.readouterr().err
     assert main(["servosphere", "--simulate", "--seconds", "1", "--slip", "0.9"]) == 2
     assert "slip must be in [0, 0.5]" in capsys.readouterr().err
+
+
+def test_a_config_is_checked_with_its_loop_as_antarium_serve_checks_it(tmp_path, capsys):
+    """[loop] ball_radius_m and tether reach the source: a second radius, or a tether that does not fit
+    counter_rotate, is refused as `antarium serve` refuses it."""
+    for loop, message in [("ball_radius_m = 0.10", "sphere_radius 0.06 m differs from the loop's ball_radius 0.1 m"),
+                          ('tether = "fixed"', "tether 'fixed' with counter_rotate false")]:
+        config = tmp_path / "rig.toml"
+        config.write_text(f'[rig]\nname = "r10"\n[loop]\n{loop}\n[locomotion]\nsource = "servosphere"\n'
+                          'camera = "simulated"\nlink = "simulated"\nrotors = { sphere_radius = 0.06 }\n')
+        assert main(["servosphere", "--config", str(config), "--seconds", "0.05"]) == 2
+        assert message in capsys.readouterr().err

@@ -85,3 +85,10 @@ def test_counter_rotation_turns_the_ball_against_the_ant():
     assert ctl.omega[2] == pytest.approx(-2.0 * math.radians(30))
     with pytest.raises(ValueError, match="kp must be"):
         ControllerConfig(kp=-1.0)
+
+
+@pytest.mark.parametrize("setting, value", [("azimuth_deg", (0.0, 120.0, math.nan)),
+                                            ("elevation_deg", (60.0, math.inf, 60.0))])
+def test_non_finite_rotor_angles_are_refused(setting, value):
+    with pytest.raises(ValueError, match=f"rotor geometry {setting} must be 3 finite angles"):
+        RotorGeometry(**{setting: value})

@@ -2,6 +2,7 @@
 its simulated line; `serial` is pyserial on a pseudo-terminal whose other end runs the same firmware emulator
 (the lowest seam: our encode/decode runs on both sides)."""
 
+import math
 import os
 import select
 import threading
@@ -14,6 +15,7 @@ from antarium.core.clock import SimulatedClock
 from antarium.locomotion.servosphere import MOTOR_LINKS, open_motor_link
 from antarium.locomotion.servosphere import protocol as p
 from antarium.locomotion.servosphere.firmware import FirmwareEmulator
+from antarium.locomotion.servosphere.link import MotorLink
 from antarium.locomotion.servosphere.rig import SimulatedRig
 
 
@@ -133,13 +135,34 @@ def test_step_counters_unwrap_across_int32():
             data, self.data = self.data, b""
             return data
 
-    from antarium.locomotion.servosphere.link import MotorLink
-
     top = 2 ** 31 - 10
     wrapped = top + 30 - 2 ** 32
     link = MotorLink(Replay(p.encode(p.Status(1, 0, top, 0, 0, 0)) + p.encode(p.Status(2, 10, wrapped, 0, 0, 0))))
     (_, a), (_, b) = link.poll()
     assert b[0] - a[0] == 30
+
+
+@pytest.mark.parametrize("rates", [[0.0, math.nan, 0.0], [math.inf, 0.0, 0.0], [1.0, 2.0]])
+def test_rates_that_are_not_3_finite_numbers_are_refused_and_nothing_is_sent(rates):
+    written = []
+    link = MotorLink(type("Port", (), {"write": staticmethod(written.append)})())
+    with pytest.raises(ValueError, match="motor link rates must be 3 finite numbers"):
+        link.send_rates(rates)
+    assert written == [] and link.sent == 0 and link.seq == 0
+
+
+def test_the_watchdog_stops_the_rotors_when_it_expires_however_time_is_stepped():
+    """16000 steps/s reached at 40 ms, the watchdog (50 ms) expires at 50 ms, a 40 ms ramp down: 800 steps."""
+    def position(times):
+        firmware = FirmwareEmulator()
+        firmware.receive(p.encode(p.SetRates(1, 16000, 0, 0)), 0.0)
+        for t in times:
+            firmware.advance(t)
+        assert firmware.faults == p.FAULT_WATCHDOG and not firmware.rate.any()
+        return firmware.position[0]
+
+    assert position([0.04, 0.10]) == pytest.approx(800.0)
+    assert position([0.04 + 0.0005 * k for k in range(121)]) == pytest.approx(800.0)
 
 
 def test_unknown_link_names_what_is_allowed():

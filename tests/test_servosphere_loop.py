@@ -105,6 +105,7 @@ def test_counter_rotation_holds_the_ants_heading():
     def heading_spread(counter_rotate):
         clock = SimulatedClock()
         src = open_source("servosphere", clock=clock, counter_rotate=counter_rotate,
+                          tether="fixed" if counter_rotate else "free_yaw",
                           simulation={"seed": 6, "speed": 0.05, "meander": 2.0})
         log = Rows()
         src.use_log(log)
@@ -117,3 +118,53 @@ def test_counter_rotation_holds_the_ants_heading():
     free, free_yaw = heading_spread(False)
     held, _ = heading_spread(True)
     assert held < math.radians(15) < free and free_yaw == 0.0
+
+
+def test_a_stall_is_held_once_logged_on_every_held_frame_with_the_rates_sent(sim):
+    """Replies already in flight when ClearFaults goes out still carry the latched stall bit: they must not start
+    a second hold. Every frame that sent Stop logs the stall bit and rates 0 (what was sent)."""
+    src, clock, rows = sim
+    link = src.loop.link
+    sent = []  # (log row's frame, command) for Stop and ClearFaults
+
+    def recorded(name):
+        command = getattr(link, name)
+
+        def record():
+            sent.append((src.loop.frame + 1, name))
+            return command()
+        return record
+
+    for name in ("stop", "clear_faults"):
+        setattr(link, name, recorded(name))
+    _run(src, clock, 0.5)
+    src.rig.firmware.stalled[0] = True
+    _run(src, clock, 0.02)
+    src.rig.firmware.stalled[0] = False
+    _run(src, clock, 0.4)
+    stop_frames = {f for f, name in sent if name == "stop"}
+    assert [name for _, name in sent].count("clear_faults") == 1
+    assert len(stop_frames) <= round(src.loop.stall_hold_s * 700) + 3  # one hold of 0.1 s at 700 frames/s
+    stall = 1 << FAULTS.index("stall")
+    held = [r for r in rows if r[1] in stop_frames]
+    assert len(held) == len(stop_frames) and all(r[-1] & stall and r[9:12] == (0.0, 0.0, 0.0) for r in held)
+    assert rows[-1][-1] == 0 and math.hypot(*rows[-1][2:4]) < 2.0  # tracking again
+
+
+@pytest.mark.parametrize("tether, counter_rotate", [("sideways", False), ("fixed", False), ("free_yaw", True)])
+def test_a_tether_that_does_not_fit_counter_rotation_is_refused(tether, counter_rotate):
+    with pytest.raises(ValueError, match="allowed: tether 'free_yaw' without counter_rotate, or 'fixed' with it"):
+        open_source("servosphere", clock=SimulatedClock(), tether=tether, counter_rotate=counter_rotate)
+
+
+@pytest.mark.parametrize("cfg, message", [
+    ({"apex_px": [320, 240], "mm_per_px": 0.06, "rotaton_deg": 90},
+     "unknown key 'rotaton_deg'; allowed: apex_px, mm_per_px, rotation_deg"),
+    ({"apex_px": [320, 240]}, "needs mm_per_px; allowed: {apex_px, mm_per_px, \\[rotation_deg\\]} or {image"),
+    ({"image": "calib.png", "mm_per_px": 0.06}, "unknown key 'mm_per_px'; allowed: disc_diameter_mm, image, rota"),
+    ({"apex_px": [math.nan, 240], "mm_per_px": 0.06}, "apex_px must be 2 finite numbers"),
+    ({"apex_px": [320, 240], "mm_per_px": 0.06, "rotation_deg": math.nan}, "rotation_deg must be a finite number"),
+])
+def test_calibration_settings_name_what_is_wrong(cfg, message):
+    with pytest.raises(ValueError, match=message):
+        _calibration(cfg)

@@ -77,3 +77,19 @@ def test_bad_tracker_settings_are_refused(rig):
         Tracker(rig.calibration, threshold=0)
     with pytest.raises(ValueError, match="area_mm2"):
         Tracker(rig.calibration, area_mm2=(10.0, 1.0))
+
+
+@pytest.mark.parametrize("kwargs, message", [({"apex_px": (math.nan, 240.0)}, "apex_px must be 2 finite numbers"),
+                                             ({"rotation_deg": math.nan}, "rotation_deg must be a finite number")])
+def test_non_finite_calibration_is_refused(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        Calibration(**{"apex_px": (320.0, 240.0), "mm_per_px": 0.06, **kwargs})
+
+
+def test_a_blob_with_a_four_vertex_contour_is_the_ant():
+    frame = np.full((480, 640), 200, np.uint8)
+    frame[230:250, 253:387] = 40  # an axis-aligned 8.0 x 1.2 mm bar on the apex: its contour is 4 vertices
+    det = Tracker(Calibration((320.0, 240.0), 0.06)).update(frame)
+    assert det.fault is None
+    assert (det.x_mm, det.y_mm) == pytest.approx((-0.03, 0.03), abs=1e-9)  # centre (319.5, 239.5) px
+    assert det.orientation == pytest.approx(0.0, abs=1e-9) and det.area_mm2 == pytest.approx(133 * 19 * 0.06 ** 2)

@@ -50,10 +50,12 @@ def run(args: argparse.Namespace) -> int:
 
         if args.config is None:
             raise ValueError("without --simulate a --config with [locomotion] source = \"servosphere\" is needed")
-        locomotion = load_config(args.config).locomotion
-        options = locomotion.options
+        config = load_config(args.config)
+        locomotion = config.locomotion
         if locomotion.source != "servosphere":
             raise ValueError(f"{args.config}: [locomotion] source must be \"servosphere\"")
+        # one ball, one tether: the loop's, as `antarium serve` passes them
+        options = {"tether": config.loop.tether, "ball_radius": config.loop.ball_radius_m, **locomotion.options}
     src = open_source("servosphere", clock=clock, process=False, **options)  # the loop here: its rig, its rows
     rows: list[tuple] = []
     src.use_log(type("Rows", (), {"add_servosphere": staticmethod(rows.append)})())

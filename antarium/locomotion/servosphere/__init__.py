@@ -11,8 +11,11 @@ style); `simulated` back-ends come from `rig.SimulatedRig`.
 
 from __future__ import annotations
 
+import math
 from importlib import import_module
 from typing import Any
+
+import numpy as np
 
 #: back-end name -> "module:factory"
 MOTOR_LINKS: dict[str, str] = {
@@ -42,3 +45,12 @@ def open_motor_link(name: str, **kwargs: Any):
 def open_camera(name: str, **kwargs: Any):
     """A camera (`grab() -> (t, uint8 (H, W))`, `frame_rate`, `close()`) from back-end `name`."""
     return _open(CAMERAS, "camera", name, kwargs)
+
+
+def finite_numbers(values: Any, n: int) -> bool:
+    """True when `values` is a sequence (tuple, list, 1-D array) of `n` finite real numbers (no bools)."""
+    if isinstance(values, np.ndarray):
+        values = values.tolist() if values.ndim == 1 else None
+    return isinstance(values, (tuple, list)) and len(values) == n and all(
+        isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
+        for v in values)

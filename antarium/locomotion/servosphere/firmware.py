@@ -34,13 +34,21 @@ class FirmwareEmulator:
         self._last_command = float(t0)
 
     def advance(self, t: float) -> None:
-        """Run the steppers until time `t` (s): ramp at max_accel, integrate position exactly."""
-        dt = t - self.t
-        if dt <= 0:
+        """Run the steppers until time `t` (s): ramp at max_accel, integrate position exactly; the watchdog stops
+        them from the moment it expires (`watchdog_s` after the last valid command)."""
+        if t <= self.t:
             return
-        if t - self._last_command > self.watchdog_s and (self.target.any() or self.rate.any()):
+        expires = self._last_command + self.watchdog_s
+        if self.t < expires < t:
+            self._run(expires)
+        if t > expires and (self.target.any() or self.rate.any()):
             self.faults |= p.FAULT_WATCHDOG
             self.target[:] = 0.0
+        self._run(t)
+
+    def _run(self, t: float) -> None:
+        """The steppers from `self.t` to `t` (s) toward the current targets."""
+        dt = t - self.t
         for i, bit in enumerate(_STALL_BITS):
             if self.stalled[i] and (self.rate[i] or self.target[i]):
                 self.faults |= bit

@@ -16,6 +16,8 @@ from functools import cached_property
 
 import numpy as np
 
+from antarium.locomotion.servosphere import finite_numbers
+
 #: the paper's rig: rotors at 0/120/240 deg azimuth, 60 deg elevation; 60 mm omniwheels on a 120 mm ball
 AZIMUTH_DEG = (0.0, 120.0, 240.0)
 ELEVATION_DEG = (60.0, 60.0, 60.0)
@@ -55,6 +57,10 @@ class RotorGeometry:
     sphere_radius: float = SPHERE_RADIUS_M
 
     def __post_init__(self) -> None:
+        for name in ("azimuth_deg", "elevation_deg"):
+            angles = getattr(self, name)
+            if not finite_numbers(angles, 3):
+                raise ValueError(f"rotor geometry {name} must be 3 finite angles (deg), got {angles!r}")
         for name in ("wheel_radius", "sphere_radius"):
             value = getattr(self, name)
             if not 1e-4 <= value <= 1.0:

@@ -11,6 +11,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from antarium.locomotion.servosphere import finite_numbers
 from antarium.locomotion.servosphere import protocol as p
 
 
@@ -45,7 +46,10 @@ class MotorLink:
         return self.seq
 
     def send_rates(self, rates) -> int:
-        """Step rates (3,) steps/s (rounded to integers); returns the message's seq."""
+        """Step rates (3,) steps/s (rounded to integers); returns the message's seq. ValueError, nothing sent, for
+        anything but 3 finite numbers."""
+        if not finite_numbers(rates, 3):
+            raise ValueError(f"motor link rates must be 3 finite numbers (steps/s), got {rates!r}")
         r1, r2, r3 = (int(round(float(x))) for x in rates)
         return self._send(p.SetRates(self._next(), r1, r2, r3))
 

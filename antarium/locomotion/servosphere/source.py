@@ -27,12 +27,15 @@ from antarium.locomotion.servosphere.tracker import Calibration, Tracker, calibr
 FAULTS = ("no_ant", "two_blobs", "link_timeout", "link_garbled", "stall", "watchdog", "firmware_bad_message")
 _BIT = {name: 1 << i for i, name in enumerate(FAULTS)}
 _STALLS = p.FAULT_STALL_1 | p.FAULT_STALL_2 | p.FAULT_STALL_3
+#: the dome loop's tether -> the counter_rotate it needs (with counter_rotate the ball's yaw is the ant's turning)
+_COUNTER_ROTATE = {"free_yaw": False, "fixed": True}
 
 
 class ServosphereLoop:
     """camera (`grab() -> (t, frame)`), link (`MotorLink`), tracker, controller; `step()` runs one frame and returns
     (new BallSamples, log row in `SERVOSPHERE_DTYPE` order). link_timeout_s: longest wait for a reply before the
-    line counts as lost; stall_hold_s: how long the ball stays stopped after a stall before the loop retries."""
+    line counts as lost; stall_hold_s: how long the ball stays stopped after a stall before the loop retries.
+    The fault bits of replies to commands sent before the last ClearFaults are ignored: that cleared them."""
 
     def __init__(self, camera, link, tracker: Tracker, controller: Controller, link_timeout_s: float = 0.02,
                  stall_hold_s: float = 0.1) -> None:
@@ -50,6 +53,7 @@ class ServosphereLoop:
         self._steps: np.ndarray | None = None
         self._t_dev: float | None = None
         self._stall_since: float | None = None
+        self._clear_seq: int | None = None  # seq of the last ClearFaults sent
         self._sample_seq = 0
         self.last_faults = 0
 
@@ -74,6 +78,7 @@ class ServosphereLoop:
         rates = self.controller.update(error, det.heading, dt)
         if self._stall_since is not None:
             self.link.stop()
+            rates = np.zeros(3)  # what Stop sends: every target 0
         else:
             self.link.send_rates(rates)
         for name, bit in _BIT.items():
@@ -104,7 +109,8 @@ class ServosphereLoop:
         faults = None
         for status, steps in self.link.poll():
             self._last_reply_t = t
-            faults = status.faults
+            cleared = self._clear_seq is not None and (status.seq - self._clear_seq) % 65536 >= 32768
+            faults = 0 if cleared else status.faults
             t_dev = status.t_us * 1e-6
             if self._t_dev is not None:
                 t_dev = self._t_dev + ((status.t_us - round(self._t_dev * 1e6)) % 2 ** 32) * 1e-6
@@ -117,22 +123,28 @@ class ServosphereLoop:
         return samples, faults if faults is not None else 0
 
     def _firmware_faults(self, fw: int, t: float) -> int:
-        """Fault bits from the firmware's; a stall stops the ball for `stall_hold_s`, then faults are cleared."""
+        """Fault bits from the firmware's; a stall stops the ball for `stall_hold_s` (the stall bit set on every
+        frame that sends Stop), then faults are cleared."""
         out = 0
         if fw & _STALLS:
             out |= _BIT["stall"]
             if self._stall_since is None:
                 self._stall_since = t
         if self._stall_since is not None and t - self._stall_since >= self.stall_hold_s:
-            self.link.clear_faults()
+            self._clear_faults()
             self._stall_since = None
+        if self._stall_since is not None:
+            out |= _BIT["stall"]
         if fw & p.FAULT_WATCHDOG:
             out |= _BIT["watchdog"]
         if fw & p.FAULT_BAD_MESSAGE:
             out |= _BIT["firmware_bad_message"]
         if fw & (p.FAULT_WATCHDOG | p.FAULT_BAD_MESSAGE) and not fw & _STALLS:
-            self.link.clear_faults()  # the ball is commanded again from this frame on
+            self._clear_faults()  # the ball is commanded again from this frame on
         return out
+
+    def _clear_faults(self) -> None:
+        self._clear_seq = self.link.clear_faults()
 
 
 class ServosphereSource(BufferedSource):
@@ -141,9 +153,10 @@ class ServosphereSource(BufferedSource):
     line; camera_index; calibration: {apex_px = [x, y], mm_per_px, rotation_deg} or {image = "path.png",
     disc_diameter_mm}; kp, kd, counter_rotate; threshold (grey level), area_mm2 [min, max];
     rotors: {azimuth_deg, elevation_deg, wheel_radius, sphere_radius}; steppers: {steps_per_rev, max_rate,
-    max_accel}. ball_radius (m): the dome loop's (`antarium serve` passes `[loop] ball_radius`); it is the sphere's
-    radius unless `rotors` sets one, and must then be equal. `tether`: the loop's (free_yaw, or fixed with
-    counter_rotate)."""
+    max_accel}. ball_radius (m): the dome loop's (`antarium serve` and `antarium servosphere --config` pass
+    `[loop] ball_radius_m`); it is the sphere's radius unless `rotors` sets one, and must then be equal. `tether`: the
+    loop's too (`[loop] tether`): free_yaw without counter_rotate, or fixed with it (the ball's yaw is then the
+    ant's turning)."""
 
     def __init__(self, camera: str = "simulated", link: str = "simulated", simulation: dict | None = None,
                  port: str = "", baudrate: int = 1_000_000, camera_index: int | str = 0,
@@ -152,12 +165,15 @@ class ServosphereSource(BufferedSource):
                  steppers: dict | None = None, clock: Clock | None = None, tether: str = "free_yaw",
                  ball_radius: float | None = None) -> None:
         super().__init__()
+        if not isinstance(tether, str) or _COUNTER_ROTATE.get(tether) is not bool(counter_rotate):
+            raise ValueError(f"servosphere tether {tether!r} with counter_rotate {str(bool(counter_rotate)).lower()}; "
+                             "allowed: tether 'free_yaw' without counter_rotate, or 'fixed' with it")
         self.clock = clock or MonotonicClock()
         rotors = {k: (tuple(v) if isinstance(v, list) else v) for k, v in (rotors or {}).items()}
         if ball_radius is not None:
             if not math.isclose(rotors.setdefault("sphere_radius", ball_radius), ball_radius):
                 raise ValueError(f"servosphere rotors sphere_radius {rotors['sphere_radius']} m differs from the "
-                                 f"loop's ball_radius {ball_radius} m; allowed: one value ([loop] ball_radius)")
+                                 f"loop's ball_radius {ball_radius} m; allowed: one value ([loop] ball_radius_m)")
         geometry = RotorGeometry(**rotors)
         limits = StepperLimits(**(steppers or {}))
         self.rig = None
@@ -239,17 +255,34 @@ class ServosphereSource(BufferedSource):
                 "tracker_faults": dict(loop.tracker.faults)}
 
 
+#: the two forms of `[locomotion] calibration`: its key that picks the form -> (required keys, optional keys)
+_CALIBRATION_FORMS = {"apex_px": (("apex_px", "mm_per_px"), ("rotation_deg",)),
+                      "image": (("image",), ("disc_diameter_mm", "rotation_deg"))}
+
+
 def _calibration(cfg: dict | None) -> Calibration:
-    if not cfg:
-        raise ValueError("a real servosphere needs [locomotion] calibration = {apex_px, mm_per_px} or {image}")
+    """The camera calibration from `[locomotion] calibration`: {apex_px = [x, y] (pixels), mm_per_px,
+    rotation_deg} or {image = "path.png", disc_diameter_mm, rotation_deg}; ValueError naming a missing or unknown
+    key and the allowed ones."""
+    forms = " or ".join("{" + ", ".join(req + tuple(f"[{k}]" for k in opt)) + "}"
+                        for req, opt in _CALIBRATION_FORMS.values())
+    if not cfg or not isinstance(cfg, dict):
+        raise ValueError(f"a real servosphere needs [locomotion] calibration = {forms}")
+    required, optional = _CALIBRATION_FORMS["image" if "image" in cfg else "apex_px"]
+    unknown = sorted(set(cfg) - set(required) - set(optional))
+    if unknown:
+        raise ValueError(f"servosphere calibration has unknown key {unknown[0]!r}; allowed: "
+                         f"{', '.join(sorted(required + optional))}")
+    missing = [k for k in required if k not in cfg]
+    if missing:
+        raise ValueError(f"servosphere calibration needs {missing[0]}; allowed: {forms}")
+    rotation_deg = cfg.get("rotation_deg", 0.0)
     if "image" in cfg:
         import cv2
 
         image = cv2.imread(str(cfg["image"]), cv2.IMREAD_GRAYSCALE)
         if image is None:
             raise ValueError(f"servosphere calibration image {cfg['image']!r} cannot be read")
-        return calibrate(image, cfg.get("disc_diameter_mm", 10.0), cfg.get("rotation_deg", 0.0))
-    return Calibration(tuple(cfg["apex_px"]), float(cfg["mm_per_px"]), float(cfg.get("rotation_deg", 0.0)))
-
-
-
+        return calibrate(image, cfg.get("disc_diameter_mm", 10.0), rotation_deg)
+    apex = cfg["apex_px"]
+    return Calibration(tuple(apex) if isinstance(apex, list) else apex, cfg["mm_per_px"], rotation_deg)

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from antarium.locomotion.servosphere import finite_numbers
+
 
 @dataclass(frozen=True)
 class Calibration:
@@ -25,8 +27,13 @@ class Calibration:
     rotation_deg: float = 0.0
 
     def __post_init__(self) -> None:
-        if not 1e-4 <= self.mm_per_px <= 10.0:
-            raise ValueError(f"camera calibration mm_per_px must be in [1e-4, 10], got {self.mm_per_px!r}")
+        if not finite_numbers(self.apex_px, 2):
+            raise ValueError(f"camera calibration apex_px must be 2 finite numbers (x, y pixels), got {self.apex_px!r}")
+        if not finite_numbers([self.mm_per_px], 1) or not 1e-4 <= self.mm_per_px <= 10.0:
+            raise ValueError(f"camera calibration mm_per_px must be a number in [1e-4, 10], got {self.mm_per_px!r}")
+        if not finite_numbers([self.rotation_deg], 1):
+            raise ValueError(f"camera calibration rotation_deg must be a finite number (deg), got "
+                             f"{self.rotation_deg!r}")
 
     def to_mm(self, px: float, py: float) -> tuple[float, float]:
         """Image point (pixels) -> (x, y) mm from the apex in the dome frame."""
@@ -104,9 +111,7 @@ class Tracker:
         contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         lo, hi = self._area_px
         blobs = []
-        for c in contours:
-            if len(c) < 5:
-                continue
+        for c in contours:  # any contour has moments; a degenerate one (point, line) has area 0
             m = cv2.moments(c)
             if lo <= m["m00"] <= hi:
                 blobs.append(m)
