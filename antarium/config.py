@@ -5,7 +5,8 @@ Each section is a pydantic model (`LoopSection`, `LinkSection`, ...) whose field
 read as attributes (`config.loop.rate_hz`). Anything wrong (an unknown section or key, a wrong type, a value out
 of range) raises `ConfigError` with one line naming the key and what is allowed, before anything starts. Keys
 renamed since (`[loop] eye_height` is now `eye_height_m`) are still read, with a `ConfigDeprecationWarning`.
-Sections owned by another part (`[trackball]`, `[ant]`) are kept as tables for that part to parse. With no file
+Sections owned by another part (`[trackball]`, `[ant]`) are kept as tables for that part to parse (a
+`[trackball]` without `ball_radius` gets the loop's: the ball has one radius). With no file
 the embedded default rig is used: emulator on loopback, default habitat, scripted walker in closed loop.
 See `docs/rig.example.toml`.
 """
@@ -245,44 +246,76 @@ def resolve(raw: dict[str, Any]) -> RigConfig:
         if name in raw:
             if not isinstance(raw[name], dict):
                 raise ConfigError(f"[{name}] must be a table, got {raw[name]!r}")
-            foreign[name] = raw[name]
+            foreign[name] = trackball_table(raw) if name == "trackball" else raw[name]
     config = RigConfig(**sections, foreign=foreign)
     _one_ball_radius(raw, config)
     return config
 
 
+def _loop_ball_radius(doc: dict[str, Any]) -> Any:
+    """`[loop] ball_radius_m` (or its old name) of a parsed rig file as written, None where it sets none."""
+    loop = doc.get("loop")
+    return loop.get("ball_radius_m", loop.get("ball_radius")) if isinstance(loop, dict) else None
+
+
+def trackball_table(doc: dict[str, Any]) -> dict[str, Any]:
+    """The `[trackball]` table of a parsed rig file as the USB trackball driver reads it ({} without one): one
+    without `ball_radius` takes the file's `[loop] ball_radius_m`, so that the driver and the loop use one radius."""
+    table = doc.get("trackball", {})
+    if not isinstance(table, dict) or "ball_radius" in table or _loop_ball_radius(doc) is None:
+        return table
+    return {**table, "ball_radius": _loop_ball_radius(doc)}
+
+
 def _one_ball_radius(raw: dict[str, Any], config: RigConfig) -> None:
-    """The ball has one radius: `[trackball] ball_radius` (the hardware's) is the loop's unless `[loop]` sets it;
-    two different values are refused, since the ant's motion would be scaled by their ratio."""
-    trackball = raw.get("trackball")
-    if not isinstance(trackball, dict) or "ball_radius" not in trackball:
+    """The ball has one radius, the frame loop's and the USB trackball driver's. `[trackball] ball_radius` (the
+    hardware's), or that of the `[trackball]` in the file `[locomotion] trackball` names (source "usb"; the driver's
+    default where that sets none), is the loop's unless `[loop]` sets it; a `[trackball]` here without one takes
+    the loop's (`trackball_table`). Two different values are refused: the ant's motion would be scaled by their
+    ratio."""
+    given = {}  # where a radius is set -> its value as written
+    if _loop_ball_radius(raw) is not None:
+        given["[loop] ball_radius_m"] = config.loop.ball_radius_m
+    trackball = config.section("trackball")
+    if trackball is not None and "ball_radius" in trackball:
+        given["[trackball] ball_radius"] = trackball["ball_radius"]
+    path = config.locomotion.options.get("trackball")
+    if config.locomotion.source == "usb" and isinstance(path, str):
+        table = trackball_table(_read_toml(path, "[locomotion] trackball file"))
+        where = f"[trackball] ball_radius of {path!r}" + ("" if "ball_radius" in table else " (its default)")
+        given[where] = table.get("ball_radius", BALL_RADIUS_M)
+    radii = {}
+    for where, value in given.items():
+        try:
+            radii[where] = LoopSection.read({"ball_radius_m": value}).ball_radius_m
+        except ConfigError as exc:
+            raise ConfigError(str(exc).replace("[loop] ball_radius_m", where)) from None
+    if not radii:
         return
-    try:
-        r = LoopSection.read({"ball_radius_m": trackball["ball_radius"]}).ball_radius_m
-    except ConfigError as exc:
-        raise ConfigError(str(exc).replace("[loop] ball_radius_m", "[trackball] ball_radius")) from None
-    loop = raw.get("loop", {})
-    if ("ball_radius_m" in loop or "ball_radius" in loop) and not math.isclose(config.loop.ball_radius_m, r):
-        raise ConfigError(
-            f"[loop] ball_radius_m {config.loop.ball_radius_m} m differs from [trackball] ball_radius {r} m; "
-            "allowed: one value (set it in [trackball] only)"
-        )
+    (first, r), *rest = radii.items()
+    for where, other in rest:
+        if not math.isclose(r, other):
+            raise ConfigError(f"{first} {r} m differs from {where} {other} m; allowed: one value (set it in "
+                              "[trackball] only)")
     config.loop.ball_radius_m = r
+
+
+def _read_toml(path: str | Path, what: str = "rig config") -> dict[str, Any]:
+    """A TOML file parsed; ConfigError naming it as `what` if it is missing or not TOML."""
+    try:
+        with Path(path).open("rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise ConfigError(f"{what} {str(path)!r} not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{what} {str(path)!r} is not valid TOML: {exc}") from None
 
 
 def load_config(path: str | Path | None = None) -> RigConfig:
     """The rig config from a TOML file, or the embedded default when `path` is None."""
     if path is None:
         return resolve({})
-    path = Path(path)
-    try:
-        with path.open("rb") as f:
-            raw = tomllib.load(f)
-    except FileNotFoundError:
-        raise ConfigError(f"rig config {str(path)!r} not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"rig config {str(path)!r} is not valid TOML: {exc}") from None
-    return resolve(raw)
+    return resolve(_read_toml(path))
 
 
 def _renamed(cls: type[Section], table: dict[str, Any]) -> dict[str, Any]:

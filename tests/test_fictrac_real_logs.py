@@ -109,6 +109,19 @@ def test_the_docs_say_which_fictrac_speaks_tcp():
     assert "cannot disagree" not in text
 
 
+def test_the_docs_name_functions_that_exist():
+    import importlib
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "docs" / "fictrac.md").read_text()
+    names = set(re.findall(r"`([a-z_]+(?:\.[A-Za-z_]+)+)", text))  # lower case: modules and their functions
+    assert {"antarium.core.ball.arc_step", "antarium.locomotion.fictrac.timeline.replay_times"} <= names
+    for name in names:
+        module, _, attr = name.rpartition(".")
+        assert name.startswith("antarium.") and hasattr(importlib.import_module(module), attr), name
+
+
 def test_a_live_datagram_cut_inside_its_last_field_is_counted(tmp_path):
     import socket
     import time

@@ -113,3 +113,40 @@ def test_bad_arguments_are_rejected_clearly(tmp_path):
         open_source("fictrac-replay", path=tmp_path / "x.dat", speed=0)
     with pytest.raises(FileNotFoundError, match="not found"):
         open_source("fictrac-replay", path=tmp_path / "x.dat").start()
+
+
+@pytest.mark.parametrize("source", ["fictrac", "fictrac-replay"])
+@pytest.mark.parametrize("value", [0, -0.5, float("nan"), float("inf"), "0.5"])
+def test_max_match_error_must_be_a_positive_number(tmp_path, source, value):
+    path = {"path": tmp_path / "x.dat"} if source == "fictrac-replay" else {}
+    with pytest.raises(ValueError, match=r"^FicTrac max_match_error must be a finite number > 0 \(FicTrac's match "
+                                         rf"error; leave it out for quality 1\), got {value!r}$"):
+        open_source(source, max_match_error=value, **path)
+
+
+@pytest.mark.parametrize("value", [0, float("nan"), "1"])
+def test_timeout_must_be_a_positive_number(value):
+    with pytest.raises(ValueError, match=r"^FicTrac timeout_s must be a finite number > 0 \(s without frames "
+                                         rf"before it is not connected\), got {value!r}$"):
+        open_source("fictrac", timeout_s=value)
+
+
+def test_a_frame_that_does_not_convert_is_counted_and_the_reader_goes_on(monkeypatch):
+    from antarium.locomotion.fictrac import source
+
+    def to_sample(frame, t, max_match_error=None):
+        if frame.frame == 2:
+            raise ZeroDivisionError("float division by zero")
+        return real(frame, t, max_match_error)
+
+    real = source.to_sample
+    monkeypatch.setattr(source, "to_sample", to_sample)
+    with open_source("fictrac", port=0, max_match_error=0.5) as src:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for i in (1, 2, 3):
+                tx.sendto((format_line(frame(i)) + "\n").encode(), src.address)
+        assert wait_for(lambda: src.status()["lines"] == 3)
+        status = src.status()
+        assert src._thread.is_alive() and [s.seq for s in src.read()] == [1, 3]
+    assert status["frames"] == 2 and status["malformed"] == 1
+    assert status["last_error"] == "FicTrac frame 2 does not convert to a sample: float division by zero"

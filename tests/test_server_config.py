@@ -1,6 +1,7 @@
 """The rig config: typed sections with units in their names, checks naming what is allowed, renamed keys still
 read with a warning, foreign sections kept for their owners, the documented example."""
 
+import re
 import tomllib
 import warnings
 from pathlib import Path
@@ -104,3 +105,43 @@ def test_the_ball_has_one_radius():
         resolve({"loop": {"ball_radius_m": 0.05}, "trackball": {"ball_radius": 0.04}})
     with pytest.raises(ConfigError, match=r"\[trackball\] ball_radius must be in"):
         resolve({"trackball": {"ball_radius": 5.0}})
+
+
+def test_the_driver_gets_the_loop_radius_from_a_trackball_section_without_one(tmp_path):
+    from antarium.locomotion import open_source
+    from antarium.locomotion.trackball import config as tbconfig
+
+    config = resolve({"loop": {"ball_radius_m": 0.08}, "locomotion": {"source": "usb", "emulate": True},
+                      "trackball": {"resolution_cpi": 1200}})
+    assert config.section("trackball") == {"resolution_cpi": 1200, "ball_radius": 0.08}
+    assert open_source("usb", trackball=config.section("trackball"), emulate=True).config.ball_radius == 0.08
+    # `antarium trackball calibrate --config rig.toml` reads [trackball] from the file and writes it back
+    path = tmp_path / "rig.toml"
+    path.write_text("[loop]\nball_radius_m = 0.08\n[trackball]\nresolution_cpi = 1200\n")
+    assert tbconfig.load(path).ball_radius == 0.08
+    tbconfig.write_section(path, tbconfig.load(path))
+    assert load_config(path).loop.ball_radius_m == 0.08 and tbconfig.load(path).ball_radius == 0.08
+
+
+def test_the_trackball_file_named_by_locomotion_has_the_loops_radius(tmp_path):
+    ball = tmp_path / "ball.toml"
+    ball.write_text("[trackball]\nball_radius = 0.1\n")
+    usb = {"source": "usb", "trackball": str(ball)}
+    assert resolve({"locomotion": usb}).loop.ball_radius_m == 0.1  # the loop takes the hardware's
+    assert resolve({"loop": {"ball_radius_m": 0.1}, "locomotion": usb}).loop.ball_radius_m == 0.1
+    with pytest.raises(ConfigError, match=rf"^\[loop\] ball_radius_m 0.05 m differs from \[trackball\] ball_radius "
+                                          rf"of '{re.escape(str(ball))}' 0.1 m; allowed: one value"):
+        resolve({"loop": {"ball_radius_m": 0.05}, "locomotion": usb})
+    ball.write_text("[trackball]\nresolution_cpi = 1200\n")  # the driver's default radius
+    with pytest.raises(ConfigError, match=r"^\[loop\] ball_radius_m 0.08 m differs from \[trackball\] ball_radius "
+                                          r"of '.*ball.toml' \(its default\) 0.05 m"):
+        resolve({"loop": {"ball_radius_m": 0.08}, "locomotion": usb})
+    with pytest.raises(ConfigError, match=r"^\[locomotion\] trackball file '.*none.toml' not found$"):
+        resolve({"locomotion": {"source": "usb", "trackball": str(tmp_path / "none.toml")}})
+
+
+def test_the_architecture_doc_says_what_happens_to_unknown_sections():
+    doc = (EXAMPLE.parent / "architecture.md").read_text()
+    assert "kept verbatim" not in doc and "any other section\nis refused, naming the sections allowed" in doc
+    with pytest.raises(ConfigError, match=r"^unknown section \[mypart\]; allowed: \[rig\], .*\[trackball\], \[ant\]$"):
+        resolve({"mypart": {"k": 1}})

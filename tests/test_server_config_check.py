@@ -22,6 +22,17 @@ def _write(tmp_path, text: str) -> str:
     ('[render]\nscene = {scene = "horizon", panorama = "/no/pano.png"}\n', "(panorama) does not exist"),
     ('[locomotion]\nsource = "scriptd"\n', "[locomotion] source 'scriptd' is unknown; allowed: ant, bus, fictrac"),
     ('[render]\nface_size_px = 7\n', "[render] face_size_px = 7 is not a face size the renderer accepts; allowed: 16"),
+    ('[locomotion]\nsource = "scripted"\nsped = 0.03\n',
+     "[locomotion] source 'scripted' has no option 'sped'; allowed: ball_radius, clock, duration, heading_deg, "
+     "meander, path, pause_fraction, rate_hz, seed, speed, spurt_s, tether, turn_rate"),
+    ('[locomotion]\nsource = "scripted"\nspeed = 5.0\n',
+     "[locomotion] scripted source speed must be a number in [0.0, 2.0], got 5.0"),
+    ('[locomotion]\nsource = "usb"\nemulate = true\n[trackball]\nsample_rate_hz = 5000\n',
+     "[trackball] sample_rate_hz must be in [1, 1000], got 5000"),
+    ('[locomotion]\nsource = "fictrac"\nmax_match_error = 0\n', "[locomotion] FicTrac max_match_error must be a "
+     "finite number > 0"),
+    ('[loop]\ntether = "fixed"\n[locomotion]\nsource = "scripted"\nheading_deg = 90.0\n',
+     "[locomotion] scripted source heading_deg applies to the free_yaw tether only"),
 ])
 @pytest.mark.parametrize("print_config", [True, False])
 def test_serve_refuses_a_config_it_could_not_run_before_anything_starts(tmp_path, capsys, toml, message,
@@ -44,6 +55,20 @@ def test_a_bus_port_in_use_is_named_with_what_to_do(tmp_path, capsys):
         assert main(["serve", "--config", _write(tmp_path, f'[bus]\nlisten = ["tcp/127.0.0.1:{port}"]\n')]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1 and "is in use" in err
+
+
+def test_the_locomotion_options_are_checked_without_starting_the_source(tmp_path):
+    ball = tmp_path / "ball.toml"
+    ball.write_text("[trackball]\nsample_rate_hz = 500\n")
+    for locomotion in ({"source": "scripted", "speed": 0.03, "heading_deg": 90.0, "duration": 10.0},
+                       {"source": "usb", "trackball": str(ball)},  # no device: building the driver opens nothing
+                       {"source": "fictrac", "port": 0, "max_match_error": 0.5, "timeout_s": 2.0}):
+        config = resolve({"bus": {"enabled": False}, "locomotion": locomotion})
+        assert check_config(config) is config and config.locomotion.options == {
+            k: v for k, v in locomotion.items() if k != "source"}  # not changed by the check
+    ball.write_text("[trackball]\nsample_rate_hz = 5000\n")
+    with pytest.raises(ConfigError, match=r"^\[trackball\] sample_rate_hz must be in \[1, 1000\], got 5000$"):
+        check_config(resolve({"bus": {"enabled": False}, "locomotion": {"source": "usb", "trackball": str(ball)}}))
 
 
 def test_a_good_config_passes(tmp_path):

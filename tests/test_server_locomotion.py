@@ -1,5 +1,6 @@
 """The locomotion back-ends shipped with the server: one test class run against every one of them."""
 
+import re
 import time
 
 import numpy as np
@@ -135,10 +136,67 @@ def test_replay_from_trial_log_reproduces_the_recorded_samples(tmp_path):
 @pytest.mark.parametrize("kwargs, match", [
     ({"speed": -1}, "speed"), ({"tether": "loose"}, "tether"), ({"path": [(0, 0)]}, "at least 2"),
     ({"rate_hz": 0}, "rate_hz"),
+    ({"heading_deg": float("nan")}, r"scripted source heading_deg must be a number in \[-3600.0, 3600.0\], got nan$"),
+    ({"heading_deg": float("inf")}, r"heading_deg must be a number in \[-3600.0, 3600.0\], got inf$"),
+    ({"heading_deg": "90"}, r"heading_deg must be a number in \[-3600.0, 3600.0\], got '90'$"),
+    ({"duration": "10"}, r"scripted source duration must be a finite number > 0 \(s; leave it out for no end\), "
+                         r"got '10'$"),
+    ({"duration": 0}, r"duration must be a finite number > 0 .*, got 0$"),
+    ({"duration": float("nan")}, r"duration must be a finite number > 0 .*, got nan$"),
+    ({"tether": "fixed", "heading_deg": 90.0}, r"heading_deg applies to the free_yaw tether only .*"
+                                                r"\[loop\] start_heading_deg\), got 90.0$"),
 ])
 def test_scripted_rejects_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
         ScriptedSource(**kwargs)
+
+
+def test_scripted_heading_and_duration_are_kept():
+    clock = SimulatedClock()
+    src = ScriptedSource(speed=0.02, heading_deg=90.0, duration=0.5, rate_hz=100.0, clock=clock)
+    src.start()
+    clock.advance(2.0)
+    samples = src.read()
+    assert len(samples) == 50  # 0.5 s at 100 Hz, then no more
+    total = np.sum([s.rotation for s in samples], axis=0)  # walked 0.01 m along the dome's +y: rx = dy / r
+    assert total == pytest.approx([0.01 / src.radius, 0.0, 0.0], abs=1e-12)
+    assert ScriptedSource(tether="fixed", heading_deg=0.0).tether == "fixed"  # the default heading is fine
+
+
+def test_replay_refuses_non_finite_values_naming_file_line_and_column(tmp_path):
+    path = tmp_path / "walk.csv"
+    where = f"^replay CSV '{re.escape(str(path))}'"
+    path.write_text("t,rx,ry,rz\n0.0,0,-0.001,0\n0.01,nan,-0.001,0\n0.02,0,-0.001,0\n")
+    with pytest.raises(ValueError, match=where + " line 3: rx must be a finite number, got nan$"):
+        open_source("replay", path=str(path))
+    path.write_text("t,rx,ry,rz,quality\n0.0,0,-0.001,0,1\n0.01,0,-0.001,0,1\n0.02,0,-0.001,0,inf\n")
+    with pytest.raises(ValueError, match=where + " line 4: quality must be a finite number, got inf$"):
+        open_source("replay", path=str(path))
+
+
+def test_a_looped_replay_never_repeats_sequence_numbers(tmp_path):
+    path = tmp_path / "gappy.csv"
+    rows = [f"{i * 0.01},{s},0,-0.001,0" for i, s in enumerate([0, 1, 2, 5, 6, 7])]  # 3 and 4 were lost
+    path.write_text("t,seq,rx,ry,rz\n" + "\n".join(rows) + "\n")
+    clock = SimulatedClock()
+    src = open_source("replay", path=str(path), loop=True, clock=clock)
+    src.start()
+    clock.advance(0.175)  # a lap lasts 0.06 s: 18 samples
+    assert [s.seq for s in src.read()] == [0, 1, 2, 5, 6, 7, 8, 9, 10, 13, 14, 15, 16, 17, 18, 21, 22, 23]
+
+
+@pytest.mark.parametrize("radius", [0.05, 0.1])
+def test_the_scripted_walker_walks_its_speed_whatever_the_ball_radius(radius):
+    from antarium.config import resolve
+    from antarium.server.server import Server
+
+    config = resolve({"loop": {"ball_radius_m": radius, "rate_hz": 100.0, "realtime_priority": 0, "cpu": "off"},
+                      "bus": {"enabled": False}, "link": {"interface": "virtual"},
+                      "locomotion": {"source": "scripted", "speed": 0.03}})
+    server = Server(config, clock=SimulatedClock(), renderer_factory=None, echo=lambda line: None)
+    server.run(seconds=2.0)
+    assert server.source.radius == radius
+    assert np.hypot(server.loop.pose.x, server.loop.pose.y) == pytest.approx(0.06, abs=1e-3)
 
 
 def test_replay_rejects_bad_files(tmp_path):
@@ -150,6 +208,13 @@ def test_replay_rejects_bad_files(tmp_path):
         open_source("replay", path=str(bad))
     with pytest.raises(ValueError, match="unknown locomotion source 'mouse'"):
         open_source("mouse")
+
+
+@pytest.mark.parametrize("timeout_s", [0, -1.0, float("nan"), float("inf"), "0.5"])
+def test_bus_source_timeout_must_be_a_positive_number(timeout_s):
+    with pytest.raises(ValueError, match=r"^bus source timeout_s must be a finite number > 0 \(s without samples "
+                                         rf"before it is not connected\), got {timeout_s!r}$"):
+        open_source("bus", timeout_s=timeout_s)
 
 
 def test_bus_source_counts_malformed_payloads_and_reports_silence():

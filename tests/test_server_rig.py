@@ -87,7 +87,7 @@ def test_failed_scene_load_keeps_the_previous_scene(tmp_path):
             assert server.renderer.scene.sky.sun_azimuth == pytest.approx(1.5707963)
             rig.polarisers([[10.0] * 9] * 55)
             assert wait_for(lambda: server.link.telemetry(wait_s=0.1).get("polariser_angles") is not None, 5.0)
-            with pytest.raises(RigError, match="55 x 9"):
+            with pytest.raises(RigError, match="55 lists of 9 numbers"):
                 rig.polarisers([[10.0] * 9] * 54)
     finally:
         server.stop()

@@ -104,6 +104,22 @@ def test_faults_are_counted_and_dropped_and_gaps_detected():
     assert lifted.quality < 0.8 and all(s.quality > 0.95 for s in samples if s.seq != 40)
 
 
+@pytest.mark.parametrize("before, after, resets, lost", [
+    ((1000, 5_000_000), (0, 1000), 1, 0),  # restarted: seq and device time back to 0
+    ((2**31 + 1000, 5_000_000), (0, 1000), 1, 0),  # the same late in a run: seq looks 2**31 - 1001 ahead
+    ((2**31 + 1000, 1000), (0, 1000), 1, 0),  # ... even where the device time says nothing
+    ((10, 5000), (11, 4000), 1, 0),  # the device time went back
+    ((100, 1000), (103, 4000), 0, 2),  # 2 reports lost in 3 ms at 1 kHz
+    ((2**32 - 2, 1000), (1, 4000), 0, 2),  # the same across the u32 wrap
+])
+def test_a_device_restart_is_a_reset_and_lost_reports_a_gap(before, after, resets, lost):
+    src = UsbTrackball()  # 1000 reports/s
+    for seq, t_us in (before, after):
+        src._handle(memoryview(P.encode_report(P.Report(seq, t_us, (0, 0, 0, 0), (100, 100), (False, False)))), 0.0)
+    assert (src.counters["seq_resets"], src.counters["gaps"], src.counters["lost_reports"]) == (resets, int(lost > 0),
+                                                                                                lost)
+
+
 def test_overflow_flag_is_counted():
     backend = EmulatedTrackball(motion=constant((0.0, 0.0, 200.0)), realtime=False)  # 10 m/s surface speed
     with UsbTrackball(backend=backend) as src:

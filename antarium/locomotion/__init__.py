@@ -10,6 +10,8 @@ for the motion of the ant standing on the top pole.
 
 from __future__ import annotations
 
+import inspect
+import math
 import threading
 from abc import ABC, abstractmethod
 from collections import deque
@@ -37,7 +39,11 @@ class BallSample:
 
 
 class LocomotionSource(ABC):
-    """A source of ball rotations. `read()` never blocks; it returns the samples since the last call."""
+    """A source of ball rotations. `read()` never blocks; it returns the samples since the last call.
+
+    Building a source checks its options and opens nothing (no device, thread, socket or process: `start` does),
+    so `check_config` builds one to check a config's options.
+    """
 
     def start(self) -> None:  # noqa: B027 - sources without set-up need not override
         """Open devices, threads or subscriptions."""
@@ -142,7 +148,11 @@ BACKENDS: dict[str, str] = {
 
 
 def open_source(name: str, **kwargs: Any) -> LocomotionSource:
-    """Instantiate the locomotion back-end `name` with `kwargs` (not started)."""
+    """Instantiate the locomotion back-end `name` with `kwargs` (not started).
+
+    ValueError for an unknown back-end or a value it refuses; TypeError for an option it does not take, listing those
+    it takes.
+    """
     try:
         target = BACKENDS[name]
     except KeyError:
@@ -150,4 +160,24 @@ def open_source(name: str, **kwargs: Any) -> LocomotionSource:
             f"unknown locomotion source {name!r}; allowed: {', '.join(sorted(BACKENDS)) or 'none'}"
         ) from None
     module_name, cls_name = target.split(":")
-    return getattr(import_module(module_name), cls_name)(**kwargs)
+    factory = getattr(import_module(module_name), cls_name)
+    check_keywords(f"source {name!r}", factory, kwargs)
+    return factory(**kwargs)
+
+
+def check_keywords(what: str, factory: Any, kwargs: dict[str, Any]) -> None:
+    """TypeError naming the first key of `kwargs` that `factory` takes no parameter for, and those it takes
+    (nothing is checked for a factory that takes any keyword: it checks them itself)."""
+    params = inspect.signature(factory).parameters
+    if any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        return
+    unknown = sorted(set(kwargs) - set(params))
+    if unknown:
+        raise TypeError(f"{what} has no option {unknown[0]!r}; allowed: {', '.join(sorted(params))}")
+
+
+def positive(value: Any, what: str, unit: str) -> float:
+    """`value` as a float if it is a finite number > 0, else ValueError naming `what` and its `unit`."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{what} must be a finite number > 0 ({unit}), got {value!r}")
+    return float(value)

@@ -20,7 +20,7 @@ import json
 from typing import Any
 
 from antarium.core.clock import Clock, MonotonicClock
-from antarium.locomotion import BufferedSource, wire
+from antarium.locomotion import BufferedSource, positive, wire
 
 
 class BusSource(BufferedSource):
@@ -34,7 +34,7 @@ class BusSource(BufferedSource):
         self.rig_name = check_rig_name(rig)
         self.bus_section = bus
         self.clock = clock or MonotonicClock()
-        self.timeout_s = float(timeout_s)
+        self.timeout_s = positive(timeout_s, "bus source timeout_s", "s without samples before it is not connected")
         self._session = session
         self._own_session = session is None
         super().__init__(max_pending)

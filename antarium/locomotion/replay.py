@@ -3,7 +3,8 @@
 A CSV file has a header row naming at least `t, rx, ry, rz` (seconds; radians about the dome axes),
 optionally `seq`, `t_device`, `quality`. Samples come out at their recorded time offsets on the injected
 clock (the first sample at `start()` + its offset from the first recorded time), with their recorded
-sequence numbers, so a replayed trial drives the loop exactly as the original did.
+sequence numbers, so a replayed trial drives the loop exactly as the original did. Looped, each lap's sequence
+numbers are the recorded ones + lap x (largest - smallest recorded + 1): gaps recur, numbers never repeat.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ def load_samples(path: str | Path) -> np.ndarray:
         with open_log(path) as f:
             if "locomotion" not in f:
                 raise ValueError(f"{str(path)!r} has no 'locomotion' table; is it an antarium trial log?")
-            data = f["locomotion"][:]
-        return data.astype(SAMPLE_DTYPE)
+            data = f["locomotion"][:].astype(SAMPLE_DTYPE)
+        return _finite(data, f"replay file {str(path)!r} locomotion table row", 0)
     if path.suffix.lower() != ".csv":
         raise ValueError(f"replay file {str(path)!r} must be .h5/.hdf5 (trial log) or .csv")
     with path.open(newline="") as f:
@@ -46,7 +47,22 @@ def load_samples(path: str | Path) -> np.ndarray:
                              float(row["rz"]), float(row.get("t_device") or "nan"), float(row.get("quality") or 1.0)))
             except ValueError as exc:
                 raise ValueError(f"replay CSV {str(path)!r} line {i + 2}: {exc}") from None
-    return np.array(rows, dtype=SAMPLE_DTYPE)
+    return _finite(np.array(rows, dtype=SAMPLE_DTYPE), f"replay CSV {str(path)!r} line", 2)
+
+
+#: columns that must hold finite numbers (t is checked with its order by `ReplaySource`; t_device may be nan: none)
+FINITE_COLUMNS = ("rx", "ry", "rz", "quality")
+
+
+def _finite(data: np.ndarray, where: str, first: int) -> np.ndarray:
+    """`data`, or ValueError naming the first sample with a non-finite `FINITE_COLUMNS` value: `where` then its
+    number counted from `first` (the file's row or line), the column and the value."""
+    bad = ~np.column_stack([np.isfinite(data[c]) for c in FINITE_COLUMNS])
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        column = FINITE_COLUMNS[j]
+        raise ValueError(f"{where} {i + first}: {column} must be a finite number, got {data[column][i]}")
+    return data
 
 
 class ReplaySource(LocomotionSource):
@@ -65,6 +81,8 @@ class ReplaySource(LocomotionSource):
         self._offsets = (self.data["t"] - self.data["t"][0]) / self.speed
         self._span = float(self._offsets[-1]) + (float(np.median(np.diff(self._offsets))) if len(self.data) > 1
                                                   else 1.0)
+        seqs = self.data["seq"]
+        self._lap_seq = int(seqs.max()) - int(seqs.min()) + 1  # a lap's sequence numbers follow the previous lap's
         self._t0: float | None = None
         self._i = 0
         self._lap = 0
@@ -94,7 +112,7 @@ class ReplaySource(LocomotionSource):
                 break
             row = self.data[self._i]
             t_dev = None if math.isnan(row["t_device"]) else float(row["t_device"])
-            seq = int(row["seq"]) + self._lap * n
+            seq = int(row["seq"]) + self._lap * self._lap_seq
             out.append(BallSample(self._t0 + float(t_rel), seq, (float(row["rx"]), float(row["ry"]),
                                                                  float(row["rz"])), t_dev, float(row["quality"])))
             self._i += 1

@@ -17,7 +17,7 @@ from typing import Any
 
 from antarium.core.ball import BALL_RADIUS_M, check_tether
 from antarium.core.clock import Clock, MonotonicClock
-from antarium.locomotion import BallSample, LocomotionSource
+from antarium.locomotion import BallSample, LocomotionSource, positive
 
 
 class ScriptedSource(LocomotionSource):
@@ -25,7 +25,8 @@ class ScriptedSource(LocomotionSource):
 
     meander: standard deviation of a random turn rate (rad/s), redrawn every `spurt_s` seconds (seeded).
     spurt_s: ants walk in spurts; with `pause_fraction` > 0 the walker stands still that share of spurts.
-    heading_deg: initial walking direction in the dome frame. duration: stop producing samples after it (s).
+    heading_deg: initial walking direction in the dome frame (free_yaw only: a fixed ant faces the dome's +x).
+    duration: stop producing samples after it (s; None: no end).
     """
 
     def __init__(self, speed: float = 0.02, turn_rate: float = 0.0, path: list | None = None,
@@ -34,11 +35,18 @@ class ScriptedSource(LocomotionSource):
                  duration: float | None = None, ball_radius: float = BALL_RADIUS_M, clock: Clock | None = None) -> None:
         checks = {"speed": (speed, 0.0, 2.0), "rate_hz": (rate_hz, 1.0, 100000.0), "meander": (meander, 0.0, 100.0),
                   "spurt_s": (spurt_s, 1e-3, 3600.0), "pause_fraction": (pause_fraction, 0.0, 1.0),
-                  "ball_radius": (ball_radius, 1e-3, 1.0), "turn_rate": (turn_rate, -100.0, 100.0)}
+                  "ball_radius": (ball_radius, 1e-3, 1.0), "turn_rate": (turn_rate, -100.0, 100.0),
+                  "heading_deg": (heading_deg, -3600.0, 3600.0)}
         for name, (value, lo, hi) in checks.items():
             if not isinstance(value, (int, float)) or not lo <= value <= hi:
                 raise ValueError(f"scripted source {name} must be a number in [{lo}, {hi}], got {value!r}")
         check_tether(tether, "scripted source tether")
+        if tether == "fixed" and heading_deg != 0:
+            raise ValueError(f"scripted source heading_deg applies to the free_yaw tether only (a fixed ant always "
+                             "faces the dome's +x; set its world heading with [loop] start_heading_deg), got "
+                             f"{heading_deg!r}")
+        if duration is not None:
+            duration = positive(duration, "scripted source duration", "s; leave it out for no end")
         if path is not None:
             try:
                 path = [(float(x), float(y)) for x, y in path]

@@ -1,6 +1,7 @@
 """`check_config(config)`: everything `antarium serve` would find wrong only once it runs, found before anything
-starts (scene names and files, the locomotion back-end, face sizes, ports in use). One line per problem:
-`ConfigError` naming the key, what was wrong and what is allowed. `serve` and `serve --print-config` run it.
+starts (scene names and files, the locomotion back-end and its options, face sizes, ports in use). One line per
+problem: `ConfigError` naming the key, what was wrong and what is allowed. `serve` and `serve --print-config` run
+it.
 """
 
 from __future__ import annotations
@@ -54,16 +55,43 @@ def _check_face_size(size: int) -> None:
                           f"{lo}..{hi} texels, or 0 for its default")
 
 
+def source_options(config: RigConfig, **runtime) -> dict:
+    """The keyword arguments `antarium serve` opens the [locomotion] source with: its own options, then what other
+    sections give it (the bus source the rig's name and [bus]; scripted and servosphere the loop's tether and ball
+    radius, one ball for the source and the loop; usb its [trackball] section), then `runtime` (the clock) where
+    not set."""
+    options = config.locomotion.options
+    source = config.locomotion.source
+    if source == "bus":
+        options.setdefault("rig", config.rig.name)
+        options.setdefault("bus", config.bus)
+    if source in ("scripted", "servosphere"):
+        options.setdefault("tether", config.loop.tether)
+        options.setdefault("ball_radius", config.loop.ball_radius_m)
+    if source == "usb" and config.section("trackball") is not None:
+        options.setdefault("trackball", config.section("trackball"))  # the driver parses its own section
+    for key, value in runtime.items():
+        options.setdefault(key, value)
+    return options
+
+
 def _check_locomotion(config: RigConfig) -> None:
-    from antarium.locomotion import BACKENDS
+    """The source is known and takes its options (`source_options`): it is built, so that its own checks run, and
+    dropped, never started."""
+    from antarium.locomotion import BACKENDS, open_source
 
     source = config.locomotion.source
     if source not in BACKENDS:
         raise ConfigError(f"[locomotion] source {source!r} is unknown; allowed: {', '.join(sorted(BACKENDS))}")
+    options = source_options(config)
     if source == "replay" or source.endswith("-replay"):
-        path = config.locomotion.options.get("path")
+        path = options.get("path")
         if isinstance(path, str) and not Path(path).is_file():
             raise ConfigError(f"[locomotion] path {path!r} does not exist; give the recording to replay")
+    try:
+        open_source(source, **options)
+    except (TypeError, ValueError) as exc:  # an option it does not take, or a value it refuses
+        raise ConfigError(str(exc) if str(exc).startswith("[") else f"[locomotion] {exc}") from None
 
 
 def _check_ports(config: RigConfig) -> None:

@@ -105,21 +105,11 @@ class Server:
     # -- building --------------------------------------------------------------------------------------
     def _open_source(self):
         from antarium.locomotion import open_source
+        from antarium.server.config_check import source_options
 
-        loco = self.config.locomotion.options
         name = self.config.locomotion.source
-        if name == "bus":
-            loco.setdefault("rig", self.rig_name)
-            loco.setdefault("bus", self.config.bus)
-        loco.setdefault("clock", self.clock)
-        if name in ("scripted", "servosphere"):
-            loco.setdefault("tether", self.config.loop.tether)
-        if name == "servosphere":  # one ball: the dome's loop integrates the rotation with the same radius
-            loco.setdefault("ball_radius", self.config.loop.ball_radius_m)
-        if name == "usb" and self.config.section("trackball") is not None:
-            loco.setdefault("trackball", self.config.section("trackball"))  # the driver parses its own section
         try:
-            return open_source(name, **loco)
+            return open_source(name, **source_options(self.config, clock=self.clock))
         except TypeError as exc:
             raise ServerError(f"[locomotion] options do not fit source {name!r}: {exc}") from None
 

@@ -4,9 +4,10 @@
     open_source("fictrac", transport="tcp", host="127.0.0.1", port=5000)   # FicTrac 2.0 (2.1 sends UDP only)
     open_source("fictrac-replay", path="run.dat", speed=1.0, clock=clock)
 
-Malformed lines are counted (`status()["malformed"]`) and skipped; a jump of FicTrac's frame counter is
-counted as a gap; a step back of it, or of the sequence counter (column 23: FicTrac reset its tracking), as
-a reset. The live source calls itself connected while frames arrive at least every `timeout_s`.
+Malformed lines, and frames that do not convert to a sample, are counted (`status()["malformed"]`) and skipped;
+a jump of FicTrac's frame counter is counted as a gap; a step back of it, or of the sequence counter (column 23:
+FicTrac reset its tracking), as a reset. The live source calls itself connected while frames arrive at least
+every `timeout_s`.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from antarium.core.clock import Clock, MonotonicClock
-from antarium.locomotion import BallSample, LocomotionSource, ReaderSource
+from antarium.locomotion import BallSample, LocomotionSource, ReaderSource, positive
 from antarium.locomotion.fictrac.protocol import FicTracFrame, FicTracParseError, parse_line, to_sample
 from antarium.locomotion.fictrac.timeline import replay_times
 
@@ -25,22 +26,41 @@ TRANSPORTS = ("udp", "tcp")
 MAX_LINE = 4096  # bytes; a longer line without newline is garbage
 
 
+def _max_match_error(value: float | None) -> float | None:
+    """The match error at which a sample's quality reaches 0 (None: quality 1 always), checked."""
+    if value is None:
+        return None
+    return positive(value, "FicTrac max_match_error", "FicTrac's match error; leave it out for quality 1")
+
+
 class _Counters:
     """Line statistics shared by the live and replay sources."""
 
-    def __init__(self) -> None:
+    def __init__(self, max_match_error: float | None) -> None:
         self.counts = dict.fromkeys(("lines", "frames", "malformed", "gaps", "lost_frames", "resets"), 0)
         self._prev: tuple[int, int] | None = None  # frame counter, sequence counter
+        self.max_match_error = max_match_error
         self.last_error = ""
 
-    def parse(self, line: bytes | str) -> FicTracFrame | None:
+    def malformed(self, reason: str) -> None:
+        """Count a line that yields no sample."""
         self.counts["lines"] += 1
+        self.counts["malformed"] += 1
+        self.last_error = reason
+
+    def parse(self, line: bytes | str, t: float) -> tuple[FicTracFrame, BallSample] | None:
+        """The frame of `line` and its sample at host time `t` (s), or None (counted malformed)."""
         try:
             frame = parse_line(line)
         except FicTracParseError as exc:
-            self.counts["malformed"] += 1
-            self.last_error = str(exc)
+            self.malformed(str(exc))
             return None
+        try:
+            sample = to_sample(frame, t, self.max_match_error)
+        except (ArithmeticError, TypeError, ValueError) as exc:  # never end the reader thread
+            self.malformed(f"FicTrac frame {frame.frame} does not convert to a sample: {exc}")
+            return None
+        self.counts["lines"] += 1
         if self._prev is not None:
             step = frame.frame - self._prev[0]
             if step < 1 or frame.seq < self._prev[1]:  # FicTrac restarted, or reset its tracking (column 23)
@@ -50,7 +70,7 @@ class _Counters:
                 self.counts["lost_frames"] += step - 1
         self._prev = (frame.frame, frame.seq)
         self.counts["frames"] += 1
-        return frame
+        return frame, sample
 
 
 class FicTracSource(ReaderSource):
@@ -73,9 +93,9 @@ class FicTracSource(ReaderSource):
             raise ValueError(f"FicTrac port must be an integer 0..65535, got {port!r}")
         self.transport, self.host, self.port = transport, host, port
         self.clock = clock or MonotonicClock()
-        self.max_match_error = max_match_error
-        self.timeout_s, self.retry_s = timeout_s, retry_s
-        self._stats = _Counters()
+        self.timeout_s = positive(timeout_s, "FicTrac timeout_s", "s without frames before it is not connected")
+        self.retry_s = retry_s
+        self._stats = _Counters(_max_match_error(max_match_error))
         super().__init__(max_queue)
         self._sock: socket.socket | None = None
         self._last_frame: float | None = None
@@ -117,13 +137,11 @@ class FicTracSource(ReaderSource):
                 "last_error": self._stats.last_error, **self._stats.counts}
 
     def _line(self, line: bytes) -> None:
-        frame = self._stats.parse(line)
-        if frame is None:
-            return
         t = self.clock.now()
-        sample = to_sample(frame, t, self.max_match_error)
-        self._push(sample)
-        self._last_frame = t
+        parsed = self._stats.parse(line, t)
+        if parsed is not None:
+            self._push(parsed[1])
+            self._last_frame = t
 
     def _run(self) -> None:
         if self.transport == "udp":
@@ -147,9 +165,7 @@ class FicTracSource(ReaderSource):
             lines = data.splitlines()
             for k, line in enumerate(lines):
                 if k == len(lines) - 1 and self._sender_terminates and not terminated:
-                    self._stats.counts["lines"] += 1
-                    self._stats.counts["malformed"] += 1
-                    self._stats.last_error = "FicTrac datagram cut short (its line has no end of line)"
+                    self._stats.malformed("FicTrac datagram cut short (its line has no end of line)")
                 elif line.strip():
                     self._line(line)
 
@@ -181,9 +197,7 @@ class FicTracSource(ReaderSource):
                         if line.strip():
                             self._line(line)
                     if len(pending) > MAX_LINE:
-                        self._stats.counts["lines"] += 1
-                        self._stats.counts["malformed"] += 1
-                        self._stats.last_error = f"FicTrac line longer than {MAX_LINE} bytes"
+                        self._stats.malformed(f"FicTrac line longer than {MAX_LINE} bytes")
                         pending = b""
             self._tcp_connected = False
 
@@ -191,7 +205,7 @@ class FicTracSource(ReaderSource):
 class FicTracReplay(LocomotionSource):
     """A FicTrac `.dat` log played back on `clock`, paced by its timestamps (field 22) divided by `speed`.
 
-    Field 22 is repaired first (`fictrac_timeline.replay_times`: a log made from a video holds wall-clock times
+    Field 22 is repaired first (`timeline.replay_times`: a log made from a video holds wall-clock times
     in its first and last frames); a sample's `t_device` is that repaired time, seconds from the first frame.
     A last line without its end of line (the log was cut while being written) is counted malformed.
     """
@@ -204,9 +218,8 @@ class FicTracReplay(LocomotionSource):
         self.path = Path(path)
         self.clock = clock or MonotonicClock()
         self.speed = float(speed)
-        self.max_match_error = max_match_error
-        self._stats = _Counters()
-        self._frames: list[tuple[float, FicTracFrame, float]] = []  # (replay offset s, frame, log time s)
+        self._stats = _Counters(_max_match_error(max_match_error))
+        self._frames: list[tuple[float, BallSample, float]] = []  # (replay offset s, sample, log time s)
         self._next = 0
         self._t0: float | None = None
 
@@ -222,15 +235,13 @@ class FicTracReplay(LocomotionSource):
             if not line.strip():
                 continue
             if k == len(lines) - 1 and not data.endswith(b"\n"):
-                self._stats.counts["lines"] += 1
-                self._stats.counts["malformed"] += 1
-                self._stats.last_error = f"the last line of {self.path.name} is cut short (no end of line)"
+                self._stats.malformed(f"the last line of {self.path.name} is cut short (no end of line)")
                 continue
-            frame = self._stats.parse(line)
-            if frame is not None:
-                frames.append(frame)
-        times = replay_times([f.timestamp_ms for f in frames])
-        self._frames = [(float(t) / self.speed, f, float(t)) for t, f in zip(times, frames, strict=True)]
+            parsed = self._stats.parse(line, 0.0)
+            if parsed is not None:
+                frames.append(parsed)
+        times = replay_times([f.timestamp_ms for f, _ in frames])
+        self._frames = [(float(t) / self.speed, s, float(t)) for t, (_, s) in zip(times, frames, strict=True)]
         self._t0 = self.clock.now()
 
     def read(self) -> list[BallSample]:
@@ -240,9 +251,8 @@ class FicTracReplay(LocomotionSource):
         out = []
         frames = self._frames
         while self._next < len(frames) and frames[self._next][0] <= elapsed:
-            offset, frame, t_log = frames[self._next]
-            sample = to_sample(frame, self._t0 + offset, self.max_match_error)
-            out.append(replace(sample, t_device=t_log))  # the log's own time, repaired, never backwards
+            offset, sample, t_log = frames[self._next]
+            out.append(replace(sample, t=self._t0 + offset, t_device=t_log))  # the log's own time, repaired
             self._next += 1
         return out
 

@@ -8,14 +8,13 @@ same monotonic clock, so the samples' times are the frame loop's.
 
 from __future__ import annotations
 
-import inspect
 import threading
 import time
 from typing import Any
 
 from antarium.core.childproc import ChildProcess, connection_from_arg
 from antarium.core.clock import Clock, MonotonicClock
-from antarium.locomotion import BallSample, BufferedSource
+from antarium.locomotion import BallSample, BufferedSource, check_keywords
 
 
 class ServosphereProcess(BufferedSource):
@@ -26,7 +25,7 @@ class ServosphereProcess(BufferedSource):
         from antarium.locomotion.servosphere.source import ServosphereSource
 
         super().__init__()
-        inspect.signature(ServosphereSource).bind(**options)  # TypeError naming an unknown option, now
+        check_keywords("servosphere source", ServosphereSource, options)  # TypeError naming an unknown option, now
         if clock is not None and not isinstance(clock, MonotonicClock):
             raise ValueError(f"the servosphere's own process runs on the monotonic clock, got {type(clock).__name__}")
         self.options, self.start_timeout_s, self.batch_s = options, float(start_timeout_s), float(batch_s)

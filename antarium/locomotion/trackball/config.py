@@ -15,8 +15,9 @@
     counts_per_mm = [47.24, 47.24]   # sensor x, sensor y (written by `antarium trackball calibrate`)
     signs = [1, 1]                   # +1 or -1 per sensor axis (mounting)
 
-A missing key takes its default; an unknown key or a bad value raises `TrackballConfigError` naming it.
-`write_section` replaces `[trackball]` in a rig file and keeps every other section's values.
+A missing key takes its default (`ball_radius`: in a rig file, its `[loop] ball_radius_m` if it sets one); an
+unknown key or a bad value raises `TrackballConfigError` naming it. `write_section` replaces `[trackball]` in a
+rig file and keeps every other section's values.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from antarium.config import trackball_table
+from antarium.core.ball import BALL_RADIUS_M
 from antarium.locomotion.trackball.kinematics import BallSolver, SensorPlacement
 from antarium.locomotion.trackball.protocol import N_SENSORS
 
@@ -58,7 +61,7 @@ class SensorConfig:
 class TrackballConfig:
     vendor_id: int = 0x1209
     product_id: int = 0x0001
-    ball_radius: float = 0.05
+    ball_radius: float = BALL_RADIUS_M
     sample_rate_hz: int = 1000
     resolution_cpi: int = DEFAULT_CPI
     slip_floor_mm: float = 0.1
@@ -173,12 +176,15 @@ def _read_toml(path: Path) -> dict[str, Any]:
 
 
 def load(source: str | Path | dict[str, Any] | TrackballConfig | None) -> TrackballConfig:
-    """A `TrackballConfig` from a rig file path, a `[trackball]` table, a config, or None (defaults)."""
+    """A `TrackballConfig` from a rig file path, a `[trackball]` table, a config, or None (defaults).
+
+    A rig file's `[trackball]` without `ball_radius` takes the file's `[loop] ball_radius_m` (one ball, one radius).
+    """
     if source is None or isinstance(source, TrackballConfig):
         return source or TrackballConfig()
     if isinstance(source, dict):
         return parse_section(source)
-    return parse_section(_read_toml(Path(source)).get("trackball"))
+    return parse_section(trackball_table(_read_toml(Path(source))))
 
 
 def write_section(path: str | Path, config: TrackballConfig) -> None:

@@ -69,6 +69,7 @@ class UsbTrackball(ReaderSource):
              "unplugs", "connects", "dropped_samples", "publish_errors"), 0)
         self.quality_avg = 1.0
         self._prev_seq: int | None = None
+        self._prev_t_us = 0  # the device time of report `_prev_seq` (µs)
         self._last_report = 0.0
         self.last_error = ""
 
@@ -220,6 +221,13 @@ class UsbTrackball(ReaderSource):
         self._last_report = time.monotonic()  # probe again only after another silent period
         return None
 
+    def _restarted(self, gap: int, t_us: int) -> bool:
+        """A sequence jump of `gap` reports to a report at device time `t_us` (µs) is a restart of the device, not
+        lost reports: its clock went back, or it skipped more than twice the sample periods its clock says passed
+        (START resets seq and t_us to 0, so a restart late in a run looks like a jump forward in seq)."""
+        elapsed_us = t_us - self._prev_t_us
+        return elapsed_us < 0 or gap > 2e-6 * elapsed_us * self.config.sample_rate_hz
+
     def _handle(self, data: memoryview, t_arrival: float) -> None:
         counters = self.counters
         try:
@@ -231,12 +239,12 @@ class UsbTrackball(ReaderSource):
             counters["bad_reports"] += 1
             return
         gap = P.seq_gap(self._prev_seq, report.seq)
-        if gap >= 1 << 31:  # a sequence that went backwards: the device restarted
+        if self._prev_seq is not None and self._restarted(gap, report.t_us):
             counters["seq_resets"] += 1
         elif gap:
             counters["gaps"] += 1
             counters["lost_reports"] += gap
-        self._prev_seq = report.seq
+        self._prev_seq, self._prev_t_us = report.seq, report.t_us
         if report.overflow[0] or report.overflow[1]:
             counters["overflows"] += 1
         raw = self._raw
