@@ -240,6 +240,8 @@ BAD_SPECS = [
      "eye.sigma_deg, eye.fine_per_col, eye.fine_elevation_deg, eye.neighbours, eye.gamma, eye.row_gain, "
      "learn_spacing_m, got 5"),
     ("models", ANTCAR + "amplitude_deg = nan\n", "models.antcar.amplitude_deg: expected a finite number, got nan"),
+    ("models", ANTCAR + "amplitude_deg = " + "9" * 400 + "\n",  # TOML integers may be too large for a float
+     "models.antcar.amplitude_deg: expected a finite number, got " + "9" * 57 + "..."),
     ("models", ANTCAR + 'amplitude_deg = "big"\n',
      "models.antcar.amplitude_deg: expected a finite number, got 'big'"),
     ("models", ANTCAR + "amplitude_deg = [10, 10.0]\n",

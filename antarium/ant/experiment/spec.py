@@ -125,7 +125,8 @@ class Check:
         raise NotImplementedError
 
     def fail(self, key: str, value):
-        raise SpecError(f"{key}: expected {self.what}, got {value!r}")
+        shown = repr(value)
+        raise SpecError(f"{key}: expected {self.what}, got {shown if len(shown) <= 60 else shown[:57] + '...'}")
 
 
 def _is_number(value) -> bool:
@@ -159,9 +160,13 @@ class Number(Check):
         return "a finite number" + (f" > {self.gt:g}" if self.gt is not None else "")
 
     def __call__(self, key: str, value) -> float:
-        if not _is_number(value) or not math.isfinite(value) or self.gt is not None and not value > self.gt:
+        try:
+            number = float(value) if _is_number(value) else math.nan
+        except OverflowError:  # an integer too large for a float
+            number = math.inf
+        if not math.isfinite(number) or self.gt is not None and not number > self.gt:
             self.fail(key, value)
-        return float(value)
+        return number
 
 
 @dataclass(frozen=True)
