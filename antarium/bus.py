@@ -28,10 +28,23 @@ KEY_ROOT = "antarium"
 
 
 def check_key_chunk(value: str, what: str) -> str:
-    """`value` if it is one key chunk (non-empty, without '/', wildcards or spaces), else ValueError naming `what`."""
-    if not isinstance(value, str) or not value or any(c in value for c in "/*?$# "):
-        raise ValueError(f"{what} must be a non-empty key chunk without '/', '*', '?', '$', '#', ' ', got {value!r}")
+    """`value` if it is one key chunk (non-empty, without '/', wildcards, spaces or control characters, not starting
+    with '@', which zenoh reads as a verbatim chunk that no wildcard matches), else ValueError naming `what`."""
+    if not isinstance(value, str) or not value or value.startswith("@") or any(
+            c in "/*?$# " or ord(c) < 32 for c in value):
+        raise ValueError(f"{what} must be a non-empty key chunk without '/', '*', '?', '$', '#', ' ' or control "
+                         f"characters, not starting with '@', got {value!r}")
     return value
+
+
+def json_object(payload: bytes) -> dict | None:
+    """A bus message's JSON object, or None for one that is not UTF-8 JSON or not an object (a subscriber skips
+    it: a malformed message never reaches a callback)."""
+    try:
+        value = json.loads(payload)
+    except ValueError:  # UnicodeDecodeError included
+        return None
+    return value if isinstance(value, dict) else None
 
 
 def check_rig_name(rig: str) -> str:

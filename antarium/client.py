@@ -291,8 +291,12 @@ class Rig:
         """Call `callback({"t", "kind", "data"})` for every server event."""
         if self._session is None:
             raise RigError("the rig is not connected")
-        sub = self._session.declare_subscriber(
-            bus.events_key(self.name), lambda s: callback(json.loads(s.payload.to_bytes())))
+        def handler(sample) -> None:
+            event = bus.json_object(sample.payload.to_bytes())
+            if event is not None:  # a malformed message is skipped, never handed on
+                callback(event)
+
+        sub = self._session.declare_subscriber(bus.events_key(self.name), handler)
         self._subs.append(sub)
         return sub
 

@@ -18,6 +18,40 @@ def test_keys_share_the_rig_prefix():
         bus.command_key("rig1", "cmd/fly")
 
 
+@pytest.mark.parametrize("name", ["@rig", "rig\x00", "tab\there", "a/b", "r*", ""])
+def test_a_rig_name_that_wildcards_would_not_match_is_refused(name):
+    """zenoh reads a chunk starting with '@' verbatim: `antarium/**` (access rules, monitors) would not match it."""
+    with pytest.raises(ValueError, match="rig name must be a non-empty key chunk without"):
+        bus.check_rig_name(name)
+
+
+def test_a_bus_message_that_is_not_a_json_object_is_skipped():
+    assert bus.json_object(b'{"kind": "x", "data": {}}') == {"kind": "x", "data": {}}
+    for payload in (b"\xff\xfe", b"{not json", b"[1, 2]", b'"text"', b"3"):
+        assert bus.json_object(payload) is None
+
+
+def test_malformed_events_never_reach_a_scripts_callback():
+    from antarium.client import Rig
+    from antarium.config import resolve
+    from antarium.server import Server
+
+    config = resolve({"rig": {"name": "tev"}, "bus": {"listen": [bus.free_tcp_endpoint()]}})
+    server = Server(config, renderer_factory=None, link=False).start_thread()
+    got = []
+    try:
+        with Rig("tev", config=config, timeout_s=10.0) as rig:
+            rig.on_event(got.append)
+            deadline = time.monotonic() + 10
+            while sum(e == {"kind": "forged"} for e in got) < 3 and time.monotonic() < deadline:  # surely reached
+                for payload in (b"\xff", b"[1, 2]", b"{bad", json.dumps({"kind": "forged"}).encode()):
+                    rig.session.put(bus.events_key("tev"), payload)
+                time.sleep(0.05)
+    finally:
+        server.stop()
+    assert sum(e == {"kind": "forged"} for e in got) >= 3 and all(isinstance(e, dict) for e in got)
+
+
 def test_an_unknown_command_is_a_rig_error_before_anything_is_sent():
     from antarium.client import Rig, RigError
 

@@ -273,3 +273,49 @@ def test_idle_work_runs_between_frames_only_with_time_to_spare_one_call_a_frame(
     failing = loop.when_idle(lambda: 1 / 0)  # an error goes to the caller, never into the loop
     loop.step()
     assert isinstance(failing.exception(0), ZeroDivisionError)
+
+
+class FlakyPolariserLink:
+    """The virtual link whose next POLARISER datagram fails to go out (a full send buffer), at the lowest seam."""
+
+    @staticmethod
+    def make(clock):
+        from antarium.firmware_proto.virtual import VirtualLink
+
+        class Link(VirtualLink):
+            fail_next = False
+
+            def _transmit(self, data):
+                if self.fail_next and bytes(data)[2] == 0x02 and len(bytes(data)) == 994:  # a POLARISER datagram
+                    self.fail_next = False
+                    return False
+                return super()._transmit(data)
+
+        return Link(clock=clock)
+
+
+class StillRenderer(SlowRenderer):
+    def polariser_angles(self):
+        return np.zeros((55, 9))
+
+
+def test_a_polariser_update_that_failed_to_go_out_is_sent_again():
+    clock = SimulatedClock()
+    link = FlakyPolariserLink.make(clock)
+    loop = make_loop(clock, renderer=StillRenderer(clock, 0.0), link=link)
+    loop.run(frames=3)
+    link.fail_next = True
+    loop.set_polarisers(np.full((55, 9), math.pi / 4))  # held: nothing else would send them again
+    loop.run(frames=400)  # 2.1 s: the actuators have turned there
+    assert link.counters["datagrams_failed"] == 1
+    assert set(np.ravel(link.telemetry(wait_s=0.01)["polariser_codes"])) == {16384}  # pi/4 on the dome
+
+
+def test_polariser_angles_a_hair_below_zero_are_held_at_zero_and_frames_go_on():
+    clock = SimulatedClock()
+    link = FlakyPolariserLink.make(clock)
+    loop = make_loop(clock, renderer=StillRenderer(clock, 0.0), link=link)
+    loop.set_polarisers(np.full((55, 9), -1e-20))  # np.mod(-1e-20, pi) is pi itself, which no code encodes
+    assert np.all(loop.polariser_override == 0.0)
+    loop.run(frames=5)
+    assert loop.frame == 5 and not loop.faults

@@ -5,7 +5,6 @@ Zenoh callbacks (their own threads) store under one lock; the web server takes w
 
 from __future__ import annotations
 
-import json
 import threading
 import time
 from typing import Any
@@ -87,9 +86,8 @@ class Hub:
             del self.stats[:-600]
 
     def _on_status(self, sample) -> None:
-        try:
-            status = json.loads(sample.payload.to_bytes())
-        except ValueError:
+        status = bus.json_object(sample.payload.to_bytes())
+        if status is None:
             return
         with self._lock:
             self.status = status
@@ -101,14 +99,13 @@ class Hub:
                 self.trial = {"name": name, "metadata": None, "t_start": None}
 
     def _on_event(self, sample) -> None:
-        try:
-            event = json.loads(sample.payload.to_bytes())
-        except ValueError:
+        event = bus.json_object(sample.payload.to_bytes())
+        if event is None:
             return
+        data = event.get("data") if isinstance(event.get("data"), dict) else {}
         with self._lock:
             if event.get("kind") == "trial_started":
-                self.trial = {"name": event["data"].get("name"), "metadata": event["data"].get("metadata"),
-                              "t_start": event.get("t")}
+                self.trial = {"name": data.get("name"), "metadata": data.get("metadata"), "t_start": event.get("t")}
             elif event.get("kind") == "trial_stopped":
                 self.trial = None
             self.events.append(event)

@@ -277,6 +277,7 @@ class FrameLoop:
             if angles.shape != (55, 9) or not np.all(np.isfinite(angles)):
                 raise ValueError(f"polariser angles must be (55, 9) finite radians, got shape {angles.shape}")
             angles = np.mod(angles, math.pi)
+            angles[angles >= math.pi] = 0.0  # a tiny negative angle's remainder rounds to pi itself
         self.polariser_override = angles
         self._polarisers_dirty = True
         self.event("polarisers", mode="sky" if angles is None else "fixed")
@@ -396,8 +397,14 @@ class FrameLoop:
             self.link_budget.deferred += 1
             return False
         angles = self.polariser_override if override else self.renderer.polariser_angles()
-        sent = self.link.send_polarisers(angles)
-        self._polarisers_dirty = False
+        failed = self.link.counters["datagrams_failed"]
+        try:
+            sent = self.link.send_polarisers(angles)
+        except ValueError as exc:  # angles the link refuses: counted, the dome keeps its polarisers, frames go on
+            self.fault("link", self.clock.now(), exc)
+            sent = False
+        # a datagram that failed to go out is sent again with the next frame (unchanged angles are not)
+        self._polarisers_dirty = self.link.counters["datagrams_failed"] > failed
         if not override:
             self._polariser_heading = pose.heading
         return sent
