@@ -7,6 +7,7 @@ names can change), and handed to trimesh as UTF-8.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 TEXT_SUFFIXES = (".obj", ".mtl")
@@ -66,11 +67,30 @@ def read_mtl(text: str) -> tuple[str, dict[str, tuple[float, float, float]]]:
     return "\n".join(out) + "\n", kd
 
 
+def check_textures(mtl_text: str, get) -> None:
+    """MeshTextError naming the first `map_Kd` texture of an MTL text that `get` (name -> bytes) cannot give
+    as a whole image (trimesh would draw its material in Kd instead)."""
+    from PIL import Image
+
+    material = None
+    for line in mtl_text.splitlines():
+        words = line.split()
+        if len(words) >= 2 and words[0] == "newmtl":
+            material = " ".join(words[1:])
+        elif len(words) >= 2 and words[0] == "map_Kd":
+            try:
+                with Image.open(io.BytesIO(get(words[-1]))) as image:
+                    image.load()
+            except Exception as exc:  # missing, truncated or not an image: PIL and the resolver raise many types
+                raise MeshTextError(f"material {material!r}: cannot read its texture {words[-1]!r} "
+                                    f"({type(exc).__name__}); allowed: an image file next to the MTL") from exc
+
+
 def load_text_mesh(path: Path):
     """trimesh.Scene of an OBJ file, with its MTL files decoded the same way (resolved next to it) and read by
-    `read_mtl`; the Kd of every material that states one in `scene.metadata["mtl_kd"]`."""
-    import io
-
+    `read_mtl` (MeshTextError naming the MTL file for a colour it refuses or a `map_Kd` texture it cannot read);
+    each `o` object a geometry of its own (one per material where the file has several: `name_material`); the
+    Kd of every material that states one in `scene.metadata["mtl_kd"]`."""
     import trimesh
 
     kd: dict[str, tuple[float, float, float]] = {}
@@ -83,7 +103,11 @@ def load_text_mesh(path: Path):
                 try:
                     text = decode_mesh_text(data, name)
                     if Path(name).suffix.lower() == ".mtl":
-                        text, stated = read_mtl(text)
+                        try:
+                            text, stated = read_mtl(text)
+                            check_textures(text, super().get)
+                        except MeshTextError as exc:
+                            raise MeshTextError(f"{path.parent / name}: {exc}") from exc
                         kd.update(stated)
                 except MeshTextError as exc:
                     refused.append(exc)
@@ -93,7 +117,7 @@ def load_text_mesh(path: Path):
 
     text = decode_mesh_text(path.read_bytes(), str(path))
     scene = trimesh.load(io.BytesIO(text.encode("utf-8")), file_type=path.suffix.lower().lstrip("."),
-                         resolver=_Utf8Resolver(str(path)), force="scene", process=False)
+                         resolver=_Utf8Resolver(str(path)), force="scene", process=False, split_objects=True)
     if refused:
         raise refused[0]
     scene.metadata["mtl_kd"] = kd

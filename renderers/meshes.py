@@ -23,9 +23,18 @@ DEFAULT_GREY = 0.5
 GLTF_TO_WORLD = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
 
 
+def texture_rgb(image) -> np.ndarray:
+    """(H, W, 3) sRGB in [0, 1] of a PIL image, 16-bit greyscale (modes I;16*, I) at its full depth."""
+    if image.mode.startswith("I"):
+        grey = np.asarray(image, dtype=np.float64) / 65535.0
+        return np.repeat(grey[..., None], 3, axis=2)
+    return np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
+
+
 def _colours_and_texture(geom, name: str, mtl_kd: dict, gltf: bool):
-    """(V, 3) linear G, B, UV vertex colours, and (uv, texture) or (None, None). gltf: the colour factor and the
-    vertex colours are linear (else sRGB). mtl_kd: an OBJ's {material name: Kd}: the colour of a material drawn
+    """(V, 3) linear G, B, UV vertex colours, and (uv, texture) or (None, None); a texture carries the colour
+    factor (multiplied in linear RGB), its vertices are white. gltf: the colour factor and the vertex colours
+    are linear (else sRGB). mtl_kd: an OBJ's {material name: Kd}: the colour of a material drawn
     without a texture (with one, the texture alone gives the colour, as Blender's importer and the photogrammetry
     programs that write such files mean it; the MTL specification would multiply it by Kd, often a placeholder
     such as 0.8 there)."""
@@ -41,14 +50,16 @@ def _colours_and_texture(geom, name: str, mtl_kd: dict, gltf: bool):
             factor = mtl_kd.get(getattr(material, "name", None), factor)
         base = np.ones(3) if factor is None else np.asarray(factor, dtype=np.float64)[:3] / (
             255.0 if np.asarray(factor).dtype.kind in "iu" else 1.0)
-        colours = np.repeat(rgb_to_gbu(base if gltf else srgb_to_linear(base))[None, :], n, axis=0)
-        if textured:
-            img = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
-            if max(img.shape[:2]) > MAX_TEXTURE_SIDE:
-                raise ValueError(f"texture of object {name!r} is {img.shape[1]}x{img.shape[0]} pixels; the largest "
-                                 f"side allowed is {MAX_TEXTURE_SIDE}")
-            return colours, np.asarray(visual.uv, dtype=np.float32), rgb_to_gbu(srgb_to_linear(img))
-        return colours, None, None
+        base = base if gltf else srgb_to_linear(base)
+        if not textured:
+            return np.repeat(rgb_to_gbu(base)[None, :], n, axis=0), None, None
+        img = texture_rgb(image)
+        if max(img.shape[:2]) > MAX_TEXTURE_SIDE:
+            raise ValueError(f"texture of object {name!r} is {img.shape[1]}x{img.shape[0]} pixels; the largest "
+                             f"side allowed is {MAX_TEXTURE_SIDE}")
+        # the factor goes into the texture in linear RGB: the shader multiplies texture and vertex colour (white)
+        texture = rgb_to_gbu(srgb_to_linear(img) * base)
+        return np.ones((n, 3), np.float32), np.asarray(visual.uv, dtype=np.float32), texture
     if kind == "vertex" or kind == "face":
         rgb = np.asarray(visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
         return rgb_to_gbu(rgb if gltf else srgb_to_linear(rgb)), None, None
@@ -81,6 +92,9 @@ def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
         if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
             continue
         name = str(node)
+        if getattr(geom.visual, "kind", None) == "face":  # each face its own vertices: keeps its colour whole
+            geom = geom.copy()
+            geom.unmerge_vertices()
         try:
             colours, uv, texture = _colours_and_texture(geom, name, loaded.metadata.get("mtl_kd", {}), gltf)
             t = np.asarray(transform, dtype=np.float64)

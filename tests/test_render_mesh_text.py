@@ -54,22 +54,71 @@ def test_each_material_gets_its_mtl_colour(tmp_path):
     assert np.allclose(colours, expected, atol=1e-6)
 
 
-def test_a_textured_material_takes_its_texture_alone(tmp_path):
-    from PIL import Image
+QUAD = ("mtllib t.mtl\nv 0 1 0\nv 1 1 0\nv 1 1 1\nv 0 1 1\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+        "usemtl mat\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
 
+
+def textured_quad(tmp_path, image, mtl="newmtl mat\nKd 0.8 0.8 0.8\nmap_Kd tex.png\n"):
+    """The one object of a 1 m textured OBJ quad whose material is `mtl`, its texture `image` (PIL) or bytes."""
     from antarium.renderers.meshes import load_mesh_objects
 
-    Image.fromarray(np.full((4, 4, 3), 200, np.uint8)).save(tmp_path / "bark.png")
-    (tmp_path / "t.mtl").write_text("newmtl bark\nKd 0.8 0.8 0.8\nmap_Kd bark.png\n")
-    (tmp_path / "t.obj").write_text("mtllib t.mtl\nv 0 1 0\nv 1 1 0\nv 0 1 1\nvt 0 0\nvt 1 0\nvt 0 1\n"
-                                    "usemtl bark\nf 1/1 2/2 3/3\n")
+    if isinstance(image, bytes):
+        (tmp_path / "tex.png").write_bytes(image)
+    else:
+        image.save(tmp_path / "tex.png")
+    (tmp_path / "t.mtl").write_text(mtl)
+    (tmp_path / "t.obj").write_text(QUAD)
     (obj,) = load_mesh_objects(tmp_path / "t.obj").values()
-    assert obj.mesh.texture is not None and np.allclose(obj.mesh.colours, [1.0, 1.0, 0.25])  # Kd not applied
+    return obj
+
+
+def test_a_textured_material_takes_its_texture_alone(tmp_path):
+    """Kd 0.8 is not applied; the texture (sRGB 200 -> linear 0.578) gives the colour, the vertices are white.
+    Before 2026-11-27 vertices and texture both carried UV = 0.25 B: a white texture drew UV 0.0625."""
+    from PIL import Image
+
+    obj = textured_quad(tmp_path, Image.fromarray(np.full((4, 4, 3), 200, np.uint8)))
+    np.testing.assert_allclose(obj.mesh.colours, 1.0)
+    np.testing.assert_allclose(obj.mesh.texture[0, 0], [0.5776, 0.5776, 0.1444], atol=1e-4)
+
+
+def test_a_16_bit_grey_texture_keeps_its_level(tmp_path):
+    """A 16-bit greyscale texture at 32896 (sRGB 0.502) is linear 0.216, as its 8-bit 128; it was clipped white."""
+    from PIL import Image
+
+    obj = textured_quad(tmp_path, Image.fromarray(np.full((4, 4), 32896, np.uint16)))
+    np.testing.assert_allclose(obj.mesh.texture[0, 0], [0.2159, 0.2159, 0.0540], atol=1e-4)
+
+
+@pytest.mark.parametrize("data, mtl", [(b"\x89PNG truncated", "newmtl mat\nmap_Kd tex.png\n"),
+                                       (b"", "newmtl mat\nmap_Kd -s 1 1 1 nothere.png\n")])
+def test_an_unreadable_texture_is_refused_by_name(tmp_path, data, mtl):
+    """A missing, truncated or non-image `map_Kd` refuses the mesh; it was dropped (the mesh drawn in Kd)."""
+    texture = mtl.split()[-1]
+    with pytest.raises(ValueError, match=rf"t\.mtl: material 'mat': cannot read its texture '{texture}'") as info:
+        textured_quad(tmp_path, data, mtl)
+    assert "\n" not in str(info.value)
+
+
+def test_obj_objects_load_each_by_its_name(tmp_path):
+    """`o tree` and `o rock` are two objects (they were one, `tree`); with several materials in the file each
+    material of an object is its own, named object_material."""
+    from antarium.renderers.meshes import load_mesh_objects
+
+    (tmp_path / "two.mtl").write_text("newmtl leaf\nKd 0.1 0.7 0.2\nnewmtl bark\nKd 0.4 0.25 0.1\n")
+    body = "v 0 0 0\nv 1 0 0\nv 0 0 3\nv 1 0 3\no tree\nf 1 2 3\nf 2 4 3\no rock\nf 1 2 4\n"
+    (tmp_path / "plain.obj").write_text(body)
+    (tmp_path / "two.obj").write_text("mtllib two.mtl\n" + body.replace("f 2 4", "usemtl bark\nf 2 4")
+                                      .replace("o tree\n", "o tree\nusemtl leaf\n"))
+    plain = load_mesh_objects(tmp_path / "plain.obj")
+    assert {k: o.mesh.n_triangles for k, o in plain.items()} == {"tree": 2, "rock": 1}
+    assert sorted(load_mesh_objects(tmp_path / "two.obj")) == ["rock_bark", "tree_bark", "tree_leaf"]
 
 
 def test_a_kd_that_is_not_three_numbers_is_named(tmp_path):
     (tmp_path / "bad.mtl").write_text("newmtl leaf\nKd green\n")
     (tmp_path / "bad.obj").write_text("mtllib bad.mtl\nusemtl leaf\n" + TRIANGLE.decode())
-    with pytest.raises(ValueError, match=r"material 'leaf': 'Kd green'; allowed: Kd r g b, or Kd r \(grey\)") as info:
+    with pytest.raises(ValueError,
+                       match=r"bad\.mtl: material 'leaf': 'Kd green'; allowed: Kd r g b, or Kd r \(grey\)") as info:
         build_scene(str(tmp_path / "bad.obj"))
     assert "\n" not in str(info.value)

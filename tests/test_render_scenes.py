@@ -202,6 +202,44 @@ def test_gltf_colours_are_linear_and_other_formats_srgb(tmp_path):
     np.testing.assert_allclose(obj.mesh.colours[0], rgb_to_gbu(np.full(3, level)), atol=1e-6)
 
 
+def test_a_textured_quad_draws_as_its_untextured_twin(renderer, tmp_path):
+    """A white texture under glTF base colour factor 128 (linear 0.502) draws G, B, UV = 0.502, 0.502, 0.1255, as
+    the factor alone does. Before 2026-11-27 the factor's and the texture's UV = 0.25 B multiplied (UV 0.031)."""
+    import trimesh
+    from PIL import Image
+
+    from antarium.renderers.meshes import GLTF_TO_WORLD, load_mesh_objects
+
+    quad = dict(vertices=[[-10, -10, 0], [10, -10, 0], [10, 10, 0], [-10, 10, 0]], faces=[[0, 1, 2], [0, 2, 3]])
+    white = Image.fromarray(np.full((8, 8, 3), 255, np.uint8))
+    for texture in (None, white):
+        material = trimesh.visual.material.PBRMaterial(baseColorTexture=texture, baseColorFactor=[128, 128, 128, 255])
+        m = trimesh.Trimesh(**quad, process=False, visual=trimesh.visual.TextureVisuals(
+            uv=[[0, 0], [1, 0], [1, 1], [0, 1]], material=material))
+        m.apply_transform(GLTF_TO_WORLD.T).export(tmp_path / "quad.glb")
+        scene = build_scene("uniform")
+        scene.far = [Uniform(0.0)]
+        scene.objects = load_mesh_objects(tmp_path / "quad.glb")
+        scene.__post_init__()
+        renderer.set_scene(scene)
+        px = renderer.cube_map(Pose(0, 0, 0.5, 0.0)).reshape(-1, 4)
+        np.testing.assert_allclose(px[px[:, 0] > 0.1, :3].mean(0), [0.502, 0.502, 0.1255], atol=2e-3,
+                                   err_msg=str(texture))
+
+
+def test_ply_face_colours_stay_on_their_faces(tmp_path):
+    """A black and a white face sharing an edge stay black and white; their shared vertices blended to G 0.212."""
+    import trimesh
+
+    from antarium.renderers.meshes import load_mesh_objects
+
+    m = trimesh.Trimesh(vertices=[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], faces=[[0, 1, 2], [0, 2, 3]],
+                        face_colors=[[0, 0, 0, 255], [255, 255, 255, 255]], process=False)
+    m.export(tmp_path / "faces.ply")
+    (obj,) = load_mesh_objects(tmp_path / "faces.ply").values()
+    assert obj.mesh.colours[obj.mesh.faces, 0].tolist() == [[0.0] * 3, [1.0] * 3]
+
+
 def test_textured_mesh(renderer, dome, tmp_path):
     import trimesh
     from PIL import Image
