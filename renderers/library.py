@@ -15,7 +15,7 @@ from pathlib import Path
 
 from . import stimuli
 from .panorama import IMAGE_SUFFIXES, Panorama
-from .scene import Scene
+from .scene import Scene, check_number
 from .sky import Sky
 
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl")
@@ -26,13 +26,15 @@ def _deg(params: dict, key: str, default=None, suffix: str = "_deg"):
     value = params.pop(key + suffix, None)
     if value is None:
         return default
-    try:
-        value = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{key}{suffix} must be a number of degrees, got {repr(value)[:60]}") from None
-    if not math.isfinite(value):
-        raise ValueError(f"{key}{suffix} must be finite, got {value!r}")
-    return math.radians(value)
+    return math.radians(check_number(key + suffix, value))
+
+
+def _path(params: dict, key: str) -> str:
+    """Pop the file path `key` from params (a string)."""
+    value = params.pop(key)
+    if not isinstance(value, (str, Path)):
+        raise ValueError(f"{key} must be a file path (a string), got {repr(value)[:60]}")
+    return str(value)
 
 
 def _sky(params: dict) -> Sky:
@@ -57,6 +59,8 @@ def _horizon(p):
 
 
 def _bar(d: dict) -> stimuli.Bar:
+    if not isinstance(d, dict):
+        raise ValueError(f"each of bars must be a table of bar parameters, got {repr(d)[:60]}")
     d = dict(d)
     bar = stimuli.Bar(azimuth=_deg(d, "azimuth", 0.0), width=_deg(d, "width", math.radians(10)),
                       bottom=_deg(d, "bottom", -math.pi / 2), top=_deg(d, "top", math.pi / 2))
@@ -98,8 +102,10 @@ def _sky_scene(p):
 def _panorama(p):
     if "path" not in p:
         raise ValueError("a panorama scene needs 'path' (an equirectangular image)")
-    path = p.pop("path")
-    kw = {k: p.pop(k) for k in ("uv", "exposure", "uv_ratio") if k in p}
+    path = _path(p, "path")
+    kw = {k: p.pop(k) for k in ("exposure", "uv_ratio") if k in p}
+    if "uv" in p:
+        kw["uv"] = _path(p, "uv")
     return Scene(far=[_sky(p), Panorama(path, **kw)], name=Path(path).stem)
 
 
@@ -108,17 +114,20 @@ def _mesh_world(p):
 
     if "path" not in p:
         raise ValueError("a mesh scene needs 'path' (OBJ, PLY, GLB/GLTF or STL)")
-    path = p.pop("path")
+    path = _path(p, "path")
     far = [_sky(p)]
     if "panorama" in p:
-        far.append(Panorama(p.pop("panorama")))
+        far.append(Panorama(_path(p, "panorama")))
     return Scene(far=far, objects=load_mesh_objects(path), name=Path(path).stem)
 
 
 def _habitat(p):
     from .habitat import habitat_scene
 
-    kw = {k: p.pop(k) for k in ("seed", "size", "n_trees", "n_bushes", "n_tussocks", "n_stones") if k in p}
+    kw = {k: check_number(k, p.pop(k), 0, integer=True)
+          for k in ("seed", "n_trees", "n_bushes", "n_tussocks", "n_stones") if k in p}
+    if "size" in p:
+        kw["size"] = check_number("size (m)", p.pop("size"), 20.0)
     return habitat_scene(**kw)
 
 
@@ -158,6 +167,9 @@ def build_scene(spec) -> Scene:
     builder = SCENES.get(name)
     if builder is None:
         suffix = Path(name).suffix.lower()
+        if suffix in (*MESH_SUFFIXES, *IMAGE_SUFFIXES) and "path" in params:
+            raise ValueError(f"scene {name!r} is a file already; give either it or 'path' "
+                             f"({repr(params['path'])[:60]}), not both")
         if suffix in MESH_SUFFIXES:
             builder, params["path"] = _mesh_world, name
         elif suffix in IMAGE_SUFFIXES:
@@ -173,7 +185,7 @@ def build_scene(spec) -> Scene:
     if params:
         raise ValueError(f"unknown parameter(s) for scene {name!r}: {', '.join(sorted(params))}")
     if "rotation_deg" in edits:
-        scene.rotation = math.radians(float(edits.pop("rotation_deg")))
+        scene.rotation = _deg(edits, "rotation")
     for key, value in edits.items():
         setattr(scene, key, value)
     scene.__post_init__()

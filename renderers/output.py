@@ -14,6 +14,8 @@ import numpy as np
 
 from antarium.geometry.constants import GB_PER_PANEL, N_PANELS, PIXELS_PER_PANEL
 
+from .scene import check_channel_gain, check_contrast
+
 FULL = 65535.0
 
 
@@ -38,16 +40,20 @@ class FrameConverter:
         self.configure(brightness=brightness)
 
     def configure(self, brightness=None, channel_gain=None, swap_green_blue=None, contrast=None) -> None:
+        if brightness is not None and not (np.isfinite(brightness) and 0 <= brightness <= 1):
+            raise ValueError(f"brightness must be in [0, 1], got {brightness!r}")
+        if channel_gain is not None:
+            channel_gain = check_channel_gain(channel_gain)
+        if contrast is not None:
+            contrast = check_contrast(contrast)
         if brightness is not None:
-            if not (np.isfinite(brightness) and 0 <= brightness <= 1):
-                raise ValueError(f"brightness must be in [0, 1], got {brightness!r}")
             self.brightness = float(brightness)
         if channel_gain is not None:
-            self.channel_gain = tuple(float(g) for g in channel_gain)
+            self.channel_gain = channel_gain
         if swap_green_blue is not None:
             self.swap_green_blue = bool(swap_green_blue)
         if contrast is not None:
-            self.contrast = float(contrast)
+            self.contrast = contrast
         self.version += 1
         g = FULL * self._led_gain * self.brightness
         cg = self.channel_gain

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .channels import DEFAULT_UV_RATIO, rgb_to_gbu, srgb_to_linear
+from .scene import check_number
 
 #: Largest accepted image side in pixels (OpenCV and GL textures both handle it; larger is refused).
 MAX_IMAGE_SIDE = 16384
@@ -115,8 +116,9 @@ class Panorama:
     _gbua: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
-        if not (np.isfinite(self.exposure) and self.exposure > 0):
-            raise ValueError(f"panorama exposure must be a positive number, got {self.exposure!r}")
+        if check_number("panorama exposure", self.exposure, 0.0) == 0:
+            raise ValueError(f"panorama exposure must be > 0, got {self.exposure!r}")
+        self.uv_ratio = check_number("panorama uv_ratio", self.uv_ratio, 0.0)
         if isinstance(self.source, (str, Path)):
             img, is_float = read_image(self.source)
         else:
@@ -142,6 +144,10 @@ class Panorama:
             uv = uv_img.reshape(h, w, -1)[:, :, 0]
         gbu = rgb_to_gbu(rgb, uv, self.uv_ratio)
         alpha = img[:, :, 3:4] if img.shape[2] == 4 else np.ones((h, w, 1))
+        if not (alpha.min() >= 0.0 and alpha.max() <= 1.0):
+            name = self.source if isinstance(self.source, (str, Path)) else "array"
+            raise ValueError(f"panorama {name} alpha must be in [0, 1], got values from {alpha.min():g} to "
+                             f"{alpha.max():g}")
         gbua = np.concatenate([np.clip(gbu, 0.0, 1.0), alpha], axis=2).astype(np.float32)
         if w > self.max_width:  # area-average down to what the cube map can resolve
             import cv2

@@ -29,7 +29,7 @@ from .gl import create_context, describe
 from .gpu_path import ATLAS, FAR_ONLY, OVER_FAR, GpuFramePath, check_path, default_path
 from .meshbuffers import MeshBuffers
 from .output import FrameConverter, polariser_angles
-from .scene import Scene, check_channel_gain, check_contrast, check_lowpass
+from .scene import Scene, check_channel_gain, check_contrast, check_lowpass, check_number
 
 #: LED pitch of the dome (degrees); the default footprint width and face size derive from it.
 LED_PITCH_DEG = 1.5
@@ -77,6 +77,11 @@ def _gl_current(method):
             return method(self, *args, **kwargs)
 
     return wrapper
+
+
+def _check_time(t) -> float:
+    """Stimulus time t (s) as a float; ValueError unless finite."""
+    return check_number("time t (s)", t)
 
 
 def _check_pose(pose) -> Pose:
@@ -606,8 +611,10 @@ class Renderer:
         self._convert.configure(channel_gain=scene.channel_gain)
 
     def swap_green_blue(self, swap: bool = True) -> None:
+        if not isinstance(swap, bool):
+            raise ValueError(f"swap_green_blue must be true or false, got {swap!r}")
         scene = self._require_scene()
-        scene.swap_green_blue = bool(swap)
+        scene.swap_green_blue = swap
         self._convert.configure(swap_green_blue=scene.swap_green_blue)
 
     @_gl_current
@@ -662,8 +669,7 @@ class Renderer:
             out = np.empty((N_PIXELS, 2), dtype=np.uint16)
         elif out.shape != (N_PIXELS, 2) or out.dtype != np.uint16 or not out.flags.c_contiguous:
             raise ValueError(f"out must be a C-contiguous ({N_PIXELS}, 2) uint16 array, got {out.shape} {out.dtype}")
-        if t is None:
-            t = self.clock.now() - self._t0
+        t = self.clock.now() - self._t0 if t is None else _check_time(t)
         t0 = time.perf_counter()
         q = self.view_rotation(pose)
         self._last_q = q
@@ -868,7 +874,7 @@ class Renderer:
         `cubemap.FACES` order), rendered through GL whatever path `render` takes."""
         scene = self._require_scene()
         pose = _check_pose(pose)
-        t = self.clock.now() - self._t0 if t is None else t
+        t = self.clock.now() - self._t0 if t is None else _check_time(t)
         self._render_cube(scene, pose, self.view_rotation(pose), t)
         n = self.face_size
         return (self._texels.astype(np.float32) / 65535.0).reshape(6, n, n, 4)

@@ -5,7 +5,9 @@ Nothing here touches GL; `Renderer.set_scene` turns a `Scene` into GPU buffers. 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from numbers import Integral, Real
 
 import numpy as np
 
@@ -13,6 +15,24 @@ from .channels import CHANNELS
 
 #: Largest texture side accepted on a mesh (larger textures are refused with a clear error).
 MAX_TEXTURE_SIDE = 8192
+#: Largest channel gain and contrast accepted (beyond them a frame is all saturated or all dark anyway).
+MAX_GAIN = 1000.0
+
+
+def check_number(name: str, value, low: float = -math.inf, high: float = math.inf, integer: bool = False):
+    """`value` as a float (an int when `integer`) in [low, high]; a bool, a string, NaN or infinity raise one
+    ValueError naming `name`, the value and what is allowed."""
+    kind = Integral if integer else Real
+    try:
+        ok = isinstance(value, kind) and not isinstance(value, (bool, np.bool_)) and math.isfinite(value)
+    except OverflowError:  # an int too large for a float
+        ok = False
+    if not (ok and low <= value <= high):
+        what = "an integer" if integer else "a finite number"
+        bounds = [f">= {low:g}"] * (low > -math.inf) + [f"<= {high:g}"] * (high < math.inf)
+        raise ValueError(f"{name} must be {what}{' ' + ' and '.join(bounds) if bounds else ''}, "
+                         f"got {repr(value)[:60]}")
+    return int(value) if integer else float(value)
 
 
 @dataclass
@@ -44,6 +64,9 @@ class MeshData:
             raise ValueError(f"mesh {name!r}: vertices contain NaN or infinite values")
         if f.dtype.kind not in "iu" or f.min() < 0 or f.max() >= len(v):
             raise ValueError(f"mesh {name!r}: face indices must be integers in 0..{len(v) - 1}")
+        corners = v[f].astype(np.float64)
+        if not np.any(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])):
+            raise ValueError(f"mesh {name!r}: all {len(f)} triangle(s) have zero area (points or lines only)")
         c = np.asarray(self.colours, dtype=np.float32)
         if c.shape != (len(v), 3) or not np.all(np.isfinite(c)):
             raise ValueError(f"mesh {name!r}: colours must be a finite ({len(v)}, 3) array, got {c.shape}")
@@ -124,6 +147,10 @@ class Scene:
             if not isinstance(obj, SceneObject):
                 raise ValueError(f"scene object {name!r} must be a SceneObject, got {type(obj).__name__}")
             obj.mesh.validate(name)
+        self.rotation = check_number("scene rotation (rad)", self.rotation)
+        if not isinstance(self.swap_green_blue, (bool, np.bool_)):
+            raise ValueError(f"swap_green_blue must be true or false, got {repr(self.swap_green_blue)[:60]}")
+        self.swap_green_blue = bool(self.swap_green_blue)
         check_channel_gain(self.channel_gain)
         check_lowpass(self.lowpass_deg)
         check_contrast(self.contrast)
@@ -168,17 +195,19 @@ class Scene:
 
 
 def check_channel_gain(gain) -> tuple:
-    g = np.asarray(gain, dtype=np.float64)
-    if g.shape != (3,) or not np.all(np.isfinite(g)) or np.any(g < 0):
-        raise ValueError(f"channel gains must be 3 non-negative numbers for {CHANNELS}, got {gain!r}")
-    return tuple(float(x) for x in g)
+    """(G, B, UV) gains as 3 floats in [0, MAX_GAIN]."""
+    if isinstance(gain, (str, bytes)) or np.shape(gain) != (3,):
+        raise ValueError(f"channel gains must be 3 numbers in [0, {MAX_GAIN:g}] for {CHANNELS}, got {gain!r}")
+    return tuple(check_number(f"{c} channel gain", g, 0.0, MAX_GAIN) for c, g in zip(CHANNELS, gain, strict=True))
 
 
 def check_lowpass(cutoff_deg) -> None:
-    if cutoff_deg is not None and not (np.isfinite(cutoff_deg) and 0 < cutoff_deg <= 180):
-        raise ValueError(f"low-pass cut-off must be a period in (0, 180] degrees or None, got {cutoff_deg!r}")
+    """Low-pass cut-off period in (0, 180] degrees, or None (off)."""
+    name = "lowpass_deg (low-pass cut-off period, degrees)"
+    if cutoff_deg is not None and check_number(name, cutoff_deg, 0.0, 180.0) == 0:
+        raise ValueError(f"{name} must be > 0 (or None: off), got {cutoff_deg!r}")
 
 
-def check_contrast(contrast) -> None:
-    if not (np.isfinite(contrast) and contrast >= 0):
-        raise ValueError(f"contrast must be a non-negative number (1 = unchanged), got {contrast!r}")
+def check_contrast(contrast) -> float:
+    """Contrast in [0, MAX_GAIN] (1 = unchanged)."""
+    return check_number("contrast (1 = unchanged)", contrast, 0.0, MAX_GAIN)

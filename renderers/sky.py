@@ -16,6 +16,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .channels import parse_colour
+from .scene import check_number
+
+#: Largest sun radiance (1 = full LED drive; above 1 the sun's disc lights the LEDs around it more).
+MAX_SUN_RADIANCE = 1000.0
 
 
 def sun_direction(azimuth: float, elevation: float) -> np.ndarray:
@@ -71,9 +75,9 @@ class Sky:
     time_varying = False
 
     def __post_init__(self) -> None:
-        for name in ("sun_azimuth", "sun_elevation", "dop_max", "sun_radiance", "sun_radius"):
-            if not np.isfinite(getattr(self, name)):
-                raise ValueError(f"sky {name} must be finite, got {getattr(self, name)!r}")
+        for name in ("sun_azimuth", "sun_elevation", "dop_max", "sun_radius"):
+            setattr(self, name, check_number(f"sky {name}", getattr(self, name)))
+        self.sun_radiance = check_number("sky sun_radiance", self.sun_radiance, 0.0, MAX_SUN_RADIANCE)
         if not 0.0 < self.sun_radius < np.pi / 2:
             raise ValueError(f"sun radius must be in (0, 90) degrees, got {np.degrees(self.sun_radius)!r}")
         if not 0.0 <= self.dop_max <= 1.0:

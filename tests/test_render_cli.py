@@ -30,6 +30,11 @@ def test_render_writes_an_equal_area_map_and_the_cube_map(tmp_path, capsys):
     (["render", "uniform", "--heading", "nan"], "heading"),
     (["render", "{not json"], "JSON"),
     (["render", "uniform", "--face-size", "8"], "face_size"),
+    (["render", "sky", "--time", "nan"], "--time must be a finite number of seconds, got nan"),
+    (["render", "sky", "--set", 'lowpass_deg="10"'], "lowpass_deg (low-pass cut-off period, degrees) must be a "
+                                                     "finite number >= 0 and <= 180, got '10'"),
+    (["render", "bars", "--set", "bars=[5]"], "each of bars must be a table of bar parameters, got 5"),
+    (["render", '{"scene": "mesh", "path": 5}'], "path must be a file path (a string), got 5"),
 ])
 def test_render_bad_input_is_a_clear_error(tmp_path, capsys, args, message):
     assert main(["render", "--out", str(tmp_path / "x.png"), "--face-size", "64", *args[1:]]) == 2

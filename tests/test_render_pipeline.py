@@ -172,6 +172,15 @@ def test_failed_scene_load_keeps_the_previous_scene(renderer, tmp_path):
         assert np.array_equal(renderer.render(Pose(0, 0, 0.01, 0.0)), before)
 
 
+@pytest.mark.parametrize("t", [math.nan, math.inf])
+def test_a_time_that_is_not_finite_is_refused(renderer, t):
+    renderer.set_scene("sky")
+    for draw in (renderer.render, renderer.cube_map):
+        with pytest.raises(ValueError) as err:
+            draw(Pose(0, 0, 0.01, 0.0), t=t)
+        assert str(err.value) == f"time t (s) must be a finite number, got {t!r}"
+
+
 @pytest.mark.parametrize("bad", [(0, 0, math.nan, 0), (0, math.inf, 0, 0), (0, 0, 0), "pose"])
 def test_bad_pose_is_refused(renderer, bad):
     renderer.set_scene("uniform")

@@ -124,7 +124,7 @@ def test_a_scene_that_fails_in_its_process_raises_its_own_error_here(renderers, 
     r = renderers[0]
     with pytest.raises(FileNotFoundError, match="missing.obj"):
         r.prepare_scene(str(tmp_path / "missing.obj"))
-    with pytest.raises(ValueError, match="period_deg must be a number of degrees"):
+    with pytest.raises(ValueError, match="period_deg must be a finite number, got .wide."):
         r.prepare_scene({"scene": "grating", "period_deg": "wide"})
 
 

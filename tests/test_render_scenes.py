@@ -415,3 +415,74 @@ def test_each_face_draws_only_the_chunks_it_can_see(renderer):
     assert np.allclose(FACES[plus_x, 0], [1, 0, 0]) and np.allclose(FACES[plus_y, 0], [0, 1, 0])
     assert vis[0].tolist() == [True, False, False, False, False, False]
     assert vis[1, plus_x] and vis[1, plus_y] and vis[1].sum() == 2
+
+
+@pytest.mark.parametrize("spec, message", [
+    ({"scene": "sky", "rotation_deg": math.nan}, "rotation_deg must be a finite number, got nan"),
+    ({"scene": "sky", "rotation_deg": "x"}, "rotation_deg must be a finite number, got 'x'"),
+    ({"scene": "uniform", "swap_green_blue": "no"}, "swap_green_blue must be true or false, got 'no'"),
+    ({"scene": "uniform", "swap_green_blue": 0.3}, "swap_green_blue must be true or false, got 0.3"),
+    ({"scene": "grating", "period_deg": True}, "period_deg must be a finite number, got True"),
+    ({"scene": "sky", "lowpass_deg": True}, "lowpass_deg (low-pass cut-off period, degrees) must be a finite "
+                                            "number >= 0 and <= 180, got True"),
+    ({"scene": "sky", "dop_max": True}, "sky dop_max must be a finite number, got True"),
+    ({"scene": "w.glb", "path": "x.obj"}, "scene 'w.glb' is a file already; give either it or 'path' ('x.obj')"),
+    ({"scene": "p.png", "path": "q.png"}, "scene 'p.png' is a file already; give either it or 'path' ('q.png')"),
+    ({"scene": "uniform", "channel_gain": [1e300, 1, 1]},
+     "green channel gain must be a finite number >= 0 and <= 1000, got 1e+300"),
+    ({"scene": "uniform", "contrast": 1e300}, "contrast (1 = unchanged) must be a finite number >= 0 and <= 1000, "
+                                              "got 1e+300"),
+    ({"scene": "sky", "sun_radiance": -1}, "sky sun_radiance must be a finite number >= 0 and <= 1000, got -1"),
+    ({"scene": "sky", "sun_radiance": math.nan}, "sky sun_radiance must be a finite number >= 0 and <= 1000, "
+                                                 "got nan"),
+    ({"scene": "bars", "bars": [5]}, "each of bars must be a table of bar parameters, got 5"),
+    ({"scene": "mesh", "path": 5}, "path must be a file path (a string), got 5"),
+    ({"scene": "habitat", "seed": 1.5}, "seed must be an integer >= 0, got 1.5"),
+])
+def test_bad_scene_parameters_are_refused_naming_them(spec, message):
+    with pytest.raises(ValueError) as err:
+        build_scene(spec)
+    assert message in str(err.value)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"uv_ratio": math.nan}, "panorama uv_ratio must be a finite number >= 0, got nan"),
+    ({"uv_ratio": -3}, "panorama uv_ratio must be a finite number >= 0, got -3"),
+    ({"uv_ratio": "x"}, "panorama uv_ratio must be a finite number >= 0, got 'x'"),
+    ({"alpha": 2.0}, "panorama array alpha must be in [0, 1], got values from 2 to 2"),
+    ({"alpha": -1.0}, "panorama array alpha must be in [0, 1], got values from -1 to -1"),
+])
+def test_bad_panorama_values_are_refused(kwargs, message):
+    from antarium.renderers.panorama import Panorama
+
+    img = np.full((4, 8, 4), 0.5)
+    img[..., 3] = kwargs.pop("alpha", 1.0)
+    with pytest.raises(ValueError) as err:
+        Panorama(img, **kwargs)
+    assert str(err.value) == message
+
+
+def test_huge_gain_or_contrast_is_refused_and_changes_nothing(renderer):
+    renderer.set_scene({"scene": "uniform", "colour": [0.3, 0.3, 0.1]})
+    before = renderer.render(HOME).copy()
+    with pytest.raises(ValueError, match=r"green channel gain must be a finite number >= 0 and <= 1000, got 1e\+300"):
+        renderer.scale_channel("green", 1e300)
+    with pytest.raises(ValueError, match=r"contrast \(1 = unchanged\) must be .* <= 1000, got 1e\+300"):
+        renderer.set_contrast(1e300)
+    assert renderer.scene.channel_gain == (1.0, 1.0, 1.0) and renderer.scene.contrast == 1.0
+    assert np.array_equal(renderer.render(HOME), before)
+
+
+def test_a_mesh_of_zero_area_triangles_is_refused_naming_it():
+    flat = MeshData(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], np.float32), np.array([[0, 1, 2]]),
+                    np.full((3, 3), 0.5, np.float32))
+    with pytest.raises(ValueError) as err:
+        flat.validate("line")
+    assert str(err.value) == "mesh 'line': all 1 triangle(s) have zero area (points or lines only)"
+
+
+def test_rotate_scene_without_pivot_keeps_the_previous_pivot(renderer):
+    renderer.set_scene("uniform")
+    renderer.rotate_scene(0.3, pivot=(1.0, 2.0))
+    renderer.rotate_scene(0.5)
+    assert renderer.scene.pivot == (1.0, 2.0) and renderer.scene.rotation == 0.5

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 
 HELP = "render a scene for one eye pose and save the LED frame as an equal-area map (and the raw cube map)"
 
@@ -57,6 +58,8 @@ def run(args: argparse.Namespace) -> int:
     if args.pos[2] < 0:
         raise ValueError(f"--pos Z is the eye's height above the ground (z = 0) in metres and must be >= 0, "
                          f"got {args.pos[2]:g}")
+    if not math.isfinite(args.time):
+        raise ValueError(f"--time must be a finite number of seconds, got {args.time:g}")
     check_png_path(args.out, "--out")  # both names checked before anything is rendered or written
     if args.cube:
         check_png_path(args.cube, "--cube")
