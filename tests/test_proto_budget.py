@@ -58,6 +58,7 @@ class _Turning(LocomotionSource):
 class _Link:
     def __init__(self):
         self.updates = 0
+        self.counters = {"datagrams_failed": 0}  # the link's counters, as `Link` keeps them
 
     def send_frame(self, frame):
         return 0
