@@ -292,10 +292,11 @@ class FrameLoop:
         for s in samples:
             dx, dy, dyaw = pole_motion(s.rotation, self.ball_radius)
             wx, wy, h = arc_step(heading, gt * dx, gt * dy, gr * dyaw if fixed else 0.0)
-            if not (math.isfinite(x + wx) and math.isfinite(y + wy) and math.isfinite(h)):
+            nx, ny = x + wx, y + wy
+            if not (math.isfinite(nx) and math.isfinite(ny) and math.isfinite(h)):
                 skipped += 1
                 continue
-            x, y, heading = x + wx, y + wy, h
+            x, y, heading = nx, ny, h
         if skipped:
             self.fault("locomotion", t, ValueError(f"{skipped} sample(s) skipped: a rotation that is not a finite "
                                                    "number of radians"))

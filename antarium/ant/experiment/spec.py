@@ -115,14 +115,11 @@ class Experiment:
 
 
 class Check:
-    """A kind of spec value, declared once: `check(key, value)` returns the value normalised (numbers that are
-    equal are equal: 10 and 10.0 of a float parameter are both 10.0) or raises SpecError naming the key, the value
-    and what is allowed."""
+    """A kind of spec value, declared once. Each kind below is a callable: `check(key, value)` returns the value
+    normalised (numbers that are equal are equal: 10 and 10.0 of a float parameter are both 10.0) or raises
+    SpecError naming the key, the value and what is allowed (`fail`, with the kind's `what`)."""
 
     what = "a value"
-
-    def __call__(self, key: str, value):
-        raise NotImplementedError
 
     def fail(self, key: str, value):
         shown = repr(value)
