@@ -20,7 +20,6 @@ from __future__ import annotations
 import contextlib
 import json
 import math
-import numbers
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -29,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from antarium import bus
+from antarium.core.numbers import as_real
 from antarium.core.pose import Pose
 
 #: the longest `Rig.wait` (s): a day; anything longer is a typo
@@ -303,12 +303,8 @@ class Rig:
     @staticmethod
     def wait(seconds: float) -> None:
         """Wait `seconds` of wall time (the dome keeps running), at most `WAIT_MAX_S` in one call."""
-        real = isinstance(seconds, numbers.Real) and not isinstance(seconds, bool)  # numpy's numbers too
-        try:
-            value = float(seconds) if real else math.nan
-            shown = repr(value) if real else repr(seconds)[:60]
-        except OverflowError:
-            value, shown = math.inf, repr(seconds)[:60]
+        value = as_real(seconds)
+        shown = repr(value) if math.isfinite(value) else repr(seconds)[:60]
         if not 0 <= value <= WAIT_MAX_S:
             raise RigError(f"wait needs a number of seconds in [0, {WAIT_MAX_S:g}], got {shown}")
         time.sleep(value)

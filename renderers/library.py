@@ -13,9 +13,11 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from antarium.core.numbers import check_number
+
 from . import stimuli
 from .panorama import IMAGE_SUFFIXES, Panorama
-from .scene import Scene, check_number
+from .scene import Scene
 from .sky import Sky
 
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl")

@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from antarium.core.numbers import check_number
+
 from .channels import DEFAULT_UV_RATIO, rgb_to_gbu, srgb_to_linear
-from .scene import check_number
 
 #: Largest accepted image side in pixels (OpenCV and GL textures both handle it; larger is refused).
 MAX_IMAGE_SIDE = 16384

@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from antarium.core.numbers import check_number
 from antarium.core.pose import Pose
 from antarium.geometry.constants import N_PANELS, N_PIXELS, UV_PER_PANEL
 
@@ -29,7 +30,7 @@ from .gl import create_context, describe
 from .gpu_path import ATLAS, FAR_ONLY, OVER_FAR, GpuFramePath, check_path, default_path
 from .meshbuffers import MeshBuffers
 from .output import FrameConverter, polariser_angles
-from .scene import Scene, check_channel_gain, check_contrast, check_lowpass, check_number
+from .scene import Scene, check_channel_gain, check_contrast, check_lowpass
 
 #: LED pitch of the dome (degrees); the default footprint width and face size derive from it.
 LED_PITCH_DEG = 1.5

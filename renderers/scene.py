@@ -5,11 +5,11 @@ Nothing here touches GL; `Renderer.set_scene` turns a `Scene` into GPU buffers. 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
-from numbers import Integral, Real
 
 import numpy as np
+
+from antarium.core.numbers import check_number
 
 from .channels import CHANNELS
 
@@ -17,22 +17,6 @@ from .channels import CHANNELS
 MAX_TEXTURE_SIDE = 8192
 #: Largest channel gain and contrast accepted (beyond them a frame is all saturated or all dark anyway).
 MAX_GAIN = 1000.0
-
-
-def check_number(name: str, value, low: float = -math.inf, high: float = math.inf, integer: bool = False):
-    """`value` as a float (an int when `integer`) in [low, high]; a bool, a string, NaN or infinity raise one
-    ValueError naming `name`, the value and what is allowed."""
-    kind = Integral if integer else Real
-    try:
-        ok = isinstance(value, kind) and not isinstance(value, (bool, np.bool_)) and math.isfinite(value)
-    except OverflowError:  # an int too large for a float
-        ok = False
-    if not (ok and low <= value <= high):
-        what = "an integer" if integer else "a finite number"
-        bounds = [f">= {low:g}"] * (low > -math.inf) + [f"<= {high:g}"] * (high < math.inf)
-        raise ValueError(f"{name} must be {what}{' ' + ' and '.join(bounds) if bounds else ''}, "
-                         f"got {repr(value)[:60]}")
-    return int(value) if integer else float(value)
 
 
 @dataclass

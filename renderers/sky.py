@@ -15,8 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from antarium.core.numbers import check_number
+
 from .channels import parse_colour
-from .scene import check_number
 
 #: Largest sun radiance (1 = full LED drive; above 1 the sun's disc lights the LEDs around it more).
 MAX_SUN_RADIANCE = 1000.0

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 from importlib import import_module
 from typing import Any
 
+from antarium.core.numbers import as_real
+
 
 @dataclass(frozen=True, slots=True)
 class BallSample:
@@ -178,6 +180,7 @@ def check_keywords(what: str, factory: Any, kwargs: dict[str, Any]) -> None:
 
 def positive(value: Any, what: str, unit: str) -> float:
     """`value` as a float if it is a finite number > 0, else ValueError naming `what` and its `unit`."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+    number = as_real(value)
+    if not (math.isfinite(number) and number > 0):
         raise ValueError(f"{what} must be a finite number > 0 ({unit}), got {value!r}")
-    return float(value)
+    return number

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from antarium.core.ball import TETHERS
+from antarium.core.numbers import as_real
 from antarium.core.pose import Pose
 
 if TYPE_CHECKING:
@@ -287,24 +288,14 @@ def _shown(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _number(value: Any) -> float:
-    """`value` as a float if it is a JSON number (not a boolean), else NaN; an integer too large for a float: inf."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return math.nan
-    try:
-        return float(value)
-    except OverflowError:
-        return math.inf
-
-
 def _check(command: str, name: str, p: Param, value: Any) -> Any:
     where = f"{command}: parameter {name!r}"
     if value is None and p.nullable:
         return None
     if p.kind == "number":
-        value = _range(where, p, _number(value), value)
+        value = _range(where, p, as_real(value), value)
     elif p.kind == "xyz":
-        xyz = [_number(v) for v in value] if isinstance(value, list) and len(value) == 3 else None
+        xyz = [as_real(v) for v in value] if isinstance(value, list) and len(value) == 3 else None
         if xyz is None or not all(math.isfinite(v) for v in xyz):
             raise CommandError(f"{where} must be a list of 3 finite numbers [x, y, z], got {_shown(value)}")
         value = [_range(where, p, v, v) for v in xyz]
@@ -381,7 +372,7 @@ def parse_command(command: str, params: Any) -> dict[str, Any]:
         import numpy as np
 
         rows = out["angles_deg"]
-        angles = [[_number(v) for v in row] if isinstance(row, list) else [] for row in rows]
+        angles = [[as_real(v) for v in row] if isinstance(row, list) else [] for row in rows]
         shape = (len(angles), *sorted({len(row) for row in angles}))
         wanted = "55 lists of 9 numbers in [-3600, 3600] (degrees)"
         if shape != (55, 9):

@@ -60,6 +60,7 @@ from antarium.ant.experiment.inputs import (
 )
 from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M
 from antarium.ant.routes import curved_route
+from antarium.core.numbers import as_real
 
 #: protocol -> put-back distance (m): Ardin et al. 2016 put the ant back at 20 cm and count an error; Antcar
 #: (Gattaux et al. 2025) never puts it back
@@ -126,10 +127,6 @@ class Check:
         raise SpecError(f"{key}: expected {self.what}, got {shown if len(shown) <= 60 else shown[:57] + '...'}")
 
 
-def _is_number(value) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
 @dataclass(frozen=True)
 class Integer(Check):
     """An integer (not a float, not a boolean), >= `min` when given."""
@@ -157,10 +154,7 @@ class Number(Check):
         return "a finite number" + (f" > {self.gt:g}" if self.gt is not None else "")
 
     def __call__(self, key: str, value) -> float:
-        try:
-            number = float(value) if _is_number(value) else math.nan
-        except OverflowError:  # an integer too large for a float
-            number = math.inf
+        number = as_real(value)
         if not math.isfinite(number) or self.gt is not None and not number > self.gt:
             self.fail(key, value)
         return number

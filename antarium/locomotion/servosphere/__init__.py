@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from antarium.core.numbers import as_real
+
 #: back-end name -> "module:factory"
 MOTOR_LINKS: dict[str, str] = {
     "simulated": "antarium.locomotion.servosphere.rig:open_simulated_link",
@@ -51,6 +53,4 @@ def finite_numbers(values: Any, n: int) -> bool:
     """True when `values` is a sequence (tuple, list, 1-D array) of `n` finite real numbers (no bools)."""
     if isinstance(values, np.ndarray):
         values = values.tolist() if values.ndim == 1 else None
-    return isinstance(values, (tuple, list)) and len(values) == n and all(
-        isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
-        for v in values)
+    return isinstance(values, (tuple, list)) and len(values) == n and all(math.isfinite(as_real(v)) for v in values)
