@@ -166,7 +166,7 @@ class Emulator:
         self.status_temperature_c = np.full(N_PANELS, self.thermal.ambient_c)
         self.status_current_a = self.panel_current_a.copy()
         self.status_codes = np.zeros((N_PANELS, N_ACTUATORS), np.uint16)
-        self.status_holding = np.zeros((N_PANELS, N_ACTUATORS), bool)
+        self.status_holding = np.ones((N_PANELS, N_ACTUATORS), bool)  # at power-up at rest on holding current
         self._panel_faults: dict[int, list[tuple[int, int, str]]] = {}
         self._snapshot: dict[str, np.ndarray] | None = None
 
@@ -265,8 +265,9 @@ class Emulator:
         self._shown = None
         self._drive_cache = None
         t = self.clock.now()
-        if self.faults.any():
-            self.detected |= detected_faults(self._drive(), self.faults)
+        if self.faults.any():  # sticky: an LED not driven now keeps the kind last detected, a driven one the latest
+            found = detected_faults(self._drive(), self.faults)
+            np.copyto(self.detected, found, where=found != FAULT_NONE)
         if t >= self._next_thermal:
             self._update_power(t)
             self._next_thermal = t + THERMAL_UPDATE_S

@@ -19,7 +19,17 @@ from .control import encode_hello, encode_latch, encode_status_request
 from .errors import ProtocolError
 from .header import PROTOCOL_VERSION, SEQ_MODULO
 from .polariser import angles_to_codes, encode_polarisers
-from .replies import OP_ACTUATORS, OP_COUNTERS, OP_FAULTS, OP_TEMPERATURES, OP_VERSION, STATUS_OPCODES, decode_reply
+from .replies import (
+    OP_ACTUATORS,
+    OP_COUNTERS,
+    OP_FAULTS,
+    OP_TEMPERATURES,
+    OP_VERSION,
+    STATUS_OPCODES,
+    Reply,
+    decode_reply,
+    foreign_version,
+)
 from .video import VIDEO_PAYLOAD_SIZE, encode_frame, video_info
 
 #: interface name -> "module:Class"
@@ -41,6 +51,10 @@ def open_link(interface: str, **kwargs) -> Link:
 OUTAGE_S = 1.0
 #: an unanswered HELLO is repeated, with the next status request, after this long (seconds)
 HELLO_RETRY_S = 0.5
+#: an actuator at rest (on holding current) further than this from its last commanded angle (in angle codes,
+#: 364 = 1 degree) did not get that update: it is sent again, at most once every POLARISER_RECHECK_S seconds
+POLARISER_TOLERANCE_CODES = 364
+POLARISER_RECHECK_S = 1.0
 
 
 class IncompatibleDistributor(RuntimeError):
@@ -53,6 +67,12 @@ class Link(ABC):
     The link says HELLO when it opens and again with a status request every `HELLO_RETRY_S` until a VERSION reply
     arrives (a
     distributor that boots after the host still gets one), and again after an outage of `OUTAGE_S`.
+
+    The distributor may not hold the polariser angles last sent when it answers for the first time since the link
+    opened or since an outage (it may have booted or rebooted since, its panels at angle 0, or the update was lost
+    in the outage), or when an ACTUATORS reply asked for after the update shows an actuator at rest elsewhere (the
+    update or the panel's serial frame was lost, or the distributor restarted between two polls): the link then
+    sends those angles again, with the next `telemetry` or `hello`.
     """
 
     #: `telemetry(wait_s=0)` sends a new STATUS_REQUEST at most this often (seconds); a request with wait_s > 0
@@ -64,7 +84,13 @@ class Link(ABC):
         self._seq = 0
         self._frame_buf = np.empty((N_PANELS, VIDEO_PAYLOAD_SIZE), np.uint8)
         self._panel_td = np.arange(N_PANELS, dtype=np.uint8)  # VIDEO class 0, panel k
-        self._last_polariser_codes: np.ndarray | None = None
+        self._last_polariser_codes: np.ndarray | None = None  # codes of the last POLARISER update that went out
+        self._last_polariser_datagram: bytes | None = None
+        self._polarisers_unsure = False  # the distributor may have lost them: sent again (see the class doc)
+        self._polarisers_checkable = False  # an ACTUATORS reply asked for after the last update has arrived
+        self._polariser_tag = 0  # the request tag when the last update went out
+        self._polarisers_rechecked_t: float | None = None
+        self._answering = False  # a reply arrived since the link opened and since the last outage
         self._tag = 0
         self._status: dict = {}
         self._last_reply_t: float | None = None
@@ -151,12 +177,25 @@ class Link(ABC):
         if a.shape != (N_PANELS, N_ACTUATORS):
             raise ValueError(f"polariser angles must have shape ({N_PANELS}, {N_ACTUATORS}), got {a.shape}")
         codes = angles_to_codes(a)
-        if not force and self._last_polariser_codes is not None and np.array_equal(codes, self._last_polariser_codes):
+        if (not force and not self._polarisers_unsure and self._last_polariser_codes is not None
+                and np.array_equal(codes, self._last_polariser_codes)):
             return False
-        ok = self.send(encode_polarisers(a))
+        datagram = encode_polarisers(a)
+        ok = self.send(datagram)
         if ok:  # a failed send is retried by the next call, even with the same angles
-            self._last_polariser_codes = codes
+            self._last_polariser_codes, self._last_polariser_datagram = codes, datagram
+            self._polarisers_went_out()
         return ok
+
+    def _polarisers_went_out(self) -> None:
+        self._polarisers_unsure = self._polarisers_checkable = False
+        self._polariser_tag = self._tag
+
+    def _resend_held(self) -> None:
+        """Send the last polariser update again when the distributor may have lost it (see the class doc)."""
+        if self._polarisers_unsure and self._last_polariser_datagram is not None and not self.incompatible:
+            if self.send(self._last_polariser_datagram):
+                self._polarisers_went_out()
 
     def send_config(self, dot_correction=None, brightness: int | None = None) -> None:
         """Send driver settings: `dot_correction` percent 0..100 per LED — a scalar, (55, 740) (LED k = 2*local
@@ -185,7 +224,9 @@ class Link(ABC):
         self._tag = (self._tag + 1) % 256
         self.send(encode_hello(self._tag))
         self._last_hello_t = time.monotonic()
-        return self._status.get("version") if self._drain(wait_s, until={OP_VERSION}, tag=self._tag) else None
+        answered = self._drain(wait_s, until={OP_VERSION}, tag=self._tag)
+        self._resend_held()
+        return self._status.get("version") if answered else None
 
     def telemetry(self, wait_s: float = 0.0) -> dict:
         """Latest upstream status, JSON-serialisable.
@@ -202,6 +243,7 @@ class Link(ABC):
         if wait_s > 0 or self._last_request_t is None or now - self._last_request_t >= self.status_interval_s:
             if self._last_reply_t is not None and now - self._last_reply_t > OUTAGE_S:
                 self.hello_pending = True
+                self._answering = False
             if self.hello_pending and (self._last_hello_t is None or now - self._last_hello_t >= HELLO_RETRY_S):
                 self._tag = (self._tag + 1) % 256
                 self.send(encode_hello(self._tag))
@@ -210,6 +252,7 @@ class Link(ABC):
             self.send(encode_status_request(self._tag))
             self._last_request_t = now
         self._drain(wait_s, until=set(STATUS_OPCODES), tag=self._tag)
+        self._resend_held()
         out = {**self._status, "link": dict(self.counters), "connected": self._last_reply_t is not None,
                "hello": "waiting" if self.hello_pending else "answered"}
         if self.incompatible:
@@ -230,25 +273,54 @@ class Link(ABC):
             try:
                 reply = decode_reply(data)
             except ProtocolError:
-                self.counters["replies_rejected"] += 1
-                continue
+                version = foreign_version(data)  # a VERSION of another protocol: read as far as its version
+                if version is None:
+                    self.counters["replies_rejected"] += 1
+                    continue
+                reply = Reply(OP_VERSION, data[3], {"protocol_version": version})
             self.counters["replies_received"] += 1
             self._last_reply_t = time.monotonic()
+            if not self._answering:  # the first answer since the link opened or since an outage
+                self._answering = self._polarisers_unsure = True
             self._absorb(reply.opcode, reply.fields)
+            if reply.opcode == OP_ACTUATORS:
+                self._check_polarisers(reply.tag, reply.fields)
             if tag is None or reply.tag == tag:
                 seen.add(reply.opcode)
             if until <= seen:
                 return True
 
+    def _check_polarisers(self, tag: int, f: dict) -> None:
+        """Mark the last polariser update for sending again when an actuator at rest is not at its angle."""
+        if self._last_polariser_codes is None or self._polarisers_unsure:
+            return
+        if not self._polarisers_checkable:  # replies to requests sent before the update show the angles before it
+            if not 0 < (tag - self._polariser_tag) % 256 < 128:
+                return
+            self._polarisers_checkable = True
+        codes = np.asarray(f["angle_codes"], np.int64)
+        off = np.abs((codes - self._last_polariser_codes + 32768) % 65536 - 32768)
+        if not (np.asarray(f["holding"], bool) & (off > POLARISER_TOLERANCE_CODES)).any():
+            return
+        now = time.monotonic()
+        if self._polarisers_rechecked_t is None or now - self._polarisers_rechecked_t >= POLARISER_RECHECK_S:
+            self._polarisers_rechecked_t = now
+            self._polarisers_unsure = True
+
     def _absorb(self, opcode: int, f: dict) -> None:
         s = self._status
         if opcode == OP_VERSION:
-            s["version"] = f
             self.hello_pending = False
             v = f["protocol_version"]
+            if "firmware_major" in f:  # decoded whole: this side's header version
+                s["version"] = f
+                firmware = f" {f['firmware_major']}.{f['firmware_minor']}"
+            else:  # a reply of another protocol version: only its version is known
+                s.pop("version", None)
+                firmware = ""
             self.incompatible = None if v == PROTOCOL_VERSION else (
                 f"the distributor speaks protocol version {v}; this host speaks {PROTOCOL_VERSION}: no frames are "
-                f"sent (update the host or the distributor's firmware {f['firmware_major']}.{f['firmware_minor']})")
+                f"sent (update the host or the distributor's firmware{firmware})")
         elif opcode == OP_COUNTERS:
             s["counters"] = f
         elif opcode == OP_TEMPERATURES:

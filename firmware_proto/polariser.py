@@ -35,6 +35,16 @@ class PolariserMessage(NamedTuple):
     codes: np.ndarray  # (n_panels, 9) uint16 angle codes; n_panels = 1 or 55
 
 
+def wrap_angles(angles) -> np.ndarray:
+    """Finite angles in radians, any value -> the same e-vector axes in [0, pi) (float64, a new array).
+
+    An e-vector is an axis, so angles are taken modulo pi; a remainder that rounds to pi itself (np.mod of a tiny
+    negative angle) is 0, the same axis, so the result always passes `angles_to_codes`.
+    """
+    a = np.mod(np.asarray(angles, dtype=np.float64), np.pi)
+    return np.where(a >= np.pi, 0.0, a)
+
+
 def angles_to_codes(angles) -> np.ndarray:
     """Angles in radians, each in [0, pi) -> uint16 codes round(angle * 65536 / pi) mod 65536.
 

@@ -143,6 +143,18 @@ def _expect(buf, size: int, what: str) -> None:
         raise LengthError(f"{what} reply must be {size} bytes, got {len(buf)}")
 
 
+def foreign_version(buf) -> int | None:
+    """The protocol version named by a VERSION reply of another protocol version, else None.
+
+    A distributor says which protocol it speaks in the VERSION byte of its replies' header (section 2); its body
+    may be laid out differently, so only the 4-byte header of a VERSION reply (TD 0xBF, opcode 0x81) is read.
+    None for any datagram that is not such a reply, and for one of this side's own version (`decode_reply`)."""
+    head = bytes(buf[:CONTROL_HEADER_SIZE])
+    if len(head) < CONTROL_HEADER_SIZE or head[0] != (CLASS_REPLY << 6 | ADDR_ALL) or head[2] != OP_VERSION:
+        return None
+    return None if head[1] == PROTOCOL_VERSION else head[1]
+
+
 def decode_reply(buf) -> Reply:
     """Check any REPLY datagram -> Reply(opcode, tag, fields). Raises a ProtocolError subclass."""
     address, opcode, tag = parse_control_header(buf, CLASS_REPLY)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from antarium.firmware_proto.polariser import wrap_angles
 from antarium.geometry.constants import GB_PER_PANEL, N_PANELS, PIXELS_PER_PANEL
 
 from .scene import check_channel_gain, check_contrast
@@ -103,4 +104,4 @@ def polariser_angles(directions: np.ndarray, e_vectors: np.ndarray, panel_axes: 
     n = panel_axes[:, 2]
     u = np.cross(n, np.cross(e_vectors, directions))
     ang = np.arctan2(np.einsum("ij,ij->i", u, panel_axes[:, 1]), np.einsum("ij,ij->i", u, panel_axes[:, 0]))
-    return np.mod(ang, np.pi)
+    return wrap_angles(ang)

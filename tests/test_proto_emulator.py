@@ -12,6 +12,7 @@ from antarium.firmware_proto import config, control, led_driver, polariser, vide
 from antarium.firmware_proto.actuator import AircoreBank
 from antarium.firmware_proto.emulator import Emulator
 from antarium.firmware_proto.link import open_link
+from antarium.firmware_proto.replies import decode_reply
 
 BASE = 1000
 
@@ -195,6 +196,23 @@ class TestFaults:
             link.send_frame(np.zeros((20350, 2), np.uint16))
             assert link.telemetry()["fault_total"] == 2  # detection is sticky
 
+    def test_a_fault_that_changes_kind_is_reported_as_the_latest_kind(self):
+        """Open, then short without "none" between: the LED was reported as neither (until 2026-11-27)."""
+        with open_link("virtual", clock=SimulatedClock()) as link:
+            f = np.zeros((20350, 2), np.uint16)
+            f[:, 0] = 30000
+            link.send_frame(f)
+            link.emulator.inject_fault(3, 120, "open")
+            assert link.telemetry()["faults"] == [{"panel": 3, "led": 120, "kind": "open"}]
+            link.emulator.inject_fault(3, 120, "short")
+            t = link.telemetry()
+            assert t["faults"] == [{"panel": 3, "led": 120, "kind": "short"}] and t["fault_total"] == 1
+            link.send_frame(np.zeros((20350, 2), np.uint16))
+            link.emulator.inject_fault(3, 120, "open")  # not driven now: the driver cannot see the new kind
+            assert link.telemetry()["faults"] == [{"panel": 3, "led": 120, "kind": "short"}]  # sticky
+            link.emulator.inject_fault(3, 120, "none")
+            assert link.telemetry()["fault_total"] == 0
+
     def test_bad_fault_spec(self, emu):
         with pytest.raises(ValueError, match="allowed"):
             emu.inject_fault(0, 0, "melted")
@@ -248,6 +266,22 @@ class TestActuators:
             assert not np.array(t["holding"]).any()
             clock.advance(1.0)
             assert np.array(link.telemetry()["holding"]).all()
+
+    def test_a_panel_whose_status_is_lost_reports_the_power_up_state(self):
+        """Every PANEL_STATUS lost on the line: ACTUATORS reports the power-up state, angle code 0 on holding
+        current (docs/protocol.md section 5), not holding bits 0 (until 2026-11-27)."""
+        def corrupt(symbols):
+            if symbols.size == 16 * (8 + 2 + 210 + 2):  # a PANEL_STATUS frame: one data bit flipped, bad CRC
+                symbols = symbols.copy()
+                symbols[200:202] ^= 1
+            return symbols
+
+        emu = Emulator(clock=SimulatedClock(), line="bits", corrupt=corrupt)
+        replies = [decode_reply(r) for r in emu.handle_datagram(control.encode_status_request(1))]
+        assert emu.counters["rejected_crc"] == 55
+        actuators = replies[3].fields
+        assert np.array(actuators["holding"]).all() and not np.array(actuators["angle_codes"]).any()
+        assert emu.actuators.holding(emu.clock.now()).all()  # as the actuators are
 
     def test_holding_current_is_a_quarter(self):
         bank = AircoreBank((2,))

@@ -38,6 +38,7 @@ from antarium.core.clock import Clock
 from antarium.core.pose import Pose
 from antarium.core.rates import DOME_RATE_HZ
 from antarium.firmware_proto.budget import LinkBudget, max_frame_rate
+from antarium.firmware_proto.polariser import wrap_angles
 from antarium.locomotion import LocomotionSource
 from antarium.trial_log import FRAME_DTYPE
 
@@ -276,8 +277,7 @@ class FrameLoop:
             angles = np.asarray(angles, dtype=np.float64)
             if angles.shape != (55, 9) or not np.all(np.isfinite(angles)):
                 raise ValueError(f"polariser angles must be (55, 9) finite radians, got shape {angles.shape}")
-            angles = np.mod(angles, math.pi)
-            angles[angles >= math.pi] = 0.0  # a tiny negative angle's remainder rounds to pi itself
+            angles = wrap_angles(angles)  # into [0, pi): a tiny negative angle is 0, not pi
         self.polariser_override = angles
         self._polarisers_dirty = True
         self.event("polarisers", mode="sky" if angles is None else "fixed")
@@ -401,12 +401,13 @@ class FrameLoop:
         failed = self.link.counters["datagrams_failed"]
         try:
             sent = self.link.send_polarisers(angles)
+            went_out = self.link.counters["datagrams_failed"] == failed
         except ValueError as exc:  # angles the link refuses: counted, the dome keeps its polarisers, frames go on
             self.fault("link", self.clock.now(), exc)
-            sent = False
-        # a datagram that failed to go out is sent again with the next frame (unchanged angles are not)
-        self._polarisers_dirty = self.link.counters["datagrams_failed"] > failed
-        if not override:
+            sent = went_out = False
+        # an update refused or failed to go out is tried again with the next frame (unchanged angles are not)
+        self._polarisers_dirty = not went_out
+        if went_out and not override:
             self._polariser_heading = pose.heading
         return sent
 
