@@ -87,3 +87,56 @@ def test_a_page_of_another_site_gets_no_websocket(session):
                              lambda c: connect(c, f"http://{c.host}:{c.port}"))
     assert foreign[0] == 403 and "a page from http://elsewhere.example may not use the monitor" in foreign[1]
     assert own[0] == 101
+
+
+def test_a_name_the_monitor_is_not_served_under_is_refused(session):
+    """DNS rebinding: a browser at an allowed address (here 127.0.0.1) opened http://evil.example:port/ after the
+    attacker pointed that name at this computer; it names the attacker's host in both Host and Origin, which match."""
+    session, received = session
+
+    async def get(client, host):
+        r = await client.get("/", headers={"Host": host})
+        return r.status, await r.text()
+
+    async def post(client, host):
+        r = await client.post("/cmd/rotate_scene", data='{"deg": 90}', headers={
+            "Host": host, "Origin": f"http://{host}", "Content-Type": "application/json"})
+        return r.status, await r.text()
+
+    async def websocket(client, host):
+        r = await client.get("/ws", headers={"Host": host, "Origin": f"http://{host}", "Connection": "Upgrade",
+                                             "Upgrade": "websocket", "Sec-WebSocket-Version": "13",
+                                             "Sec-WebSocket-Key": "dGhlIHNhbXBsZSBub25jZQ=="})
+        return r.status, await r.text()
+
+    page, command, ws, local, by_address, by_v6 = _requests(
+        session, lambda c: get(c, f"evil.example:{c.port}"), lambda c: post(c, f"evil.example:{c.port}"),
+        lambda c: websocket(c, f"evil.example:{c.port}"), lambda c: post(c, f"localhost:{c.port}"),
+        lambda c: post(c, f"192.0.2.7:{c.port}"), lambda c: get(c, f"[::1]:{c.port}"))
+    for status, text in (page, command, ws):
+        assert status == 403 and text.startswith(
+            "antarium monitor: the name 'evil.example' (Host header) is not one this monitor is served under; open "
+            "it by this computer's address or one of: "), (status, text)
+        assert "localhost" in text
+    assert local[0] == by_address[0] == by_v6[0] == 200, (local, by_address, by_v6)
+    assert received == ['{"deg": 90}', '{"deg": 90}']  # only by its own names and addresses
+
+
+def test_the_page_may_send_only_the_parameters_its_commands_declare(session):
+    """trial_start's `folder` (where on the rig the log is written) is for the bus, not for a page."""
+    session, received = session
+
+    async def post(client, name, body):
+        r = await client.post(f"/cmd/{name}", data=json.dumps(body), headers={"Content-Type": "application/json"})
+        return r.status, await r.json()
+
+    folder, extra, ok = _requests(
+        session, lambda c: post(c, "trial_start", {"name": "t1", "folder": "/tmp/elsewhere"}),
+        lambda c: post(c, "trial_stop", {"all": True}),
+        lambda c: post(c, "trial_start", {"name": "t1", "metadata": {"from": "page"}}))
+    assert folder == (400, {"error": "trial_start: 'folder' cannot be sent from the page; allowed: name, metadata "
+                                     "(use the bus for the others)"})
+    assert extra == (400, {"error": "trial_stop: 'all' cannot be sent from the page; allowed: no parameters (use "
+                                    "the bus for the others)"})
+    assert ok[0] == 200
+    assert received == ['{"name": "t1", "metadata": {"from": "page"}}']

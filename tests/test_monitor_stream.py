@@ -14,7 +14,7 @@ from antarium import bus
 from antarium.config import ConfigError, resolve
 from antarium.firmware_proto.link import open_link
 from antarium.firmware_proto.video import VIDEO_HEADER_SIZE, decode_panel_data, encode_frame
-from antarium.monitor.led_stream import LED_HEADER, decode_leds, encode_leds, led_key
+from antarium.monitor.led_stream import LED_HEADER, LedPublisher, decode_leds, encode_leds, led_key
 from antarium.monitor.settings import allowed
 from antarium.server import Server
 
@@ -24,20 +24,61 @@ def test_golden_bytes_and_round_trip():
     payload = encode_leds(7, 1.5, 2.0, values)
     assert payload == (bytes([1, 0, 2, 0, 7, 0, 0, 0, 2, 0, 0, 0]) + np.float64(1.5).tobytes()
                        + np.float64(2.0).tobytes() + bytes([1, 0, 2, 0, 0x34, 0x12, 0xFF, 0xFF]))
-    d = decode_leds(payload)
+    d = decode_leds(payload, pixels=2)
     assert (d["frame"], d["t"], d["t_wall"]) == (7, 1.5, 2.0)
     np.testing.assert_array_equal(d["values"], values)
     assert LED_HEADER.size == 28 and f"{LED_HEADER.size}-byte header + 20,350 × 2 u16" in open("docs/bus.md").read()
 
 
-@pytest.mark.parametrize("payload, message", [
-    (b"\x01\x00", "at least 28 bytes"),
-    (b"\x02" + bytes(27), "version 2 not supported"),
-    (encode_leds(1, 0.0, 0.0, np.zeros((3, 2), np.uint16))[:-1], "must be 40 bytes, got 39"),
+@pytest.mark.parametrize("payload, pixels, message", [
+    (b"\x01\x00", None, "at least 28 bytes"),
+    (b"\x02" + bytes(27), None, "version 2 not supported"),
+    (encode_leds(1, 0.0, 0.0, np.zeros((3, 2), np.uint16))[:-1], None, "must be 40 bytes, got 39"),
+    (encode_leds(1, 0.0, 0.0, np.zeros((3, 3), np.uint16)), None, "3 channels; allowed: 2"),
+    # by default only the dome's frames: 20,350 pixels
+    (encode_leds(1, 0.0, 0.0, np.zeros((3, 2), np.uint16)), 20350, "3 pixels; the dome has 20350"),
+    (encode_leds(1, 0.0, 0.0, np.zeros((20351, 2), np.uint16)), 20350, "20351 pixels; the dome has 20350"),
 ])
-def test_malformed_payloads_are_refused(payload, message):
+def test_malformed_payloads_are_refused(payload, pixels, message):
     with pytest.raises(bus.StreamError, match=message):
-        decode_leds(payload)
+        decode_leds(payload, pixels=pixels)
+    if pixels == 20350:
+        with pytest.raises(bus.StreamError, match=message):
+            decode_leds(payload)  # the default
+
+
+def test_a_failed_put_is_counted_and_reported_and_the_stream_goes_on():
+    """The LED stream's thread, on a stand-in zenoh session whose publisher's put fails twice, then works."""
+    class Publisher:
+        def __init__(self):
+            self.sent, self.calls = [], 0
+
+        def put(self, payload):
+            self.calls += 1
+            if self.calls <= 2:
+                raise RuntimeError("zenoh: no route")
+            self.sent.append(decode_leds(payload)["frame"])
+
+        def undeclare(self):
+            pass
+
+    class Session:
+        def declare_publisher(self, key):
+            assert key == led_key("tput")
+            return publisher
+
+    publisher, lines = Publisher(), []
+    stream = LedPublisher(Session(), "tput", every=1, report=lines.append)
+    values = np.zeros((20350, 2), np.uint16)
+    try:
+        for frame in range(3):  # each offered once its thread has tried to put the one before
+            stream.offer(frame, frame / 190, values)
+            assert wait_for(lambda n=frame: publisher.calls > n, 5.0), f"frame {frame} was never put"
+    finally:
+        stream.close()
+    assert publisher.sent == [2] and stream.failed == 2 and stream.last_error == "RuntimeError: zenoh: no route"
+    assert lines == ["antarium serve: the LED stream's put failed (1 so far, the stream goes on): "
+                     "RuntimeError: zenoh: no route"]
 
 
 def test_the_stream_carries_the_frame_the_dome_shows(tmp_path):

@@ -7,6 +7,7 @@ needs no separate ASGI server and no framework; the page is plain HTML + JavaScr
 from __future__ import annotations
 
 import asyncio
+import errno
 import json
 import math
 from importlib import resources
@@ -16,7 +17,7 @@ import numpy as np
 
 from antarium import bus
 from antarium.monitor.hub import Hub
-from antarium.monitor.settings import PAGE_COMMANDS, allowed
+from antarium.monitor.settings import PAGE_COMMANDS, allowed, foreign_host, refused_params, served_names
 
 if TYPE_CHECKING:
     from antarium.config import MonitorSection
@@ -109,11 +110,17 @@ def make_app(session, rig: str, settings: MonitorSection):
     page = resources.files("antarium.monitor").joinpath("page.html").read_text()
     clients: dict = {}  # websocket -> LED frames it may still be sent before it says "drawn"
     period = 1.0 / settings.update_hz
+    # the names the page may be opened by: the Origin check below compares with the Host header, so that header
+    # must name this monitor (else a name of an attacker's, pointed at this computer, passes both: DNS rebinding)
+    names = served_names(settings.host, getattr(settings, "hosts", ()))
 
     @web.middleware
     async def access(request, handler):
         if not allowed(request.remote, settings.allow):
             return web.Response(status=403, text=refusal(request.remote, rig, settings.allow))
+        wrong_name = foreign_host(request.headers.get("Host"), names)
+        if wrong_name:
+            return web.Response(status=403, text=f"antarium monitor: {wrong_name}")
         return await handler(request)
 
     async def index(request):
@@ -173,6 +180,9 @@ def make_app(session, rig: str, settings: MonitorSection):
             return web.json_response({"error": f"{name}: the body is not JSON: {exc}"}, status=400)
         if not isinstance(params, dict):
             return web.json_response({"error": f"{name}: parameters must be a JSON object"}, status=400)
+        refused = refused_params(name, params)
+        if refused:
+            return web.json_response({"error": refused}, status=400)
         ok, body = await asyncio.get_running_loop().run_in_executor(None, _call, session, rig, name, params)
         return web.json_response(body, status=200 if ok else 400)
 
@@ -277,7 +287,13 @@ def serve(session, rig: str, settings: MonitorSection, echo=print) -> None:
         runner = web.AppRunner(make_app(session, rig, settings), handle_signals=False)
         await runner.setup()
         site = web.TCPSite(runner, settings.host, settings.port)
-        await site.start()
+        try:
+            await site.start()
+        except OSError as exc:
+            await runner.cleanup()
+            why = "in use (another monitor?)" if exc.errno == errno.EADDRINUSE else f"refused: {exc.strerror or exc}"
+            raise RuntimeError(f"the page cannot be served on {settings.host} port {settings.port}: {why}; set "
+                               "[monitor] port (or --port; 0: any free port)") from None
         host, port = site._server.sockets[0].getsockname()[:2]
         echo(f"antarium monitor: rig {rig!r} at http://{host}:{port}/ "
              f"(commands {'on' if settings.commands else 'off'})")

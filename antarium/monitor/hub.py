@@ -1,6 +1,9 @@
 """What the monitor has heard from the rig's bus: newest LED frame, pose path, stats, status, events, liveliness.
 
 Zenoh callbacks (their own threads) store under one lock; the web server takes what is new at its update rate.
+LED payloads that are not this version's dome frames are dropped here (counted), never forwarded to a page. The path
+starts anew when the rig comes back after its liveliness token went (a restarted server) or its poses' time or frame
+number goes backwards: a page is sent `path_reset` and the new path.
 """
 
 from __future__ import annotations
@@ -10,7 +13,7 @@ import time
 from typing import Any
 
 from antarium import bus
-from antarium.monitor.led_stream import led_key
+from antarium.monitor.led_stream import decode_leds, led_key
 
 #: poses kept for a page opened later (the path's history), newest last
 PATH_HISTORY = 20000
@@ -26,8 +29,12 @@ class Hub:
         self._lock = threading.Lock()
         self.leds: bytes | None = None
         self.leds_seq = 0
+        self.leds_dropped = 0  # payloads that were not LED frames of this version and the dome's size
+        self.leds_error: str | None = None  # why the last of them was dropped
         self.path: list[list[float]] = []  # [t, x, y, heading, scene_rotation, flags]
         self.path_seq = 0  # poses appended so far
+        self.path_run = 0  # paths started anew so far (a restarted rig, time going backwards)
+        self._rig_gone = False  # the liveliness token went: the next pose starts a new path
         self.pose: dict[str, Any] | None = None
         self.stats: list[dict[str, Any]] = []
         self.stats_seq = 0
@@ -56,6 +63,13 @@ class Hub:
 
     def _on_leds(self, sample) -> None:
         payload = sample.payload.to_bytes()
+        try:
+            decode_leds(payload)
+        except bus.StreamError as exc:
+            with self._lock:
+                self.leds_dropped += 1
+                self.leds_error = str(exc)
+            return
         with self._lock:
             self.leds = payload
             self.leds_seq += 1
@@ -66,7 +80,11 @@ class Hub:
         except bus.StreamError:
             return
         with self._lock:
-            self.pose = p
+            last, self.pose = self.pose, p
+            if self._rig_gone or (last is not None and (p["t"] < last["t"] or p["frame"] < last["frame"])):
+                self._rig_gone = False  # a new run: its path is not joined to the last one's
+                self.path = []
+                self.path_run += 1
             if p["frame"] % PATH_EVERY == 0:
                 flags = (1 if p["closed_loop"] else 0) | (2 if p["fixed_tether"] else 0)
                 self.path.append([p["t"], p["x"], p["y"], p["heading"], p["scene_rotation"], flags])
@@ -118,6 +136,8 @@ class Hub:
         with self._lock:
             self.alive = sample.kind == zenoh.SampleKind.PUT
             self.alive_seq += 1
+            if not self.alive and self.pose is not None:
+                self._rig_gone = True
 
     def since(self, seen: dict[str, int], leds: bool = True) -> tuple[bytes | None, dict[str, Any]]:
         """(the newest LED payload if not seen and `leds`, JSON-able updates not seen); `seen` is updated."""
@@ -127,7 +147,11 @@ class Hub:
                 seen["leds"] = self.leds_seq
             out: dict[str, Any] = {}
             new_path = self.path_seq - seen.get("path", 0)
-            if new_path:
+            if seen.get("path_run") != self.path_run:  # a new page, or a new path: all of it, drawn anew
+                out["path_reset"] = True
+                out["path"] = list(self.path)
+                seen["path"], seen["path_run"] = self.path_seq, self.path_run
+            elif new_path:
                 out["path"] = self.path[-min(new_path, len(self.path)):]
                 seen["path"] = self.path_seq
             for name in ("stats", "events"):
@@ -145,4 +169,7 @@ class Hub:
                 seen["alive"] = self.alive_seq
             if self.pose is not None and out.get("path") is not None:
                 out["pose"] = self.pose
+            if self.leds_dropped != seen.get("leds_dropped", 0):
+                out["leds_dropped"] = {"count": self.leds_dropped, "error": self.leds_error}
+                seen["leds_dropped"] = self.leds_dropped
         return leds, out

@@ -13,16 +13,21 @@ the thread is still busy with the previous one is skipped: the loop never waits 
 from __future__ import annotations
 
 import struct
+import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from antarium import bus
+from antarium.geometry.constants import N_PIXELS
 
 LED_VERSION = 1
 LED_HEADER = struct.Struct("<BBHIIdd")  # 28 bytes
+#: values per pixel: green, blue (a UV pixel: plain UV, polarised UV)
+LED_CHANNELS = 2
 
 
 def led_key(rig: str) -> str:
@@ -37,13 +42,19 @@ def encode_leds(frame: int, t: float, t_wall: float, values: np.ndarray) -> byte
     return LED_HEADER.pack(LED_VERSION, 0, channels, frame & 0xFFFFFFFF, pixels, t, t_wall) + values.tobytes()
 
 
-def decode_leds(payload: bytes) -> dict[str, Any]:
-    """A payload as {"frame", "t", "t_wall", "values": (pixels, channels) uint16}; bus.StreamError if malformed."""
+def decode_leds(payload: bytes, pixels: int | None = N_PIXELS) -> dict[str, Any]:
+    """A payload as {"frame", "t", "t_wall", "values": (pixels, channels) uint16}; bus.StreamError if malformed,
+    of another version, or not `pixels` (the dome's 20,350; None: any number) x `LED_CHANNELS` values."""
     if len(payload) < LED_HEADER.size:
         raise bus.StreamError(f"leds payload must be at least {LED_HEADER.size} bytes, got {len(payload)}")
-    version, _, channels, frame, pixels, t, t_wall = LED_HEADER.unpack_from(payload)
+    version, _, channels, frame, n, t, t_wall = LED_HEADER.unpack_from(payload)
     if version != LED_VERSION:
         raise bus.StreamError(f"leds payload version {version} not supported (allowed: {LED_VERSION})")
+    if channels != LED_CHANNELS:
+        raise bus.StreamError(f"leds payload of {channels} channels; allowed: {LED_CHANNELS}")
+    if pixels is not None and n != pixels:
+        raise bus.StreamError(f"leds payload of {n} pixels; the dome has {pixels}")
+    pixels = n
     if len(payload) != LED_HEADER.size + 2 * pixels * channels:
         raise bus.StreamError(f"leds payload of {pixels} x {channels} values must be "
                               f"{LED_HEADER.size + 2 * pixels * channels} bytes, got {len(payload)}")
@@ -52,10 +63,18 @@ def decode_leds(payload: bytes) -> dict[str, Any]:
 
 
 class LedPublisher:
-    """Publishes every `every`-th offered frame on `led_key(rig)` from a thread of its own."""
+    """Publishes every `every`-th offered frame on `led_key(rig)` from a thread of its own. A put that fails is
+    counted (`failed`, `last_error`) and reported through `report` (one line: the first failure, then every
+    `REPORT_EVERY`-th); the stream goes on with the next frame."""
 
-    def __init__(self, session, rig: str, every: int) -> None:
+    #: after the first failed put, one line per this many
+    REPORT_EVERY = 1000
+
+    def __init__(self, session, rig: str, every: int, report: Callable[[str], None] | None = None) -> None:
         self.every = every
+        self.failed = 0
+        self.last_error: str | None = None
+        self._report = report or (lambda line: print(line, file=sys.stderr, flush=True))
         self._pub = session.declare_publisher(led_key(rig))
         self._buf: np.ndarray | None = None
         self._meta = (0, 0.0, 0.0)
@@ -92,8 +111,14 @@ class LedPublisher:
                 payload = encode_leds(*self._meta, self._buf)
             try:
                 self._pub.put(payload)
-            except Exception:  # noqa: BLE001 - a closed session at shutdown; the loop never hears of it
-                return
+            except Exception as exc:  # noqa: BLE001 - whatever zenoh raises: the loop never hears of it
+                if self._closed:  # the session closed at shutdown
+                    return
+                self.failed += 1
+                self.last_error = f"{type(exc).__name__}: {exc}"
+                if (self.failed - 1) % self.REPORT_EVERY == 0:
+                    self._report(f"antarium serve: the LED stream's put failed ({self.failed} so far, the stream "
+                                 f"goes on): {self.last_error}")
 
     def close(self) -> None:
         self._closed = True

@@ -147,8 +147,10 @@ class Server:
                            s.liveliness().declare_token(bus.alive_key(self.rig_name))]
         from antarium.monitor.process import open_led_stream, start_monitor
 
-        self._leds_pub = open_led_stream(s, self.rig_name, self.config)
+        self._leds_pub = open_led_stream(s, self.rig_name, self.config, report=self.echo)
         self.monitor = start_monitor(self.config)
+        if self.monitor is not None:  # its address once it listens, or why it stopped (a port in use)
+            self.monitor.report(self.echo)
 
     # -- bus traffic -----------------------------------------------------------------------------------
     def _on_query(self, query) -> None:

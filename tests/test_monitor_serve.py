@@ -1,0 +1,77 @@
+"""Starting the monitor: `antarium serve` says where its monitor serves the page, or why the monitor stopped; a port in
+use is one line, not a traceback; a config that enables the monitor without the bus is refused."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import urllib.request
+
+import pytest
+from conftest import wait_for
+
+from antarium import bus
+from antarium.config import ConfigError, resolve
+from antarium.server import Server
+from antarium.server.config_check import check_config
+
+
+@pytest.fixture
+def taken_port():
+    """A loopback TCP port something else listens on."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        yield s.getsockname()[1]
+
+
+def test_a_port_in_use_is_one_line(tmp_path, taken_port):
+    config = tmp_path / "rig.toml"
+    config.write_text(f'[bus]\nlisten = ["{bus.free_tcp_endpoint()}"]\n')
+    done = subprocess.run([sys.executable, "-m", "antarium", "monitor", "--config", str(config), "--port",
+                           str(taken_port)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done
+    assert done.stdout == "" and done.stderr == (
+        f"antarium monitor: error: the page cannot be served on 127.0.0.1 port {taken_port}: in use (another "
+        "monitor?); set [monitor] port (or --port; 0: any free port)\n"), done.stderr
+
+
+def _serve(tmp_path, port: int):
+    """`antarium serve`'s server (no renderer, no link) with the monitor on `port`; its echoed lines."""
+    config = resolve({"rig": {"name": "tsay"}, "bus": {"listen": [bus.free_tcp_endpoint()]},
+                      "loop": {"realtime_priority": 0, "cpu": "off"}, "log": {"dir": str(tmp_path)},
+                      "monitor": {"enabled": True, "port": port}})
+    lines: list[str] = []
+    return Server(config, renderer_factory=None, link=False, echo=lines.append), lines
+
+
+def test_serve_prints_where_its_monitor_serves_the_page(tmp_path):
+    server, lines = _serve(tmp_path, 0)  # any free port: only the monitor's line says which
+    with server.start_thread():
+        assert wait_for(lambda: any(" at http://" in line for line in lines), 60.0), lines
+        line = next(line for line in lines if " at http://" in line)
+        assert line.startswith("antarium monitor: rig 'tsay' at http://127.0.0.1:"), line
+        url = line.split(" at ", 1)[1].split()[0]
+        with urllib.request.urlopen(url, timeout=10) as page:
+            assert "antarium monitor" in page.read().decode()
+        server.stop()
+
+
+def test_serve_says_why_its_monitor_stopped(tmp_path, taken_port):
+    server, lines = _serve(tmp_path, taken_port)
+    with server.start_thread():
+        assert wait_for(lambda: any("monitor" in line for line in lines), 60.0), lines
+        server.stop()
+    said = [line for line in lines if "monitor" in line]
+    assert said == [f"antarium serve: the monitor stopped at its start (exit code 2): antarium monitor: error: the "
+                    f"page cannot be served on 127.0.0.1 port {taken_port}: in use (another monitor?); set [monitor] "
+                    "port (or --port; 0: any free port)"], lines
+
+
+def test_the_monitor_without_the_bus_is_refused():
+    with pytest.raises(ConfigError, match=r"^\[monitor\] enabled = true needs the bus, but \[bus\] enabled = false: "
+                                          r"the monitor shows the rig's bus streams; enable \[bus\] or set \[monitor\] "
+                                          r"enabled = false$"):
+        check_config(resolve({"bus": {"enabled": False}, "monitor": {"enabled": True}}))
+    check_config(resolve({"bus": {"enabled": False}}))  # the monitor off: no bus needed
