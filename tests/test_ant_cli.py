@@ -49,3 +49,40 @@ def test_unknown_models_and_parameters_are_refused(tmp_path, capsys):
     assert "allowed: antcar, ardin, perfect_memory" in capsys.readouterr().err
     assert main(["ant", "learn", "--route", "curved:1", "--param", "n_mbons=3", "--out", str(tmp_path / "m.npz")]) == 2
     assert "unknown antcar parameter" in capsys.readouterr().err
+
+
+def test_params_are_converted_by_the_type_of_the_models_field():
+    from antarium.commands.ant import _params
+
+    assert _params(["avoid=False", "flow_gain=0.3", "n_kc=2e4", "flow_method=foe"], "cxmb") == {
+        "avoid": False, "flow_gain": 0.3, "n_kc": 20_000, "flow_method": "foe"}
+    converted = _params(["avoid=1", "noise=0", "seed=7"], "cx")
+    assert converted == {"avoid": True, "noise": 0.0, "seed": 7}
+    assert type(converted["noise"]) is float and type(converted["seed"]) is int
+    assert _params(["avoid=TRUE"], "one_ring") == {"avoid": True} and _params(["avoid=0"], "cx") == {"avoid": False}
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["learn", "--route", "curved:1", "--param", "n_kc=1.5"], "antcar parameter n_kc must be an integer, got 1.5"),
+    (["learn", "--model", "ardin", "--route", "curved:1", "--param", "seed=x"],
+     "ardin parameter seed must be an integer, got 'x'"),
+    (["learn", "--route", "curved:1", "--param", "k_v=nan"], "antcar parameter k_v must be a finite number, got nan"),
+    (["arena", "--param", "avoid=maybe"], "cxmb parameter avoid must be true or false (or 1 or 0), got 'maybe'"),
+    (["homing", "--param", "avoid=False=1"], "cx parameter avoid must be true or false"),
+    (["learn", "--route", "curved:1", "--spacing", "0"],
+     "--spacing must be > 0 m (leave it out for the default), got 0"),
+    (["learn", "--route", "curved:1", "--spacing", "-0.02"], "--spacing must be > 0 m"),
+    (["run", "no_such_model.npz", "--max-decisions", "0"],
+     "--max-decisions must be > 0 (leave it out for the default)"),
+    (["serve", "no_such_model.npz", "--config", "no.toml", "--max-decisions", "-3"], "--max-decisions must be > 0"),
+    (["homing", "--compass", "sky", "--param", "compass=ideal", "--seeds", "1", "--steps", "2", "--inbound", "1"],
+     "model parameter compass='ideal' differs from the task's compass 'sky'; choose the compass with --compass"),
+    (["arena", "--compass", "ideal", "--param", "compass=sky", "--seeds", "1", "--steps", "2", "--inbound", "1"],
+     "choose the compass with --compass"),
+])
+def test_bad_values_are_refused_in_one_line(tmp_path, capsys, argv, message):
+    out = ["--out", str(tmp_path / ("m.npz" if argv[0] == "learn" else "out"))]
+    assert main(["ant", *argv, *out]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "m.npz").exists()

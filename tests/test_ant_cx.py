@@ -80,6 +80,23 @@ def test_homing_metrics_of_a_straight_return():
     assert m["tortuosity"] == pytest.approx(1.9 / 1.9)
 
 
+def _line(x0: float, dx: float, n: int) -> Trip:
+    return Trip.walked([(x0 + i * dx, 0.0) for i in range(1, n + 1)], [0.0] * n, [{}] * n)
+
+
+def test_tortuosity_is_path_length_over_the_approach_and_nan_when_the_ant_never_came_nearer():
+    out = _line(0.0, 0.01, 100)  # 1 m straight out
+    away = homing_metrics(out, _line(1.0, 0.01, 100))
+    assert away["closest_approach_m"] == pytest.approx(1.0) and math.isnan(away["tortuosity"])
+    assert math.isnan(homing_metrics(out, Trip.walked([], [], []))["tortuosity"])  # lost its cue at once
+    half = Trip.walked([(1.0 - i * 0.01, 0.0) for i in range(1, 51)] + [(0.5, 0.0)] * 50, [math.pi] * 100, [{}] * 100)
+    assert homing_metrics(out, half)["tortuosity"] == pytest.approx(0.5 / 0.5)
+    # 0.4 m sideways, then 1 m toward the nest: L = 1.4 m, C = 1 - hypot(0, 0.4) m
+    zigzag = Trip.walked([(1.0, 0.1 * i) for i in range(1, 5)] + [(1.0 - 0.1 * i, 0.4) for i in range(1, 11)],
+                         [0.0] * 14, [{}] * 14)
+    assert homing_metrics(out, zigzag)["tortuosity"] == pytest.approx(1.4 / (1.0 - 0.4))
+
+
 @pytest.mark.parametrize("kind", ["cx", "cxmb", "one_ring"])
 def test_central_complex_models_round_trip_through_model_files(kind, tmp_path):
     from antarium.ant.eye import EyeParams
@@ -160,3 +177,35 @@ def test_arena_and_foraging_runs_go_on_after_a_trip_without_a_compass_cue(tmp_pa
     homing = pi_homing(tmp_path, seeds=[0, 1], n_outbound=10, scene={"scene": "sky", "dop_max": 0.0})
     assert homing["runs"] == 2 and set(homing["runs_without_cue"]) == {"seed 0", "seed 1"}
     assert math.isnan(homing["closest_approach_share_median"])
+
+
+def test_a_seeds_foraging_trip_does_not_depend_on_the_seeds_before_it(monkeypatch):
+    from antarium.ant import homing
+
+    ends: dict[int, list] = {}
+    trial = homing.pi_trial
+
+    def spy(ant, seed, n_outbound, n_inbound):
+        metrics, out, home = trial(ant, seed, n_outbound, n_inbound)
+        ends.setdefault(seed, []).append(np.vstack([out.xy, home.xy]))
+        return metrics, out, home
+
+    monkeypatch.setattr(homing, "pi_trial", spy)
+    pi_homing(None, seeds=[1], n_outbound=60, n_inbound=60, compass="ideal")
+    pi_homing(None, seeds=[0, 1], n_outbound=60, n_inbound=60, compass="ideal")
+    alone, after_seed_0 = ends[1]
+    assert alone.shape == (119, 2)
+    np.testing.assert_array_equal(alone, after_seed_0)
+    assert not np.array_equal(ends[0][0][:59], alone[:59])  # another route
+
+
+def test_one_ring_refuses_cxmbs_k_which_it_does_not_use():
+    from antarium.ant.models import make_model
+    from antarium.ant.navigation import OneRingParams
+
+    with pytest.raises(ValueError, match=r"One Ring does not use CXMB's k \(got 0.3; allowed: its default 0.8\); "
+                                         r"weigh CPU4, the MBONs and the optic flow with k_cx, k_mb, k_of"):
+        make_model("one_ring", 800, k=0.3, n_kc=100)
+    assert OneRingParams().k == 0.8  # the default stays valid (files and make_model without k)
+    assert make_model("one_ring", 800, k_cx=0.5, k_mb=0.3, k_of=0.2, n_kc=100).params.k_mb == 0.3
+    assert make_model("cxmb", 800, k=0.3, n_kc=100).params.k == 0.3

@@ -108,3 +108,28 @@ def test_bad_input_is_refused_with_a_clear_error(eye):
         EyeParams(channel="red")
     with pytest.raises(ValueError, match="finite"):
         eye.look(np.zeros((20350, 2), np.uint16), yaw=math.nan)
+
+
+@pytest.mark.parametrize("params", [EyeParams(sigma_deg=16.0), EyeParams(sigma_deg=60.0),
+                                    EyeParams(elevation_min_deg=-90.0, sigma_deg=20.0),
+                                    EyeParams(sigma_deg=1.0, fine_elevation_deg=10.0)])
+def test_every_valid_eye_gives_a_finite_view(dome, params):
+    """A wide acceptance reaches below the dome's lowest LEDs (-57 deg): those fine samples take their nearest LEDs
+    instead of 0 / 0 = NaN; a fine grid coarse against sigma keeps each row's nearest fine elevation."""
+    eye = Eye.from_dome(dome, params)
+    x = np.random.default_rng(0).random(eye.channel_pixels.size).astype(np.float32)
+    view = eye.look_intensities(x)
+    assert np.all(np.isfinite(view.band)) and np.all(np.isfinite(view.pns()))
+    assert 0.0 < view.band.min() and view.band.max() < 1.0  # a weighted mean of intensities in (0, 1)
+
+
+@pytest.mark.parametrize("params", [EyeParams(), EyeParams(sigma_deg=30.0), EyeParams(sigma_deg=60.0),
+                                    EyeParams(cols=25, fine_per_col=3, sigma_deg=60.0)])
+def test_the_compiled_band_equals_the_dense_reference(dome, params):
+    """Also for an azimuth blur as wide as the circle (an even number of fine columns: the opposite column once)."""
+    eye = Eye.from_dome(dome, params)
+    x = np.random.default_rng(1).random(eye.channel_pixels.size).astype(np.float32)
+    band = eye.look_intensities(x).band
+    ref = eye._blur_el.astype(np.float64) @ (eye._sample @ x.astype(np.float64)).reshape(eye._fine_shape) \
+        @ eye._blur_az.astype(np.float64)
+    assert np.abs(band - ref).max() <= 1e-5 * np.abs(ref).max()

@@ -65,6 +65,48 @@ def test_kernel_breaks_ties_toward_lower_kc_and_handles_all_active():
     np.testing.assert_allclose(everyone.novelty(random_view(3).pns([0.0, 1.0]), [m])[:, 0], 0.8, atol=1e-12)
 
 
+def _reference_active(kc: KenyonCells, pn: np.ndarray) -> np.ndarray:
+    """The k largest EPs, ties broken toward the lower KC index, by a stable sort (ascending KC index)."""
+    order = np.argsort(-kc.excitation(pn), axis=1, kind="stable")[:, :kc.k]
+    return np.sort(order, axis=1)
+
+
+def _quantised_sparse_pn(rng, m: int, zeros: float) -> np.ndarray:
+    pn = rng.random((m, N_PN)).astype(np.float32)
+    pn[rng.random((m, N_PN)) < zeros] = 0.0
+    return np.round(pn * 4) / 4  # few distinct intensities: many KCs tie at the k-th EP
+
+
+@pytest.mark.parametrize("m", [1, 5, 64, 70])
+def test_learning_selects_the_kcs_recall_reads_also_on_ties(m):
+    """`KenyonCells.active` (what learning depresses) is the kernel's selection: the k largest EPs, ties at the
+    k-th toward the lower KC index; so a view just learned reads novelty 0, also from quantised inputs."""
+    rng = np.random.default_rng(4)
+    kc = KenyonCells(N_PN, 20_000, 10, 0.01, seed=0)
+    for zeros in (0.0, 0.5, 0.97):
+        pn = _quantised_sparse_pn(rng, m, zeros)
+        active = kc.active(pn)
+        assert active.shape == (m, kc.k) and active.dtype == np.int64
+        np.testing.assert_array_equal(active, _reference_active(kc, pn))
+        for row in range(m):
+            mbon = MBON(kc.n_kc)
+            mbon.learn(active[row])
+            assert kc.novelty(pn[row:row + 1], [mbon])[0, 0] == 0.0
+            assert mbon.novelty(kc.active(pn[row:row + 1]))[0] == 0.0
+    smooth = random_view(5).pns(np.linspace(-0.5, 0.5, m))  # distinct EPs: the plain k largest
+    np.testing.assert_array_equal(kc.active(smooth), _reference_active(kc, smooth))
+
+
+def test_an_ardin_ant_finds_a_view_it_just_learned_fully_familiar_in_a_sparse_scene():
+    """A black scene with one bright patch: few PNs see an edge, so many KCs tie at the k-th EP."""
+    band = np.zeros((16, 300), np.float32)
+    band[5:7, 100:106] = 1.0
+    model = ArdinModel(N_PN)
+    model.learn(View(band, 6, 50))
+    cmd = model.decide(View(band, 6, 50))
+    assert cmd.turn == 0.0 and cmd.trace["novelty"] == 0.0
+
+
 def test_kernel_rejects_wrong_pn_shape():
     kc = KenyonCells(N_PN, 1_000, 4, 0.01, seed=1)
     with pytest.raises(ValueError, match=r"shape \(m, 800\)"):

@@ -152,3 +152,14 @@ def test_pi_error_counts_steering_errors_cumulatively():
     for v in views:
         model.learn(v)
     assert memory_pi_error(model, views) < 0.05
+
+
+def test_memory_pi_error_is_taken_about_the_direction_the_views_were_learned_in():
+    """A homing Antcar (phase 180 deg) learns its views looking back along the route: PI_error rotates them about
+    that direction, where its MBONs know them, as for a route-following one about the heading."""
+    views = [random_view(s) for s in range(4)]
+    for phase in (0.0, 180.0, 90.0):
+        model = AntcarModel(N_PN, AntcarParams(phase_deg=phase))
+        for v in views:
+            model.learn(v)
+        assert memory_pi_error(model, views) < 0.05, phase

@@ -72,3 +72,58 @@ def test_wrong_version_shape_or_kind_is_refused(tmp_path):
         load_model(tmp_path / "junk.npz")
     with pytest.raises(FileNotFoundError):
         load_model(tmp_path / "missing.npz")
+
+
+@pytest.mark.parametrize("cut", [100, 0.5, -10])
+def test_a_truncated_file_is_refused_naming_it(tmp_path, cut):
+    path = save_model(tmp_path / "m.npz", make_model("antcar", N_PN, n_kc=2000, place_n_kc=500), EyeParams())
+    data = path.read_bytes()
+    end = int(len(data) * cut) if isinstance(cut, float) else cut
+    (tmp_path / "cut.npz").write_bytes(data[:end])
+    with pytest.raises(ModelFileError, match=r"cut\.npz: damaged model file \(a truncated or corrupted"):
+        load_model(tmp_path / "cut.npz")
+
+
+def test_a_corrupted_entry_is_refused_naming_the_file(tmp_path):
+    path = save_model(tmp_path / "m.npz", make_model("ardin", N_PN, n_kc=2000), EyeParams())
+    data = bytearray(path.read_bytes())
+    at = data.index(b"mbon_familiarity.npy") + 60  # inside the compressed member
+    data[at:at + 40] = bytes(40)
+    (tmp_path / "bad.npz").write_bytes(bytes(data))
+    with pytest.raises(ModelFileError, match=r"bad\.npz: damaged model file"):
+        load_model(tmp_path / "bad.npz")
+
+
+@pytest.mark.parametrize(("changes", "message"), [
+    ({"kind": None}, "entry 'kind' missing"),
+    ({"learned_views": None}, "entry 'learned_views' missing"),
+    ({"params": None}, "entry 'params' missing"),
+    ({"version": np.array("3")}, r"entry 'version' must be a single int, got <U1"),
+    ({"kind": np.array(3)}, "entry 'kind' must be a single str"),
+    ({"learned_views": np.array([1, 2])}, r"entry 'learned_views' must be a single int, got int64 of shape \(2,\)"),
+    ({"eye": "future"}, r"eye parameters: unknown \['future_field'\]; allowed: \['channel'"),
+    ({"eye": "short"}, r"eye parameters: missing \['gamma'\]"),
+    ({"eye": np.array("[1, 2]")}, "entry 'eye' must hold a JSON object of eye parameters, got list"),
+    ({"eye": np.array("{")}, "entry 'eye' is not valid JSON"),
+    ({"route": np.array([1.0, 2.0, 3.0])}, r"the route must be finite \(n, 2\) floats .* got float64 of shape \(3,\)"),
+    ({"route": np.array([[0.0, np.nan]])}, r"the route must be finite \(n, 2\) floats"),
+])
+def test_a_file_with_a_wrong_or_missing_entry_is_refused_in_one_line(tmp_path, changes, message):
+    path = save_model(tmp_path / "m.npz", make_model("antcar", N_PN, n_kc=2000, place_n_kc=500), EyeParams(),
+                      route=np.array([[0.0, 0.0], [1.0, 0.0]]))
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    eye = json.loads(str(arrays["eye"]))
+    if changes.get("eye") == "future":
+        changes["eye"] = np.array(json.dumps({**eye, "future_field": 1}))
+    elif changes.get("eye") == "short":
+        changes["eye"] = np.array(json.dumps({k: v for k, v in eye.items() if k != "gamma"}))
+    for key, value in changes.items():
+        if value is None:
+            del arrays[key]
+        else:
+            arrays[key] = value
+    np.savez(path, **arrays)
+    with pytest.raises(ModelFileError, match=message) as info:
+        load_model(path)
+    assert str(info.value).startswith(f"{path}: ") and "\n" not in str(info.value)

@@ -132,6 +132,17 @@ def _gaussian_rows(centres: np.ndarray, grid: np.ndarray, sigma: float, periodic
         delta = np.remainder(delta + math.pi, math.tau) - math.pi
     w = np.exp(-0.5 * (delta / sigma) ** 2)
     w[w < 1e-4] = 0.0
+    # A centre farther than ~4.3 sigma from every grid point (a grid coarse against sigma) keeps its nearest point.
+    empty = np.flatnonzero(w.sum(axis=1) == 0.0)
+    w[empty, np.argmin(np.abs(delta[empty]), axis=1)] = 1.0
+    return w / w.sum(axis=1, keepdims=True)
+
+
+def _nearest_weights(dist: np.ndarray, width: float) -> np.ndarray:
+    """Row-normalised Gaussian weights exp(-(dist / width)^2 / 2) (n, K) of each row's K distances (radians),
+    computed relative to the row's nearest distance so that a point far from every LED (below the lowest ring)
+    still weighs its nearest LEDs instead of underflowing to 0 / 0."""
+    w = np.exp(-0.5 * (dist * dist - dist.min(axis=1, keepdims=True) ** 2) / (width * width))
     return w / w.sum(axis=1, keepdims=True)
 
 
@@ -183,14 +194,18 @@ class Eye:
         dist = dist.reshape(len(grid), -1)
         idx = idx.reshape(len(grid), -1)
         spacing = float(np.median(dist[:, 0])) + 1e-9
-        w = np.exp(-0.5 * (dist / max(spacing, 0.5 * math.radians(p.fine_elevation_deg))) ** 2)
-        w /= w.sum(axis=1, keepdims=True)
+        w = _nearest_weights(dist, max(spacing, 0.5 * math.radians(p.fine_elevation_deg)))
         rows = np.repeat(np.arange(len(grid)), idx.shape[1])
         self._sample = sparse.csr_matrix((w.ravel(), (rows, idx.ravel())), shape=(len(grid), d.shape[0]))
         self._fine_shape = (len(fine_el), n_fine)
         # Stage 2 (dense): Gaussian acceptance, in elevation (selecting the eye's rows) and in azimuth (circular).
         self._blur_el = _gaussian_rows(self.elevations, fine_el, sigma, periodic=False).astype(np.float32)
         self._blur_az = _gaussian_rows(az, az, sigma, periodic=True).T.astype(np.float32)
+        for name, table in (("fine sampling", self._sample.data), ("elevation blur", self._blur_el),
+                            ("azimuth blur", self._blur_az)):
+            if not np.all(np.isfinite(table)):
+                raise ValueError(f"the eye's {name} weights are not finite (sigma_deg {p.sigma_deg}, "
+                                 f"fine_elevation_deg {p.fine_elevation_deg}); they must be finite numbers")
         self._band = None  # the compiled stages 1-2 (`eye_kernel.Band`), made on first look
 
     @classmethod

@@ -53,11 +53,12 @@ def scan_edges(band: np.ndarray, i0: np.ndarray, i1: np.ndarray, w: np.ndarray) 
 
 
 @njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
-def _band(nb_idx, nb_w, x, el_ptr, el_idx, el_w, taps, fine, tmp, ext, out):
+def _band(nb_idx, nb_w, x, el_ptr, el_idx, el_w, taps, h, fine, tmp, ext, out):
     """The eye's band (rows, n_fine) float32 into `out` from intensities x (N,) float32, in three passes:
     fine (fine rows * n_fine,) = each fine point's neighbours nb_idx (n, K) int32 weighted by nb_w (n, K) float32;
     tmp = B_el fine (CSR B_el (rows, fine rows)); out = tmp circularly convolved along azimuth with `taps`
-    (2h + 1,) (B_az is circulant: out[r, c] = sum_k taps[k] tmp[r, (c + k - h) mod n_fine]). float32 sums."""
+    (at most n_fine of them, offsets -h ..; B_az is circulant: out[r, c] = sum_k taps[k] tmp[r, (c + k - h) mod
+    n_fine]). float32 sums."""
     n, k_nb = nb_idx.shape
     for i in range(n):
         v = np.float32(0.0)
@@ -65,7 +66,6 @@ def _band(nb_idx, nb_w, x, el_ptr, el_idx, el_w, taps, fine, tmp, ext, out):
             v += nb_w[i, j] * x[nb_idx[i, j]]
         fine[i] = v
     rows, n_fine = out.shape
-    h = (taps.shape[0] - 1) // 2
     for r in range(rows):
         for c in range(n_fine):
             tmp[r, c] = 0.0
@@ -107,8 +107,10 @@ class Band:
             raise ValueError("the eye's azimuth blur must be circulant")
         support = np.flatnonzero(np.roll(column, n_fine // 2))  # taps centred on offset 0
         h = int(max(n_fine // 2 - support.min(), support.max() - n_fine // 2))
-        # out[:, c] = sum_j tmp[:, j] column[(j - c) mod n] = sum_k taps[k] tmp[:, (c + k - h) mod n]
-        self._taps = np.ascontiguousarray(column[(np.arange(2 * h + 1) - h) % n_fine])
+        # out[:, c] = sum_j tmp[:, j] column[(j - c) mod n] = sum_k taps[k] tmp[:, (c + k - h) mod n]; a blur as
+        # wide as the circle (2h + 1 > n offsets) takes every offset once, not the opposite one twice
+        self._h = h
+        self._taps = np.ascontiguousarray(column[(np.arange(min(2 * h + 1, n_fine)) - h) % n_fine])
         el = sparse.csr_matrix(blur_el)
         self._el = (el.indptr, el.indices, el.data.astype(np.float32))
         self._fine = np.empty(sample_matrix.shape[0], np.float32)
@@ -119,6 +121,6 @@ class Band:
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """(rows, n_fine) float32 band (a new array) for intensities x (N,)."""
         out = np.empty(self.shape, np.float32)
-        _band(*self._nb, np.ascontiguousarray(x, dtype=np.float32), *self._el, self._taps, self._fine, self._tmp,
-              self._ext, out)
+        _band(*self._nb, np.ascontiguousarray(x, dtype=np.float32), *self._el, self._taps, self._h, self._fine,
+              self._tmp, self._ext, out)
         return out

@@ -4,9 +4,11 @@ vector-memory and CXMB trips, Mitchell 2019 section 2.5).
 Foraging task: from the nest at the origin the ant walks a random outbound route (a correlated random walk of
 `n_outbound` decisions driven from outside, its CX integrating what the ball and the compass tell it), then homes
 by its CX for `n_inbound` decisions. Metrics (Stone 2017): closest approach to the nest as a share of the outbound
-path length; tortuosity of the homeward path (path length until the closest approach / the straight
-feeder-to-nest distance); the search around the nest (median distance from the nest after the closest approach,
-as a share of the outbound path).
+path length; tortuosity of the homeward path, tau = L / C as Stone 2017's: the path length L (m) from the feeder
+to the closest approach over the distance C (m) it brought the ant nearer the nest (feeder-to-nest distance minus
+the closest approach; 1 = a straight approach, NaN when the ant never came nearer than the feeder; Stone 2017
+reads C after a path as long as the feeder distance); the search around the nest (median distance from the nest
+after the closest approach, as a share of the outbound path).
 
 A trip on which the compass loses its cue (the sky compass reads no polarised sky, e.g. with the ant inside or
 against a cylinder that hides the dorsal rim) ends there: `Trip.lost_cue` says at which decision and why, its
@@ -19,12 +21,13 @@ import copy
 import json
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from antarium.ant.central_complex import CentralComplex
 from antarium.ant.compass import NoSkyCueError
 from antarium.ant.eye import EyeParams
 from antarium.ant.metrics import median_mad
@@ -149,7 +152,9 @@ def path_length(xy: np.ndarray, start=(0.0, 0.0)) -> float:
 
 def homing_metrics(outbound: Trip, inbound: Trip, nest=(0.0, 0.0)) -> dict[str, float]:
     """Closest approach (m, share of the outbound length), tortuosity and search spread of a homeward trip, over
-    the feeder and the decisions it walked (a trip that lost its cue at once stays at the feeder's distance)."""
+    the feeder and the decisions it walked (a trip that lost its cue at once stays at the feeder's distance).
+    Tortuosity: Stone 2017's L / C, path length (m) to the closest approach over how much nearer (m) the nest it
+    is there than at the feeder; NaN when it never came nearer (its closest approach is the feeder)."""
     length = path_length(outbound.xy, nest)
     start = outbound.xy[-1]
     feeder = float(np.hypot(*(start - nest)))
@@ -158,16 +163,34 @@ def homing_metrics(outbound: Trip, inbound: Trip, nest=(0.0, 0.0)) -> dict[str, 
     k = int(np.argmin(dist))
     path = path[:k + 1]
     homeward = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+    approach = float(dist[0] - dist[k])  # > 0 whenever k > 0: argmin takes the first of equal distances
+    tortuosity = homeward / approach if k > 0 and approach > 0 else math.nan
     return {"outbound_length_m": length, "feeder_distance_m": feeder, "closest_approach_m": float(dist[k]),
-            "closest_approach_share": float(dist[k] / length), "tortuosity": homeward / max(feeder - dist[k], 1e-9),
+            "closest_approach_share": float(dist[k] / length), "tortuosity": tortuosity,
             "search_median_share": float(np.median(dist[k:]) / length)}
 
 
+def _check_compass(model_params: dict | None, compass: str) -> None:
+    """Refuse a model parameter `compass` other than the task's: the model and the rig would read different
+    compasses (and the files carry the task's name)."""
+    given = (model_params or {}).get("compass", compass)
+    if given != compass:
+        raise ValueError(f"model parameter compass={given!r} differs from the task's compass {compass!r}; "
+                         f"choose the compass with --compass (sky or ideal), not --param compass")
+
+
+def trial_cx(params, seed: int) -> CentralComplex:
+    """A fresh CX for trial `seed` of a model with `params` (`CXModelParams`): its noise stream seeded from
+    (params.seed, seed), so that a trial walks the same whichever trials ran before it."""
+    stream = int(np.random.SeedSequence([params.seed, seed]).generate_state(1)[0])
+    return CentralComplex(replace(params.cx(), seed=stream))
+
+
 def pi_trial(ant, seed: int, n_outbound: int, n_inbound: int) -> tuple[dict[str, float], Trip, Trip]:
-    """One foraging trip: fresh CX memory, outbound, homing; (metrics, outbound, inbound). The metrics carry
-    `lost_cue` ("outbound/inbound, decision k: why") when the compass lost its cue; after an outbound that lost it
-    the ant does not home (metrics NaN)."""
-    ant.model.cx.reset()
+    """One foraging trip: a fresh CX (memory and noise stream, `trial_cx`), outbound, homing; (metrics, outbound,
+    inbound). The metrics carry `lost_cue` ("outbound/inbound, decision k: why") when the compass lost its cue;
+    after an outbound that lost it the ant does not home (metrics NaN)."""
+    ant.model.cx = trial_cx(ant.model.params, seed)
     outbound = walk_outbound(ant, outbound_turns(seed, n_outbound), ant.model.params.step)
     if outbound.lost_cue is not None:
         nan = dict.fromkeys(("outbound_length_m", "feeder_distance_m", "closest_approach_m", "closest_approach_share",
@@ -187,6 +210,7 @@ def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 150
     from antarium.ant.world import virtual_rig
 
     n_inbound = n_inbound or n_outbound
+    _check_compass(model_params, compass)
     model = make_model("cx", EyeParams().n_pn, **{"compass": compass, **(model_params or {})})
     outcomes: list[HomingOutcome] = []
     trips: dict[str, tuple[Trip, Trip]] = {}
@@ -326,6 +350,7 @@ def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound:
     from antarium.ant.world import virtual_rig
 
     n_inbound = n_inbound or n_outbound
+    _check_compass(model_params, compass)
     outcomes: list[ArenaOutcome] = []
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:

@@ -1,14 +1,15 @@
 """Compiled k-WTA familiarity (numba): the MBONs' novelty for many PN vectors at once, without sorting.
 
 `Workspace(pn_index, k, n_pn).novelty(pn, weights)` equals `MBON.novelty(KenyonCells.active(pn))` for every
-MBON in `weights`:
+MBON in `weights`, and `Workspace.active(pn)` is `KenyonCells.active` (the KCs learning depresses): both select
+with `_winners`:
   EP = the sum of each KC's PNs, for 64 PN vectors at once (SIMD over the vectors; the PNs summed in ascending
   index order in float32, the order of the sparse product in `KenyonCells.excitation`, so EP is the same),
   the k-th largest EP of each vector from the candidates above a lower bound (a value that k of the maxima of
   blocks of 16 KCs reach, from their histogram: only the blocks reaching it are read), and lambda = undepressed
   active KCs / k.
-Ties at the k-th value (equal EP) are broken toward the lower KC index; `np.argpartition` breaks them in an
-unspecified way, so the two agree exactly whenever the k-th largest EP is unique (any natural image).
+Ties at the k-th value (equal EP, e.g. quantised or mostly-zero PNs) are broken toward the lower KC index, in
+learning as in recall, so a view just learned reads novelty 0.
 Compiled on first use and cached on disk; single-threaded (one core per model in a sweep).
 """
 
@@ -149,48 +150,96 @@ def _lower_bound(values, k, counts):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
-def _select(ep_t, k, block_max, weights, out):
-    """novelty (G, n_out) float64 into `out` from EP (G, n_kc) and the MBONs' weights (n_out, n_kc) uint8.
+def _winners(ep, k, block_max, size, cand, vals, scratch, counts, chosen):
+    """The k-WTA of one vector: the indices of its k largest EPs `ep` (n_kc,) float32 into chosen[:k] int32, in
+    ascending KC index, ties at the k-th value broken toward the lower KC index; returns how many were written
+    (k for finite EPs). The one selection both learning (`active`) and recall (`_select`) use.
 
     A value that k block maxima reach is a lower bound of the k-th largest EP (k blocks hold a value at least that
-    large), so only the blocks whose maximum reaches it can hold active KCs."""
+    large), so only the blocks whose maximum (`block_max`, blocks of `size` KCs) reaches it can hold active KCs."""
+    n_kc = ep.shape[0]
+    low = _lower_bound(block_max, k, counts)
+    n = 0
+    for b in range(block_max.shape[0]):
+        if block_max[b] >= low:
+            for c in range(b * size, min(n_kc, (b + 1) * size)):
+                v = ep[c]
+                cand[n] = c  # written always, kept only when it reaches the bound (no branch to mispredict)
+                vals[n] = v
+                n += v >= low
+    scratch[:n] = vals[:n]
+    kth = _kth_largest(scratch, n, k)
+    ties_left = k
+    for i in range(n):
+        if vals[i] > kth:
+            ties_left -= 1
+    j = 0
+    for i in range(n):
+        v = vals[i]
+        take = v > kth
+        if not take and v == kth and ties_left > 0:
+            take = True
+            ties_left -= 1
+        if take and j < k:
+            chosen[j] = cand[i]
+            j += 1
+    return j
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+def _select(ep_t, k, block_max, weights, out):
+    """novelty (G, n_out) float64 into `out` from EP (G, n_kc) and the MBONs' weights (n_out, n_kc) uint8: the
+    undepressed share of each vector's active KCs (`_winners`)."""
     n_kc = ep_t.shape[1]
-    n_blocks = block_max.shape[1]
-    size = (n_kc + n_blocks - 1) // n_blocks
+    size = (n_kc + block_max.shape[1] - 1) // block_max.shape[1]
     n_out = weights.shape[0]
     cand = np.empty(n_kc, np.int32)
     vals = np.empty(n_kc, np.float32)
     scratch = np.empty(n_kc, np.float32)
     counts = np.empty(_BINS, np.int64)
+    chosen = np.empty(k, np.int32)
     for d in range(out.shape[0]):
-        low = _lower_bound(block_max[d], k, counts)
-        n = 0
-        for b in range(n_blocks):
-            if block_max[d, b] >= low:
-                for c in range(b * size, min(n_kc, (b + 1) * size)):
-                    v = ep_t[d, c]
-                    cand[n] = c  # written always, kept only when it reaches the bound (no branch to mispredict)
-                    vals[n] = v
-                    n += v >= low
-        scratch[:n] = vals[:n]
-        kth = _kth_largest(scratch, n, k)
-        ties_left = k
-        for i in range(n):
-            if vals[i] > kth:
-                ties_left -= 1
+        j = _winners(ep_t[d], k, block_max[d], size, cand, vals, scratch, counts, chosen)
         for o in range(n_out):
-            out[d, o] = 0.0
-        for i in range(n):
-            v = vals[i]
-            take = v > kth
-            if not take and v == kth and ties_left > 0:
-                take = True
-                ties_left -= 1
-            if take:
-                for o in range(n_out):
-                    out[d, o] += weights[o, cand[i]]
-        for o in range(n_out):
-            out[d, o] /= k
+            total = 0.0
+            for i in range(j):
+                total += weights[o, chosen[i]]
+            out[d, o] = total / k
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+def _pick(ep_t, k, block_max, out):
+    """The active KCs (G, k) int64 into `out` of the vectors' EPs (G, n_kc) (`_winners`); -1 fills a row that had
+    fewer than k winners (EPs not finite)."""
+    n_kc = ep_t.shape[1]
+    size = (n_kc + block_max.shape[1] - 1) // block_max.shape[1]
+    cand = np.empty(n_kc, np.int32)
+    vals = np.empty(n_kc, np.float32)
+    scratch = np.empty(n_kc, np.float32)
+    counts = np.empty(_BINS, np.int64)
+    chosen = np.empty(k, np.int32)
+    for d in range(out.shape[0]):
+        j = _winners(ep_t[d], k, block_max[d], size, cand, vals, scratch, counts, chosen)
+        for i in range(k):
+            out[d, i] = chosen[i] if i < j else -1
+
+
+@njit(cache=True, nogil=True)
+def _active_one(pn, pn_index, k, ep, block_max, out):
+    """The active KCs (1, k) into `out` for one PN vector (n_pn,) float32."""
+    _excitation_one(pn, pn_index, ep, block_max)
+    _pick(ep, k, block_max, out)
+
+
+@njit(cache=True, nogil=True)
+def _active(pn_groups, pn_index, k, ep_t, block_max, out):
+    """The active KCs (m, k) into `out` for PN vectors in groups (n_groups, n_pn, G) (`_novelty`'s layout)."""
+    n_groups, _, g = pn_groups.shape
+    m = out.shape[0]
+    for q in range(n_groups):
+        _excitation(pn_groups[q], pn_index, ep_t, block_max)
+        d0 = q * g
+        _pick(ep_t, k, block_max, out[d0:min(m, d0 + g)])
 
 
 def sorted_pn_index(pn_index: np.ndarray) -> np.ndarray:
@@ -210,6 +259,19 @@ class Workspace:
         self.block_max = np.empty((_GROUP, (n_kc + block - 1) // block), np.float32)
         self.groups = np.zeros((1, n_pn, _GROUP), np.float32)
 
+    def _groups(self, pn: np.ndarray) -> np.ndarray:
+        """The PN vectors (m, n_pn) in groups (n_groups, n_pn, G), the last one zero-padded."""
+        m = pn.shape[0]
+        n_groups = -(-m // _GROUP)
+        if self.groups.shape[0] < n_groups:
+            self.groups = np.zeros((n_groups, self.groups.shape[1], _GROUP), np.float32)
+        groups = self.groups[:n_groups]
+        for q in range(n_groups):
+            part = pn[q * _GROUP:(q + 1) * _GROUP]
+            groups[q, :, :part.shape[0]] = part.T
+            groups[q, :, part.shape[0]:] = 0.0
+        return groups
+
     def novelty(self, pn: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """lambda (m, n_out) float64 in [0, 1] (1 = novel) of n_out MBONs for PN vectors (m, n_pn) float32;
         weights: (n_out, n_kc) bool or uint8, True = undepressed synapse."""
@@ -220,13 +282,19 @@ class Workspace:
             _novelty_one(np.ascontiguousarray(pn[0], np.float32), self.pn_index, self.k, self.ep_t[:1],
                          self.block_max[:1], weights, out)
             return out
-        n_groups = -(-m // _GROUP)
-        if self.groups.shape[0] < n_groups:
-            self.groups = np.zeros((n_groups, self.groups.shape[1], _GROUP), np.float32)
-        groups = self.groups[:n_groups]
-        for q in range(n_groups):
-            part = pn[q * _GROUP:(q + 1) * _GROUP]
-            groups[q, :, :part.shape[0]] = part.T
-            groups[q, :, part.shape[0]:] = 0.0
-        _novelty(groups, self.pn_index, self.k, self.ep_t, self.block_max, weights, out)
+        _novelty(self._groups(pn), self.pn_index, self.k, self.ep_t, self.block_max, weights, out)
+        return out
+
+    def active(self, pn: np.ndarray) -> np.ndarray:
+        """The active KCs (m, k) int64 (ascending KC index) for PN vectors (m, n_pn) float32: the k largest EPs,
+        ties broken toward the lower KC index, the KCs `novelty` reads (so a view just learned reads 0)."""
+        m = pn.shape[0]
+        out = np.empty((m, self.k), np.int64)
+        if m == 1:
+            _active_one(np.ascontiguousarray(pn[0], np.float32), self.pn_index, self.k, self.ep_t[:1],
+                        self.block_max[:1], out)
+        elif m > 1:
+            _active(self._groups(pn), self.pn_index, self.k, self.ep_t, self.block_max, out)
+        if out.size and out.min() < 0:
+            raise ValueError("k-WTA found fewer than k active KCs: the PN input must be finite")
         return out

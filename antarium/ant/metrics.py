@@ -75,15 +75,18 @@ def pi_error(lambda_diff, theta_e) -> np.ndarray:
 
 
 def memory_pi_error(model, views, half_range_deg: float | None = None, step_deg: float = 1.0) -> float:
-    """PI_error over learned views rotated by +-`half_range_deg` in `step_deg` steps (|theta| < 1 deg left out).
-    The range defaults to the model's oscillation amplitude: the operating area its learning defines."""
+    """PI_error over learned views rotated by theta = +-`half_range_deg` (degrees) in `step_deg` steps (|theta| < 1
+    deg left out) about the direction the model learned them in: the view's heading turned by the model's
+    oscillation centre `phase_deg` (180: looking back along the route). The range defaults to the model's
+    oscillation amplitude: the operating area its learning defines."""
     if half_range_deg is None:
         half_range_deg = model.params.amplitude_deg
+    centre = math.radians(getattr(model.params, "phase_deg", 0.0))
     angles = np.radians(np.arange(-half_range_deg, half_range_deg + 1e-9, step_deg))
     angles = angles[np.abs(angles) >= math.radians(1.0) - 1e-12]
     diffs, thetas = [], []
     for view in views:
-        diffs.append(model.lambda_diff(view.pns(angles)))
+        diffs.append(model.lambda_diff(view.pns(centre + angles)))
         thetas.append(angles)
     if not diffs:
         raise ValueError("PI_error needs at least one view")

@@ -8,6 +8,7 @@ internal signals (familiarities, motivation) in `Command.trace` for the trial lo
 from __future__ import annotations
 
 import math
+import typing
 from dataclasses import asdict, dataclass, fields
 
 import numpy as np
@@ -16,6 +17,7 @@ from antarium.ant.command import Command
 from antarium.ant.eye import View
 from antarium.ant.mushroom_body import MBON, KenyonCells
 from antarium.ant.navigation import NAVIGATION_MODELS
+from antarium.core.numbers import check_number
 
 
 def oscillation_angles(amplitude: float, step: float, phase: float = 0.0) -> np.ndarray:
@@ -280,6 +282,41 @@ def make_model(kind: str, n_pn: int, **overrides):
     if unknown:
         raise ValueError(f"unknown {kind} parameter(s) {sorted(unknown)}; allowed: {sorted(known)}")
     return cls(n_pn, params_cls(**overrides))
+
+
+def parse_params(kind: str, texts: dict[str, str]) -> dict:
+    """Parameter overrides of model `kind` given as text (`--param key=value`), each converted by the type of
+    its parameter field: bool from true / false / 1 / 0, int from an integral number (2e4 = 20000), float from a
+    finite number, str as given. One ValueError naming the parameter and what it allows for any other text."""
+    try:
+        params_cls = MODELS[kind][1]
+    except KeyError:
+        raise ValueError(f"model {kind!r} not known; allowed: {', '.join(MODELS)}") from None
+    types = typing.get_type_hints(params_cls)
+    out: dict = {}
+    for key, text in texts.items():
+        if key not in types:
+            raise ValueError(f"unknown {kind} parameter {key!r}; allowed: {', '.join(sorted(types))}")
+        name, kind_of = f"{kind} parameter {key}", types[key]
+        if kind_of is bool:
+            word = text.strip().lower()
+            if word not in ("true", "false", "1", "0"):
+                raise ValueError(f"{name} must be true or false (or 1 or 0), got {text!r}")
+            out[key] = word in ("true", "1")
+        elif kind_of in (int, float):
+            try:
+                value = int(text)
+            except ValueError:
+                try:
+                    value = float(text)
+                except ValueError:
+                    value = text
+            if kind_of is int and isinstance(value, float) and math.isfinite(value) and value.is_integer():
+                value = int(value)
+            out[key] = check_number(name, value, integer=kind_of is int)
+        else:
+            out[key] = text
+    return out
 
 
 def model_params(model) -> dict:

@@ -56,14 +56,8 @@ class KenyonCells:
             raise ValueError(f"PN input must have shape (m, {self.n_pn}), got {pn.shape}")
         return np.asarray(self._matrix.T.dot(pn.T).T)
 
-    def active(self, pn: np.ndarray) -> np.ndarray:
-        """Indices (m, k) int64 of the active KCs (k-WTA) for PN vectors (m, n_pn)."""
-        ep = self.excitation(pn)
-        return np.argpartition(ep, self.n_kc - self.k, axis=1)[:, self.n_kc - self.k:]
-
-    def novelty(self, pn: np.ndarray, mbons: list[MBON]) -> np.ndarray:
-        """lambda (m, len(mbons)) float64 of each MBON for PN vectors (m, n_pn): `mbon.novelty(self.active(pn))`
-        for all of them in one compiled pass without sorting (`kc_kernel`; ties broken toward lower KC index)."""
+    def _workspace(self, pn: np.ndarray):
+        """The compiled kernel's workspace (made on first use) and `pn` as float32 (m, n_pn), its shape checked."""
         from antarium.ant import kc_kernel
 
         pn = np.asarray(pn, dtype=np.float32)
@@ -71,7 +65,20 @@ class KenyonCells:
             raise ValueError(f"PN input must have shape (m, {self.n_pn}), got {pn.shape}")
         if self._kernel is None:
             self._kernel = kc_kernel.Workspace(self.pn_index, self.k, self.n_pn)
-        return self._kernel.novelty(pn, np.stack([mbon.weights for mbon in mbons]))
+        return self._kernel, pn
+
+    def active(self, pn: np.ndarray) -> np.ndarray:
+        """Indices (m, k) int64 of the active KCs (k-WTA: the k largest EPs, ties broken toward the lower KC index,
+        ascending) for PN vectors (m, n_pn): the same selection `novelty` makes (`kc_kernel._winners`), so a view
+        just learned reads novelty 0."""
+        kernel, pn = self._workspace(pn)
+        return kernel.active(pn)
+
+    def novelty(self, pn: np.ndarray, mbons: list[MBON]) -> np.ndarray:
+        """lambda (m, len(mbons)) float64 of each MBON for PN vectors (m, n_pn): `mbon.novelty(self.active(pn))`
+        for all of them in one compiled pass without sorting (`kc_kernel`; ties broken toward lower KC index)."""
+        kernel, pn = self._workspace(pn)
+        return kernel.novelty(pn, np.stack([mbon.weights for mbon in mbons]))
 
 
 class MBON:

@@ -192,7 +192,8 @@ class CXMBModel(CXModel):
 
 @dataclass(frozen=True)
 class OneRingParams(CXMBParams):
-    """One Ring (Mitchell 2019): CPU4, the MBONs and the optic flow join at CPU1 with weights k_cx, k_mb, k_of."""
+    """One Ring (Mitchell 2019): CPU4, the MBONs and the optic flow join at CPU1 with weights k_cx, k_mb, k_of
+    (CXMB's k is not used and must keep its default)."""
 
     k_cx: float = 0.6
     k_mb: float = 0.2
@@ -201,6 +202,9 @@ class OneRingParams(CXMBParams):
 
     def __post_init__(self) -> None:
         CXMBParams.__post_init__(self)
+        if self.k != CXMBParams.k:  # inherited from CXMB, unused: One Ring weighs its three inputs itself
+            raise ValueError(f"One Ring does not use CXMB's k (got {self.k!r}; allowed: its default {CXMBParams.k}); "
+                             f"weigh CPU4, the MBONs and the optic flow with k_cx, k_mb, k_of")
         w = (self.k_cx, self.k_mb, self.k_of)
         if min(w) < 0 or not math.isclose(sum(w), 1.0, abs_tol=1e-9):
             raise ValueError(f"One Ring weights k_cx, k_mb, k_of must be >= 0 and sum to 1, got {w}")

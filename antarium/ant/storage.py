@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
+import zlib
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -33,6 +35,8 @@ FORMAT = "antarium-ant-model"
 FORMAT_VERSION = 3
 #: versions this code reads: 1 lacks the eye's `row_gain` (False then); 3 adds the central-complex models' CPU4
 READABLE_VERSIONS = (1, 2, 3)
+#: version -> the eye parameters its files lack (their defaults then)
+EYE_ADDED = {1: frozenset({"row_gain"})}
 
 
 class ModelFileError(ValueError):
@@ -71,59 +75,113 @@ def load_model(path: str | os.PathLike):
         data = np.load(path, allow_pickle=False)
     except FileNotFoundError:
         raise
+    except (zipfile.BadZipFile, EOFError) as exc:  # a zip archive cut short (a copy or a write interrupted)
+        raise ModelFileError(f"{path}: damaged model file (a truncated or corrupted .npz archive: {exc})") from None
     except (OSError, ValueError):  # numpy's own message would suggest unpickling an untrusted file
         raise ModelFileError(f"{path}: not an antarium ant model file (not a NumPy .npz archive; "
                              f"write one with `antarium ant learn`)") from None
-    with data:
-        if "format" not in data.files or str(data["format"]) != FORMAT:
-            raise ModelFileError(f"{path}: not an antarium ant model file (no format tag {FORMAT!r})")
-        version = int(data["version"])
-        if version not in READABLE_VERSIONS:
-            raise ModelFileError(f"{path}: model file version {version} cannot be read; "
-                                 f"allowed: {', '.join(map(str, READABLE_VERSIONS))}")
-        kind = str(data["kind"])
-        if kind not in MODELS:
-            raise ModelFileError(f"{path}: model kind {kind!r} not known; allowed: {', '.join(MODELS)}")
-        cls, params_cls = MODELS[kind]
-        raw = json.loads(str(data["params"]))
-        known = {f.name for f in fields(params_cls)}
-        if set(raw) != known:
-            raise ModelFileError(f"{path}: {kind} parameters {sorted(raw)} do not match {sorted(known)}")
-        params = params_cls(**raw)
-        eye_params = EyeParams(**json.loads(str(data["eye"])))
-        n_pn = int(data["n_pn"])
-        if n_pn != eye_params.n_pn:
-            raise ModelFileError(f"{path}: n_pn {n_pn} does not match the eye's {eye_params.n_pn} PNs")
-        if cls is PerfectMemoryModel:
-            views = data["views"]
-            if views.ndim != 2 or views.shape[1] != n_pn:
-                raise ModelFileError(f"{path}: stored views must have shape (n, {n_pn}), got {views.shape}")
-            model = cls(n_pn, params, views.astype(np.float32))
-        else:
-            model = cls(n_pn, params)
-            mbons = {}
-            for name, mbon in getattr(model, "mbons", {}).items():
-                key = f"mbon_{name}"
-                if key not in data.files:
-                    raise ModelFileError(f"{path}: MBON {name!r} missing")
-                n_kc = int(data[f"n_kc_{name}"])
-                if n_kc != mbon.n_kc:
-                    raise ModelFileError(f"{path}: MBON {name!r} has {n_kc} KCs, parameters say {mbon.n_kc}")
-                try:
-                    mbons[name] = MBON.from_packed(data[key], n_kc)
-                except ValueError as exc:
-                    raise ModelFileError(f"{path}: {exc}") from None
-            if hasattr(model, "mbons"):
-                model.mbons = mbons
-            model.learned_views = int(data["learned_views"])
-            if hasattr(model, "cx"):
-                if "cpu4" not in data.files:
-                    raise ModelFileError(f"{path}: the {kind} model's CPU4 memory (cpu4) is missing")
-                try:
-                    model.restore(data["cpu4"])
-                except ValueError as exc:
-                    raise ModelFileError(f"{path}: {exc}") from None
-        route = data["route"] if "route" in data.files else None
+    try:
+        with data:
+            return _read(path, data)
+    except ModelFileError:
+        raise
+    except (zipfile.BadZipFile, EOFError, zlib.error) as exc:  # an archive member truncated or corrupted
+        raise ModelFileError(f"{path}: damaged model file (a truncated or corrupted .npz archive: {exc})") from None
+    except ValueError as exc:  # an entry numpy cannot read, or parameters the model refuses
+        raise ModelFileError(f"{path}: {exc}") from None
+
+
+def _entry(path: Path, data, key: str, kind: str = "") -> np.ndarray:
+    """The archive's entry `key`; ModelFileError naming it when it is missing."""
+    if key not in data.files:
+        raise ModelFileError(f"{path}: entry {key!r} missing{f' (a {kind} model file has one)' if kind else ''}")
+    return data[key]
+
+
+def _scalar(path: Path, data, key: str, kind: type) -> int | str:
+    """The 0-d entry `key` as an int or a str; ModelFileError naming it and its dtype when it is not one."""
+    value = _entry(path, data, key)
+    ok = np.issubdtype(value.dtype, np.integer) if kind is int else value.dtype.kind == "U"
+    if value.shape != () or not ok:
+        raise ModelFileError(f"{path}: entry {key!r} must be a single {kind.__name__}, "
+                             f"got {value.dtype} of shape {value.shape}")
+    return kind(value)
+
+
+def _json(path: Path, data, key: str, cls, what: str, optional: frozenset[str] = frozenset()):
+    """The dataclass `cls` from the JSON object in entry `key`, its keys cls's fields (those in `optional` may be
+    left out: their defaults then)."""
+    try:
+        raw = json.loads(_scalar(path, data, key, str))
+    except json.JSONDecodeError as exc:
+        raise ModelFileError(f"{path}: entry {key!r} is not valid JSON ({exc})") from None
+    known = {f.name for f in fields(cls)}
+    if not isinstance(raw, dict):
+        raise ModelFileError(f"{path}: entry {key!r} must hold a JSON object of {what}, got {type(raw).__name__}")
+    unknown, missing = sorted(set(raw) - known), sorted(known - optional - set(raw))
+    if unknown or missing:
+        wrong = "; ".join([f"unknown {unknown}"] * bool(unknown) + [f"missing {missing}"] * bool(missing))
+        raise ModelFileError(f"{path}: {what}: {wrong}; allowed: {sorted(known)}")
+    try:
+        return cls(**raw)
+    except (TypeError, ValueError) as exc:
+        raise ModelFileError(f"{path}: {what}: {exc}") from None
+
+
+def _read(path: Path, data):
+    if "format" not in data.files or str(data["format"]) != FORMAT:
+        raise ModelFileError(f"{path}: not an antarium ant model file (no format tag {FORMAT!r})")
+    version = _scalar(path, data, "version", int)
+    if version not in READABLE_VERSIONS:
+        raise ModelFileError(f"{path}: model file version {version} cannot be read; "
+                             f"allowed: {', '.join(map(str, READABLE_VERSIONS))}")
+    kind = _scalar(path, data, "kind", str)
+    if kind not in MODELS:
+        raise ModelFileError(f"{path}: model kind {kind!r} not known; allowed: {', '.join(MODELS)}")
+    cls, params_cls = MODELS[kind]
+    params = _json(path, data, "params", params_cls, f"{kind} parameters")
+    eye_params = _json(path, data, "eye", EyeParams, "eye parameters", EYE_ADDED.get(version, frozenset()))
+    n_pn = _scalar(path, data, "n_pn", int)
+    if n_pn != eye_params.n_pn:
+        raise ModelFileError(f"{path}: n_pn {n_pn} does not match the eye's {eye_params.n_pn} PNs")
+    if cls is PerfectMemoryModel:
+        views = _entry(path, data, "views", kind)
+        if views.ndim != 2 or views.shape[1] != n_pn:
+            raise ModelFileError(f"{path}: stored views must have shape (n, {n_pn}), got {views.shape}")
+        model = cls(n_pn, params, views.astype(np.float32))
+    else:
+        model = cls(n_pn, params)
+        mbons = {}
+        for name, mbon in getattr(model, "mbons", {}).items():
+            key = f"mbon_{name}"
+            if key not in data.files:
+                raise ModelFileError(f"{path}: MBON {name!r} missing")
+            n_kc = _scalar(path, data, f"n_kc_{name}", int)
+            if n_kc != mbon.n_kc:
+                raise ModelFileError(f"{path}: MBON {name!r} has {n_kc} KCs, parameters say {mbon.n_kc}")
+            try:
+                mbons[name] = MBON.from_packed(data[key], n_kc)
+            except ValueError as exc:
+                raise ModelFileError(f"{path}: {exc}") from None
+        if hasattr(model, "mbons"):
+            model.mbons = mbons
+        model.learned_views = _scalar(path, data, "learned_views", int)
+        if model.learned_views < 0:
+            raise ModelFileError(f"{path}: learned_views must be >= 0, got {model.learned_views}")
+        if hasattr(model, "cx"):
+            if "cpu4" not in data.files:
+                raise ModelFileError(f"{path}: the {kind} model's CPU4 memory (cpu4) is missing")
+            try:
+                model.restore(data["cpu4"])
+            except ValueError as exc:
+                raise ModelFileError(f"{path}: {exc}") from None
+    route = None
+    if "route" in data.files:
+        route = data["route"]
+        if route.ndim != 2 or route.shape[1] != 2 or not np.issubdtype(route.dtype, np.floating) \
+                or not np.all(np.isfinite(route)):
+            raise ModelFileError(f"{path}: the route must be finite (n, 2) floats (x, y in metres), "
+                                 f"got {route.dtype} of shape {route.shape}")
     return model, eye_params, route
 
 

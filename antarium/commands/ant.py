@@ -12,22 +12,26 @@ HELP = "virtual ant: learn a route, follow it in closed loop, evaluate models ov
 KINDS = ("antcar", "ardin", "perfect_memory")
 
 
-def _params(pairs: list[str]) -> dict:
-    """--param key=value pairs: ints, floats or words."""
-    out: dict = {}
+def _params(pairs: list[str] | None, kind: str) -> dict:
+    """--param key=value pairs as overrides of model `kind`'s parameters, each value converted by its field's type
+    (`models.parse_params`: bool from true/false/1/0, int integral, float finite, str as given)."""
+    from antarium.ant.models import parse_params
+
+    texts: dict[str, str] = {}
     for pair in pairs or ():
         key, sep, value = pair.partition("=")
         if not sep or not key:
             raise ValueError(f"--param wants key=value, got {pair!r}")
-        for cast in (int, float):
-            try:
-                out[key] = cast(value)
-                break
-            except ValueError:
-                continue
-        else:
-            out[key] = value
-    return out
+        texts[key.strip()] = value.strip()
+    return parse_params(kind, texts)
+
+
+def _positive(option: str, value: float | int, unit: str = "") -> float | int:
+    """`value` of `option` when it is finite and > 0 (an int stays an int); else one ValueError naming it."""
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{option} must be > 0{' ' + unit if unit else ''} (leave it out for the default), "
+                         f"got {value}")
+    return value
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -124,11 +128,11 @@ def _run_trips(args: argparse.Namespace) -> int:
     compasses = ("sky", "ideal") if args.compass == "both" else (args.compass,)
     for compass in compasses:
         if args.action == "homing":
-            summary = pi_homing(args.out, range(args.seeds), args.steps, args.inbound, compass, _params(args.param),
-                                echo=print)
+            summary = pi_homing(args.out, range(args.seeds), args.steps, args.inbound, compass,
+                                _params(args.param, "cx"), echo=print)
         else:
             summary = cluttered_arena(args.out, range(args.seeds), args.steps, args.inbound, compass, args.model,
-                                      _params(args.param), echo=print)
+                                      _params(args.param, args.model), echo=print)
         print(json.dumps(summary, indent=2))
     return 0
 
@@ -164,6 +168,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.action == "serve":
         from antarium.ant.served import run_served
+
+        if args.max_decisions is not None:
+            _positive("--max-decisions", args.max_decisions)
 
         run_served(args.model_file, args.config, Path(args.out).resolve(),
                    (args.lateral_cm / 100.0, math.radians(args.heading_deg)), args.max_decisions)
@@ -206,8 +213,8 @@ def _learn(args: argparse.Namespace) -> int:
     if not out.parent.is_dir():
         raise FileNotFoundError(f"folder {str(out.parent)!r} for the model file does not exist")
     eye_params = MODEL_EYES[args.model]
-    model = make_model(args.model, eye_params.n_pn, **{**MODEL_PARAMS[args.model], **_params(args.param)})
-    spacing = args.spacing or LEARN_SPACING_M[args.model]
+    model = make_model(args.model, eye_params.n_pn, **{**MODEL_PARAMS[args.model], **_params(args.param, args.model)})
+    spacing = LEARN_SPACING_M[args.model] if args.spacing is None else _positive("--spacing", args.spacing, "m")
     bar = _bar("learning walk", total=int(math.ceil(route.length / spacing)) + 1)
     with virtual_rig(model, scene=args.scene, eye_params=eye_params, tether=args.tether, log_path=args.log,
                      renderer_kwargs={"face_size": FACE_SIZE}) as ant:
@@ -223,6 +230,8 @@ def _run(args: argparse.Namespace) -> int:
     from antarium.ant.routes import Route
     from antarium.ant.storage import load_model
 
+    if args.max_decisions is not None:
+        _positive("--max-decisions", args.max_decisions)
     model, eye_params, stored = load_model(args.model_file)
     if args.route is not None:
         route = parse_route(args.route, args.length)
