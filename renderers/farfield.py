@@ -85,6 +85,48 @@ class TableGrid:
         blurred = scipy.fft.irfft(spectrum, n=self.n_cols, axis=1, workers=1)
         return gaussian_filter1d(blurred, self.sigma / STEP, axis=0, mode="nearest", truncate=3.0)
 
+    def spread(self, excess: np.ndarray) -> np.ndarray:
+        """(rows, cols, C) float32: `excess` (content above 1, averaged over each cell; zero almost everywhere)
+        integrated over the LED footprint truncated at one FWHM, as `footprint.build_matrix` truncates it.
+
+        Content above 1 (a sun brighter than full drive) is spread apart from the rest: the separable blur's
+        Gaussian has tails beyond one FWHM, negligible for radiance <= 1 but, times a radiance of up to 1000, they
+        would light LEDs that the footprint matrix (the GL path) leaves dark. Sources are the cells at or below the
+        zenith (each sky cell once), weights g(angle) * cell solid angle over the footprint's integral.
+        """
+        from scipy.spatial import cKDTree
+
+        from .footprint import gaussian_weight
+
+        out = np.zeros(excess.shape, dtype=np.float32)
+        el_true = np.where(self.el > math.pi / 2, math.pi - self.el, self.el)
+        rows, cols = np.nonzero(np.any(excess > 0, axis=2) & (self.el <= math.pi / 2)[:, None])
+        if len(rows) == 0:
+            return out
+        radius = self.fwhm
+        # targets: grid points whose true elevation is within the footprint of a source row (both sides of the zenith)
+        near = (el_true >= el_true[rows].min() - radius - STEP) & (el_true <= el_true[rows].max() + radius + STEP)
+        t_rows = np.flatnonzero(near)
+        targets = _grid_directions(self.el[t_rows], self.az)
+        sources = _grid_directions(self.el[rows], self.az)[np.arange(len(rows)) * self.n_cols + cols]
+        pairs = cKDTree(targets).sparse_distance_matrix(cKDTree(sources), 2.0 * math.sin(radius / 2.0),
+                                                        output_type="coo_matrix")
+        angle = 2.0 * np.arcsin(np.clip(pairs.data / 2.0, 0.0, 1.0))
+        area = STEP * (np.sin(el_true[rows] + STEP / 2) - np.sin(el_true[rows] - STEP / 2))  # cell solid angles
+        theta = np.linspace(0.0, radius, 2001)
+        norm = np.trapezoid(2.0 * math.pi * gaussian_weight(theta, self.fwhm) * np.sin(theta), theta)
+        w = gaussian_weight(angle, self.fwhm) * area[pairs.col] / norm
+        # a source exactly on a target (distance 0) is dropped by the sparse result: add those back
+        on = cKDTree(targets).query(sources, k=1)
+        hit = on[0] == 0.0
+        t_idx = np.concatenate([pairs.row, on[1][hit]])
+        s_idx = np.concatenate([pairs.col, np.flatnonzero(hit)])
+        w = np.concatenate([w, area[hit] / norm])
+        flat = np.zeros((len(targets), excess.shape[2]))
+        np.add.at(flat, t_idx, w[:, None] * excess[rows[s_idx], cols[s_idx]])
+        out[t_rows] = flat.reshape(len(t_rows), self.n_cols, -1)
+        return out
+
     def quantise(self, values: np.ndarray, out: np.ndarray) -> np.ndarray:
         """Radiance (rows, cols, C) in [0, 1] (clipped) into `out` (rows, cols + 1, C) uint16 as value * 65535,
         the last column repeating the first; returns `out`."""
@@ -115,7 +157,12 @@ class FarFieldTable:
             for da in offsets:
                 field += scene.evaluate_far(g.directions(de, da), t).reshape(g.n_rows, g.n_cols, 4)
         field /= sub * sub
-        table = g.quantise(g.blur(field), np.empty((*g.shape, 4), dtype=np.uint16))
+        if field.max() > 1.0:  # content above 1 (a sun above full drive): its footprint truncated as the matrix's
+            excess = np.maximum(field - 1.0, 0.0)
+            blurred = g.blur(field - excess) + g.spread(excess)
+        else:
+            blurred = g.blur(field)
+        table = g.quantise(blurred, np.empty((*g.shape, 4), dtype=np.uint16))
         return cls(g, np.ascontiguousarray(table[..., 0:2]), np.ascontiguousarray(table[..., 2:4]))
 
     def lookup(self, psi: float, out: np.ndarray) -> np.ndarray:

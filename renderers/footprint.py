@@ -13,6 +13,7 @@ pitch averages out instead of aliasing. Matrices are cached on disk per (directi
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from pathlib import Path
 
@@ -23,6 +24,40 @@ from scipy.spatial import cKDTree
 from .cubemap import atlas_directions, atlas_solid_angles
 
 _CACHE_VERSION = 1
+
+#: The dome's LED pitch (degrees): the default FWHM of an LED's acceptance.
+LED_PITCH_DEG = 1.5
+#: Widest footprint (FWHM, degrees: the LED acceptance widened by any angular low-pass) a matrix is built for.
+#: Every limit on the low-pass (`max_lowpass_deg`) derives from it.
+MAX_FWHM_DEG = 45.0
+
+
+def lowpass_fwhm(cutoff_deg: float) -> float:
+    """FWHM (rad) of the Gaussian whose response is 1/2 at spatial period `cutoff_deg`."""
+    sigma = math.sqrt(math.log(2.0) / 2.0) / math.pi * math.radians(cutoff_deg)
+    return sigma * math.sqrt(8.0 * math.log(2.0))
+
+
+def footprint_fwhm(footprint_deg: float, lowpass_deg: float | None) -> float:
+    """FWHM (rad) of an LED acceptance of `footprint_deg` widened by an angular low-pass of `lowpass_deg` (None:
+    none)."""
+    fwhm = math.radians(footprint_deg)
+    return fwhm if lowpass_deg is None else math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
+
+
+def max_lowpass_deg(footprint_deg: float = LED_PITCH_DEG) -> float:
+    """Largest low-pass cut-off period (degrees, rounded down to 0.1) that keeps an LED acceptance of
+    `footprint_deg` widened by it under MAX_FWHM_DEG (101.9 for the 1.5 degree pitch)."""
+    per_deg = math.degrees(lowpass_fwhm(1.0))  # low-pass FWHM (degrees) per degree of cut-off period
+    return math.floor(10.0 * math.sqrt(MAX_FWHM_DEG ** 2 - footprint_deg ** 2) / per_deg) / 10.0
+
+
+def min_face_size(footprint_deg: float = LED_PITCH_DEG) -> int:
+    """Smallest cube face side (texels) at which every direction has a texel centre within one FWHM
+    `footprint_deg` (the footprint's radius), so that every LED sees a texel: the farthest any direction lies from
+    its nearest texel centre is atan(sqrt(2) / N), at a face centre between its four middle texels (55 for the
+    1.5 degree pitch)."""
+    return math.ceil(math.sqrt(2.0) / math.tan(math.radians(footprint_deg)))
 
 
 def gaussian_weight(angle: np.ndarray, fwhm: float) -> np.ndarray:
@@ -39,8 +74,8 @@ def _validate(directions: np.ndarray, face_size: int, fwhm: float, radius: float
         raise ValueError("directions must be unit vectors")
     if not isinstance(face_size, (int, np.integer)) or face_size < 8:
         raise ValueError(f"face_size must be an integer >= 8, got {face_size!r}")
-    if not (np.isfinite(fwhm) and 0 < fwhm < np.pi / 4):
-        raise ValueError(f"footprint FWHM must be in (0, 45) degrees, got {np.degrees(fwhm)!r} degrees")
+    if not (np.isfinite(fwhm) and 0 < fwhm < math.radians(MAX_FWHM_DEG)):
+        raise ValueError(f"footprint FWHM must be in (0, {MAX_FWHM_DEG:g}) degrees, got {np.degrees(fwhm)!r} degrees")
     radius = fwhm if radius is None else float(radius)
     if not (np.isfinite(radius) and 0 < radius < np.pi / 2):
         raise ValueError(f"footprint radius must be in (0, 90) degrees, got {np.degrees(radius)!r} degrees")

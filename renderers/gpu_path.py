@@ -75,6 +75,7 @@ uniform int n_cols;  // table columns (without the repeated one)
 uniform int uv_offset;
 uniform int shift_i; // yaw shift in table columns: shift_i + shift_f, 0 <= shift_f < 1
 uniform float shift_f;
+uniform bool clip;   // each average clipped to 1 (a float atlas: a far field brighter than 1)
 vec2 point(int k) { uint v = table[k]; return vec2(float(v & 0xFFFFu), float(v >> 16)); }
 vec2 far_value(int i) {  // kernels.lookup_pairs
     if (!lookup) return far_pairs[i];
@@ -109,6 +110,7 @@ void main() {
         a0 += u * f.x;
         a1 = uv ? u * f.y : a1 + u * f.y;
     }
+    if (clip) { a0 = min(a0, 1.0); a1 = min(a1, 1.0); }
     pairs[i] = vec2(a0, a1);
 }
 """
@@ -313,9 +315,10 @@ class GpuFramePath:
         self._gain.write(np.ascontiguousarray(gain, dtype=np.float32))
 
     def run(self, mode: int, atlas=None, level: int = 0, width: int = 0, far_pairs: np.ndarray | None = None,
-            psi: float = 0.0, contrast: float = 1.0, swap: bool = False) -> np.ndarray:
+            psi: float = 0.0, contrast: float = 1.0, swap: bool = False, clip: bool = False) -> np.ndarray:
         """Run the passes and read the frame and datagrams back into `host`; returns `frame`. The far field (modes
-        OVER_FAR, FAR_ONLY): `far_pairs` (20350, 2) float32, or else the table of `set_table` at yaw `psi` (rad)."""
+        OVER_FAR, FAR_ONLY): `far_pairs` (20350, 2) float32, or else the table of `set_table` at yaw `psi` (rad).
+        clip: each LED's footprint average is clipped to 1 (an atlas of floats: a far field brighter than 1)."""
         mgl = self._mgl
         lookup = far_pairs is None and mode != ATLAS
         self._sample["lookup"].value = lookup
@@ -338,6 +341,7 @@ class GpuFramePath:
             for b in range(3):
                 self._far.bind_to_storage_buffer(b)
         self._sample["mode"].value = mode
+        self._sample["clip"].value = bool(clip)
         self._far.bind_to_storage_buffer(3)
         self._pairs.bind_to_storage_buffer(4)
         self._means.bind_to_storage_buffer(5)

@@ -19,7 +19,8 @@ FULL = 65535.0
 def sample_pairs(indptr, indices, weights, texels, channel, out):  # pragma: no cover - compiled
     """out[i] = sum_k weights[k] * texels[indices[k], channel[i] : channel[i] + 2] over row i of a CSR matrix.
 
-    indptr (n+1,), indices (nnz,) int32; weights (nnz,) float32; texels (T, 4) uint16; channel (n,) int64
+    indptr (n+1,), indices (nnz,) int32; weights (nnz,) float32; texels (T, 4) uint16 (or float32 in the same
+    units, from the float atlas of a far field brighter than 1); channel (n,) int64
     (0 for GB pixels, 2 for UV pixels); out (n, 2) float32.
     """
     for i in range(len(indptr) - 1):
@@ -135,6 +136,7 @@ def warm_up() -> None:
     weights, texels, channel = np.ones(1, f32), np.zeros((1, 4), np.uint16), np.zeros(1, i64)
     pairs = np.zeros((1, 2), f32)
     sample_pairs(indptr, indices, weights, texels, channel, pairs)
+    sample_pairs(indptr, indices, weights, texels.astype(f32), channel, pairs)  # the float atlas (a sun above 1)
     sample_over_far(indptr, indices, weights, texels, channel, pairs, pairs.copy(), 0, 1)
     lookup_pairs(np.zeros((2, 2, 2), np.uint16), np.zeros(1, i64), np.zeros(1, i64), np.zeros(1, f32),
                  np.zeros(1), 0.0, pairs)

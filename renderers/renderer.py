@@ -26,14 +26,14 @@ from antarium.geometry.constants import N_PANELS, N_PIXELS, UV_PER_PANEL
 from . import cubemap, footprint, shaders
 from .far_layer import builder_nice
 from .farfield import FarFieldTable
+from .footprint import LED_PITCH_DEG, footprint_fwhm, lowpass_fwhm  # noqa: F401 (lowpass_fwhm: this module's API)
 from .gl import create_context, describe
 from .gpu_path import ATLAS, FAR_ONLY, OVER_FAR, GpuFramePath, check_path, default_path
 from .meshbuffers import MeshBuffers
 from .output import FrameConverter, polariser_angles
 from .scene import Scene, check_channel_gain, check_contrast, check_lowpass
 
-#: LED pitch of the dome (degrees); the default footprint width and face size derive from it.
-LED_PITCH_DEG = 1.5
+# LED_PITCH_DEG: LED pitch of the dome (degrees); the default footprint width and face size derive from it.
 #: Largest texel (at a face centre) as a fraction of the LED pitch: 2 atan(1/N) <= 0.4 * 1.5 deg -> N = 192.
 TEXEL_FRACTION = 0.4
 
@@ -45,6 +45,16 @@ def default_face_size(pitch_deg: float = LED_PITCH_DEG, fraction: float = TEXEL_
 
 
 DEFAULT_FACE_SIZE = default_face_size()
+#: cube face sides a Renderer accepts: at least MIN_FACE_SIZE (the mipmap levels a low-pass samples stop at 16) and
+#: at least what the LED footprint needs (`smallest_face_size`)
+MIN_FACE_SIZE, MAX_FACE_SIZE = 16, 2048
+
+
+def smallest_face_size(footprint_deg: float = LED_PITCH_DEG) -> int:
+    """Smallest face side a Renderer with LED footprint `footprint_deg` accepts: every LED must see a texel centre
+    within its footprint (`footprint.min_face_size`: 55 for the 1.5 degree pitch)."""
+    return max(MIN_FACE_SIZE, footprint.min_face_size(footprint_deg))
+
 #: default face size of the near meshes when a far layer carries the rest (`far_layer`)
 NEAR_FACE_SIZE = 96
 #: texels across the footprint's FWHM below which a wider footprint samples a coarser mipmap level
@@ -54,19 +64,6 @@ TEXELS_PER_FWHM = 2.5
 def _rot_z(angle: float) -> np.ndarray:
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def lowpass_fwhm(cutoff_deg: float) -> float:
-    """FWHM (rad) of the Gaussian whose response is 1/2 at spatial period `cutoff_deg`."""
-    sigma = math.sqrt(math.log(2.0) / 2.0) / math.pi * math.radians(cutoff_deg)
-    return sigma * math.sqrt(8.0 * math.log(2.0))
-
-
-def footprint_fwhm(footprint_deg: float, lowpass_deg: float | None) -> float:
-    """FWHM (rad) of an LED acceptance of `footprint_deg` widened by an angular low-pass of `lowpass_deg` (None:
-    none)."""
-    fwhm = math.radians(footprint_deg)
-    return fwhm if lowpass_deg is None else math.hypot(fwhm, lowpass_fwhm(lowpass_deg))
 
 
 def _gl_current(method):
@@ -144,14 +141,17 @@ class Renderer:
         layered = far_layer != "off"
         n = (NEAR_FACE_SIZE if layered else DEFAULT_FACE_SIZE) if face_size is None else face_size
         m = DEFAULT_FACE_SIZE if layer_face_size is None else layer_face_size
-        for label, value in (("face_size", n), ("layer_face_size", m)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 16 <= value <= 2048:
-                raise ValueError(f"{label} must be an integer in 16..2048, got {value!r}")
+        if not (np.isfinite(footprint_deg) and 0 < footprint_deg < footprint.MAX_FWHM_DEG):
+            raise ValueError(f"footprint_deg must be in (0, {footprint.MAX_FWHM_DEG:g}), got {footprint_deg!r}")
+        low = smallest_face_size(footprint_deg)
+        for label, value, lo in (("face_size", n, low), ("layer_face_size", m, MIN_FACE_SIZE)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= MAX_FACE_SIZE:
+                why = "" if lo == MIN_FACE_SIZE else (f" (a smaller face leaves LEDs of a {footprint_deg:g} degree "
+                                                      "footprint between texels: raise face_size)")
+                raise ValueError(f"{label} must be an integer in {lo}..{MAX_FACE_SIZE}{why}, got {value!r}")
         self.far_layer_mode, self.near_radius = far_layer, float(near_radius)
         self.far_layer_error = math.radians(far_layer_error_deg)
         self.layer_face_size = int(m)
-        if not (np.isfinite(footprint_deg) and 0 < footprint_deg < 45):
-            raise ValueError(f"footprint_deg must be in (0, 45), got {footprint_deg!r}")
         if not (0 < near < far and np.isfinite(far)):
             raise ValueError(f"clip planes must satisfy 0 < near < far, got near={near!r}, far={far!r}")
         self.dome = dome
@@ -227,13 +227,12 @@ class Renderer:
         import moderngl
 
         ctx, n = self.ctx, self.face_size
-        self._atlas = ctx.texture((n, 6 * n), 4, dtype="nu2")
-        # Its whole mipmap chain exists before the framebuffer takes level 0: a first glGenerateMipmap on a texture
-        # without one re-allocates its storage (Mesa), after which the framebuffer drew into the old level 0 and
-        # every low-passed frame but the first showed the first one's content.
-        self._atlas.build_mipmaps()
         self._depth = ctx.depth_renderbuffer((n, 6 * n))
-        self._fbo = ctx.framebuffer([self._atlas], self._depth)
+        #: (atlas, framebuffer) per kind: False the 16-bit normalised one, True the float one (`_use_atlas`)
+        self._targets = {}
+        #: float read-back arrays of the float atlas, by texel count (one per mipmap level used)
+        self._float_texels = {}
+        self._use_atlas(False)
         self._bg_prog = ctx.program(vertex_shader=shaders.FULLSCREEN_VS, fragment_shader=shaders.BACKGROUND_FS)
         self._bg_prog["far_tex"].value = 0
         self._bg_prog["face_size"].value = float(n)
@@ -244,9 +243,27 @@ class Renderer:
         self._proj = cubemap.projection_matrix(self.near, self.far)
         self._mgl = moderngl
 
+    def _use_atlas(self, bright: bool) -> None:
+        """Draw into the float atlas (`bright`) or the 16-bit normalised one (made when first needed; shared depth).
+
+        A far field brighter than 1 somewhere (a sun above 1) goes into the float one: the normalised one would clip
+        each texel to 1 before the footprint averages it, where the far-field table averages first and clips after
+        (`render` and the GPU path's sample pass then clip each LED's average to 1, as the table's quantisation does).
+        """
+        if bright not in self._targets:
+            n = self.face_size
+            atlas = self.ctx.texture((n, 6 * n), 4, dtype="f4" if bright else "nu2")
+            # Its whole mipmap chain exists before the framebuffer takes level 0: a first glGenerateMipmap on a
+            # texture without one re-allocates its storage (Mesa), after which the framebuffer drew into the old
+            # level 0 and every low-passed frame but the first showed the first one's content.
+            atlas.build_mipmaps()
+            self._targets[bright] = (atlas, self.ctx.framebuffer([atlas], self._depth))
+        self._atlas, self._fbo = self._targets[bright]
+        self._bright = bright
+
     def _make_far_texture(self, scene: Scene, t: float = 0.0, supersample: int | None = None):
         """World-aligned float16 cube texture of the far field, each texel the mean of supersample^2 points
-        (default: as many as the scene's finest detail needs)."""
+        (default: as many as the scene's finest detail needs); its `extra` is its largest value."""
         nf = self.far_face_size
         if supersample is None:
             supersample = scene.supersample(2.0 / nf)
@@ -256,6 +273,7 @@ class Renderer:
         data = np.ascontiguousarray(v, dtype=np.float16)
         tex = self.ctx.texture_cube((nf, nf), 4, data.tobytes(), dtype="f2")
         tex.filter = (self._mgl.LINEAR, self._mgl.LINEAR)
+        tex.extra = float(v.max())
         return tex
 
     def footprint_fwhm_for(self, lowpass_deg) -> float:
@@ -263,7 +281,9 @@ class Renderer:
         return footprint_fwhm(self.footprint_deg, lowpass_deg)
 
     def _set_footprint(self, lowpass_deg) -> None:
-        """The LED acceptance, widened by an angular low-pass; its sampling matrix is made when first needed."""
+        """The LED acceptance, widened by an angular low-pass; its sampling matrix is made when first needed. A
+        low-pass too wide for this renderer's footprint (`check_lowpass`) raises ValueError and changes nothing."""
+        check_lowpass(lowpass_deg, self.footprint_deg)
         fwhm = self.footprint_fwhm_for(lowpass_deg)
         if fwhm != self._fwhm:
             self._fwhm, self._kernel_matrix = fwhm, None
@@ -622,7 +642,7 @@ class Renderer:
     def set_lowpass(self, cutoff_deg: float | None) -> None:
         """Angular low-pass: spatial periods shorter than `cutoff_deg` are attenuated below 1/2 (None: off)."""
         scene = self._require_scene()
-        check_lowpass(cutoff_deg)
+        check_lowpass(cutoff_deg, self.footprint_deg)
         old = self._fwhm, self._kernel_matrix
         self._set_footprint(cutoff_deg)
         if self._table is not None:
@@ -704,8 +724,8 @@ class Renderer:
                 helper = self._helper_thread()
                 far = self._table if layer is None else layer[0]
                 looked_up = helper.submit(far.lookup, psi, self._far_pairs)
-            self._render_cube(scene, pose, q, t, level, texels, background=not over_table,
-                              chunks=None if layer is None else layer[1], read_back=not gpu)
+            texels = self._render_cube(scene, pose, q, t, level, texels, background=not over_table,
+                                       chunks=None if layer is None else layer[1], read_back=not gpu)
             t1 = time.perf_counter()
             if gpu:
                 if lookup_here:
@@ -721,6 +741,8 @@ class Renderer:
                 self._finish(half, sample_over_far, *args, 0, n // 2)
             else:
                 sample_pairs(indptr, indices, weights, texels, self._channel, pairs)
+                if self._bright:  # a far field above 1 (the float atlas): clipped after the footprint, as its table
+                    np.minimum(pairs, np.float32(1.0), out=pairs)
         t2 = time.perf_counter()
         if gpu:
             np.copyto(out, self._gpu.frame)
@@ -744,7 +766,7 @@ class Renderer:
         if mode != ATLAS and far_pairs is None:
             self._gpu.set_table(self._table)
         self._gpu.run(mode, self._atlas, level, self.face_size >> level, far_pairs, psi, conv.contrast,
-                      conv.swap_green_blue)
+                      conv.swap_green_blue, clip=mode == ATLAS and self._bright)
 
     @property
     def datagrams(self) -> np.ndarray | None:
@@ -804,8 +826,10 @@ class Renderer:
 
     def _render_cube(self, scene: Scene, pose: Pose, q: np.ndarray, t: float, level: int = 0,
                      texels: np.ndarray | None = None, background: bool = True, chunks=None,
-                     read_back: bool = True) -> None:
-        """Draw the six faces for `pose` and read the atlas (mipmap `level`) back into `texels`.
+                     read_back: bool = True) -> np.ndarray | None:
+        """Draw the six faces for `pose` and read the atlas (mipmap `level`) back into `texels`; returns the array
+        read into: `texels` (uint16), or a float32 one of the same shape (values in the same 16-bit units, rounded,
+        beyond 65535 where the far field is brighter than 1) when the far field drawn is (`_use_atlas`).
 
         background: draw the far field behind the meshes (channel 3 = polarised UV); otherwise leave it
         black and write the meshes' coverage into channel 3, for `kernels.sample_over_far`. chunks: (n_chunks,)
@@ -819,16 +843,31 @@ class Renderer:
             old = self._far_tex
             self._far_tex = self._make_far_texture(scene, t, supersample=1)
             old.release()
+        bright = background and self._far_tex.extra > 1.0
+        if bright != self._bright:
+            self._use_atlas(bright)
         q_far = _rot_z(-scene.yaw_rate * t) @ q
         self._draw(q, q_far, eye, background, chunks)
+        if texels is None:
+            texels = self._texels
+        if bright:
+            if len(texels) not in self._float_texels:
+                self._float_texels[len(texels)] = np.empty(texels.shape, dtype=np.float32)
+            texels = self._float_texels[len(texels)]
         if not read_back:
             if level:
                 self._atlas.build_mipmaps(0, level)
-        elif level == 0:
-            self._fbo.read_into(self._texels if texels is None else texels, components=4, dtype="nu2")
+            return None
+        if level == 0:
+            self._fbo.read_into(texels, components=4, dtype="f4" if bright else "nu2")
         else:
             self._atlas.build_mipmaps(0, level)
             self._atlas.read_into(texels, level=level)
+        if bright:  # in 16-bit units, rounded as the GPU path's sample pass rounds every texel: floor(v * 65535 + 0.5)
+            np.multiply(texels, np.float32(65535.0), out=texels)
+            np.add(texels, np.float32(0.5), out=texels)
+            np.floor(texels, out=texels)
+        return texels
 
     def _draw(self, q: np.ndarray, q_far: np.ndarray, eye: np.ndarray, background: bool = True, chunks=None) -> None:
         """Meshes first, then the far field only where no mesh was drawn (its fragments fail the depth test
@@ -876,9 +915,9 @@ class Renderer:
         scene = self._require_scene()
         pose = _check_pose(pose)
         t = self.clock.now() - self._t0 if t is None else _check_time(t)
-        self._render_cube(scene, pose, self.view_rotation(pose), t)
+        texels = self._render_cube(scene, pose, self.view_rotation(pose), t)
         n = self.face_size
-        return (self._texels.astype(np.float32) / 65535.0).reshape(6, n, n, 4)
+        return (texels.astype(np.float32) / 65535.0).reshape(6, n, n, 4)
 
     def release(self) -> None:
         if self._helper is not None:

@@ -185,10 +185,16 @@ def check_channel_gain(gain) -> tuple:
     return tuple(check_number(f"{c} channel gain", g, 0.0, MAX_GAIN) for c, g in zip(CHANNELS, gain, strict=True))
 
 
-def check_lowpass(cutoff_deg) -> None:
-    """Low-pass cut-off period in (0, 180] degrees, or None (off)."""
+def check_lowpass(cutoff_deg, footprint_deg: float | None = None) -> None:
+    """Low-pass cut-off period in (0, `footprint.max_lowpass_deg(footprint_deg)`] degrees, or None (off): a wider
+    one would widen an LED acceptance of `footprint_deg` (default: the LED pitch) past `footprint.MAX_FWHM_DEG`."""
+    from .footprint import LED_PITCH_DEG, max_lowpass_deg
+
     name = "lowpass_deg (low-pass cut-off period, degrees)"
-    if cutoff_deg is not None and check_number(name, cutoff_deg, 0.0, 180.0) == 0:
+    if cutoff_deg is None:
+        return
+    high = max_lowpass_deg(LED_PITCH_DEG if footprint_deg is None else footprint_deg)
+    if check_number(name, cutoff_deg, 0.0, high) == 0:
         raise ValueError(f"{name} must be > 0 (or None: off), got {cutoff_deg!r}")
 
 

@@ -193,13 +193,13 @@ BAD_SPECS = [
      "route_sets[0].curved: unknown key 'length'; allowed: seeds, length_m"),
     ("sets", '[[route_sets]]\npaths = "routes"\nnmae = "x"\n',
      "route_sets[0]: unknown key 'nmae'; allowed: name, paths, curved"),
-    # integers: max_decisions >= 0 (0: three times the route), face_size >= 1; no floats, no booleans (8)
+    # integers: max_decisions >= 0 (0: three times the route), face_size 55..2048; no floats, no booleans (8)
     ("experiment", "max_decisions = -5", "experiment.max_decisions: expected an integer >= 0, got -5"),
     ("experiment", "max_decisions = 2.0", "experiment.max_decisions: expected an integer >= 0, got 2.0"),
     ("experiment", "max_decisions = true", "experiment.max_decisions: expected an integer >= 0, got True"),
-    ("experiment", "face_size = 0", "experiment.face_size: expected an integer >= 1, got 0"),
-    ("experiment", "face_size = 64.9", "experiment.face_size: expected an integer >= 1, got 64.9"),
-    ("experiment", 'face_size = "big"', "experiment.face_size: expected an integer >= 1, got 'big'"),
+    ("experiment", "face_size = 0", "experiment.face_size: expected an integer >= 55 and <= 2048, got 0"),
+    ("experiment", "face_size = 64.9", "experiment.face_size: expected an integer >= 55 and <= 2048, got 64.9"),
+    ("experiment", 'face_size = "big"', "experiment.face_size: expected an integer >= 55 and <= 2048, got 'big'"),
     ("experiment", "seeds = [-1]", "experiment.seeds[0]: expected an integer >= 0, got -1"),
     # empty lists give no runs (9)
     ("experiment", "seeds = []",
@@ -422,12 +422,11 @@ def test_a_failed_run_is_recorded_and_the_others_go_on(field, tmp_path):
     assert set(df.loc[df.status == "failed", "error"].str.contains("neighbours")) == {True}
 
 
-def test_a_run_the_renderer_cannot_draw_fails_instead_of_running_blind(field, tmp_path):
+def test_a_face_size_the_renderer_cannot_draw_with_is_refused_by_the_spec(field):
+    """A face too small for the LED footprint would leave LEDs without a texel: refused before any run starts."""
     d, _ = field
-    exp = load_spec(_spec(d, "[models.perfect_memory]\n", face_size=16))
-    p = run_experiment(exp.runs, tmp_path, serial=True, progress_bar=False)
-    assert (p.done, p.failed) == (0, 2)
-    assert load_results(tmp_path)["error"].str.contains("raise face_size").all()
+    with pytest.raises(SpecError, match=r"experiment.face_size: expected an integer >= 55 and <= 2048, got 16"):
+        load_spec(_spec(d, "[models.perfect_memory]\n", face_size=16))
 
 
 def test_kill_then_rerun_runs_each_run_once(field, tmp_path):

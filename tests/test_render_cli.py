@@ -32,7 +32,7 @@ def test_render_writes_an_equal_area_map_and_the_cube_map(tmp_path, capsys):
     (["render", "uniform", "--face-size", "8"], "face_size"),
     (["render", "sky", "--time", "nan"], "--time must be a finite number of seconds, got nan"),
     (["render", "sky", "--set", 'lowpass_deg="10"'], "lowpass_deg (low-pass cut-off period, degrees) must be a "
-                                                     "finite number >= 0 and <= 180, got '10'"),
+                                                     "finite number >= 0 and <= 101.9, got '10'"),
     (["render", "bars", "--set", "bars=[5]"], "each of bars must be a table of bar parameters, got 5"),
     (["render", '{"scene": "mesh", "path": 5}'], "path must be a file path (a string), got 5"),
 ])

@@ -424,7 +424,7 @@ def test_each_face_draws_only_the_chunks_it_can_see(renderer):
     ({"scene": "uniform", "swap_green_blue": 0.3}, "swap_green_blue must be true or false, got 0.3"),
     ({"scene": "grating", "period_deg": True}, "period_deg must be a finite number, got True"),
     ({"scene": "sky", "lowpass_deg": True}, "lowpass_deg (low-pass cut-off period, degrees) must be a finite "
-                                            "number >= 0 and <= 180, got True"),
+                                            "number >= 0 and <= 101.9, got True"),
     ({"scene": "sky", "dop_max": True}, "sky dop_max must be a finite number, got True"),
     ({"scene": "w.glb", "path": "x.obj"}, "scene 'w.glb' is a file already; give either it or 'path' ('x.obj')"),
     ({"scene": "p.png", "path": "q.png"}, "scene 'p.png' is a file already; give either it or 'path' ('q.png')"),

@@ -109,7 +109,7 @@ def test_a_scene_parameter_too_large_for_a_float_fails_the_load_and_keeps_the_sc
     def small_renderer(render_cfg, clock=None):
         from antarium.renderers import Renderer
 
-        return Renderer(face_size=32, clock=clock)
+        return Renderer(face_size=55, clock=clock)
 
     config = resolve({"bus": {"enabled": False}, "link": {"interface": "virtual"}, "render": {"scene": "uniform"}})
     server = Server(config, renderer_factory=small_renderer).start_thread()

@@ -17,7 +17,7 @@ from antarium.trial_log import SERVOSPHERE_DTYPE, read_table
 def small_renderer(render_cfg, clock=None):
     from antarium.renderers import Renderer
 
-    return Renderer(face_size=32, clock=clock)
+    return Renderer(face_size=55, clock=clock)
 
 
 def test_serve_closes_the_loop_on_the_free_ants_walk(tmp_path):

@@ -4,7 +4,7 @@
     protocols = ["ardin"]              # ardin: put back at 20 cm and counted; antcar: never put back
     seeds = [0, 1]                     # the mushroom bodies' random PN->KC wiring (a model without one runs once)
     releases = [{lateral_cm = 0, heading_deg = 0}, {lateral_cm = 5, heading_deg = 20}]
-    face_size = 64                     # the renderer's cube-face side (an integer >= 1)
+    face_size = 64                     # the renderer's cube-face side (an integer 55..2048)
     max_decisions = 0                  # 0: three times the route length in steps
     eye = {cols = 50, rows = 16}       # eye parameters over each model's own (optional)
     metrics = ["errors", "lateral_median_m"]   # the summary's metrics (default: all)
@@ -129,16 +129,19 @@ class Check:
 
 @dataclass(frozen=True)
 class Integer(Check):
-    """An integer (not a float, not a boolean), >= `min` when given."""
+    """An integer (not a float, not a boolean), >= `min` and <= `max` when given."""
 
     min: int | None = None
+    max: int | None = None
 
     @property
     def what(self) -> str:
-        return "an integer" + (f" >= {self.min}" if self.min is not None else "")
+        bounds = [f">= {self.min}"] * (self.min is not None) + [f"<= {self.max}"] * (self.max is not None)
+        return " and ".join(["an integer " + bounds[0], *bounds[1:]]) if bounds else "an integer"
 
     def __call__(self, key: str, value) -> int:
-        if not (isinstance(value, int) and not isinstance(value, bool)) or self.min is not None and value < self.min:
+        if (not (isinstance(value, int) and not isinstance(value, bool)) or self.min is not None and value < self.min
+                or self.max is not None and value > self.max):
             self.fail(key, value)
         return int(value)
 
@@ -291,6 +294,7 @@ def _schema() -> Table:
     """The spec's declaration: every key, its type, its range and its default."""
     from antarium.ant.eye import EyeParams
     from antarium.ant.models import MODELS
+    from antarium.renderers.renderer import MAX_FACE_SIZE, smallest_face_size
 
     eye = {k: Axis(c) for k, c in declared(EyeParams).items()}
     special = {"learn_spacing_m": Axis(Number(gt=0.0))}
@@ -301,7 +305,7 @@ def _schema() -> Table:
                     defaults={"lateral_cm": 0.0, "heading_deg": 0.0})
     experiment = Table(
         {"protocols": ListOf(String(tuple(PROTOCOLS))), "seeds": ListOf(Integer(min=0)), "releases": ListOf(release),
-         "face_size": Integer(min=1), "max_decisions": Integer(min=0), "eye": Table(eye, noun="eye parameter"),
+         "face_size": Integer(min=smallest_face_size(), max=MAX_FACE_SIZE), "max_decisions": Integer(min=0), "eye": Table(eye, noun="eye parameter"),
          "metrics": ListOf(String(METRICS))},
         defaults={"protocols": ["ardin"], "seeds": [0], "releases": [{"lateral_cm": 0.0, "heading_deg": 0.0}],
                   "face_size": 64, "max_decisions": 0, "eye": {}, "metrics": list(METRICS)})
