@@ -305,7 +305,8 @@ def _schema() -> Table:
                     defaults={"lateral_cm": 0.0, "heading_deg": 0.0})
     experiment = Table(
         {"protocols": ListOf(String(tuple(PROTOCOLS))), "seeds": ListOf(Integer(min=0)), "releases": ListOf(release),
-         "face_size": Integer(min=smallest_face_size(), max=MAX_FACE_SIZE), "max_decisions": Integer(min=0), "eye": Table(eye, noun="eye parameter"),
+         "face_size": Integer(min=smallest_face_size(), max=MAX_FACE_SIZE), "max_decisions": Integer(min=0),
+         "eye": Table(eye, noun="eye parameter"),
          "metrics": ListOf(String(METRICS))},
         defaults={"protocols": ["ardin"], "seeds": [0], "releases": [{"lateral_cm": 0.0, "heading_deg": 0.0}],
                   "face_size": 64, "max_decisions": 0, "eye": {}, "metrics": list(METRICS)})
