@@ -149,6 +149,35 @@ class RenderSection(Section):
         return v
 
 
+#: the zenoh 1.x link protocols whose address is HOST:PORT (those the eclipse-zenoh wheel is built with; tls and
+#: quic also need certificates under [bus] access_control's zenoh config)
+ENDPOINT_IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+#: what `is_endpoint` accepts, in words (error messages)
+ENDPOINT_FORMS = ("PROTOCOL/HOST:PORT with PROTOCOL one of " + ", ".join(ENDPOINT_IP_PROTOCOLS) + " and PORT "
+                  "0..65535 (e.g. 'tcp/127.0.0.1:7447', '[::1]' for IPv6), or unixsock-stream/PATH")
+
+
+def is_endpoint(endpoint: str) -> bool:
+    """A zenoh locator `PROTOCOL/ADDRESS[?METADATA][#CONFIG]` with a protocol zenoh links and an address of its
+    form: HOST:PORT (IPv6 hosts in brackets, PORT 0..65535) or, for unixsock-stream, a socket path."""
+    if not isinstance(endpoint, str):
+        return False
+    proto, sep, address = endpoint.partition("/")
+    address = address.split("#")[0].split("?")[0]
+    if not sep or not address:
+        return False
+    if proto == "unixsock-stream":
+        return True
+    if proto not in ENDPOINT_IP_PROTOCOLS:
+        return False
+    host, colon, port = address.rpartition(":")
+    if not colon or not host or not (port.isascii() and port.isdigit()) or int(port) > 65535:
+        return False
+    if host.startswith("["):
+        return host.endswith("]") and ":" in host
+    return ":" not in host and "/" not in host
+
+
 class BusSection(Section):
     NAME: ClassVar[str] = "bus"
     enabled: bool = True
@@ -157,6 +186,15 @@ class BusSection(Section):
     connect: list[str] = Field(default_factory=list)
     multicast_scouting: bool = False
     access_control: str = Field("", description="path of a JSON5 file holding a zenoh access_control object")
+
+    @field_validator("listen", "connect")
+    @classmethod
+    def _endpoints(cls, v: list[str]) -> list[str]:
+        for endpoint in v:
+            if not is_endpoint(endpoint):
+                raise ValueError(f"{endpoint!r} is not a zenoh endpoint; allowed: {ENDPOINT_FORMS}")
+        return v
+
 
 
 class LogSection(Section):
@@ -176,6 +214,8 @@ class MonitorSection(Section):
     allow: list[str] = Field(default_factory=lambda: ["127.0.0.1/32", "::1/128"],
                              description="addresses or networks whose browsers may open the page")
     commands: bool = Field(False, description="the page may send pause / rotate scene / start / stop trial")
+    hosts: list[str] = Field(default_factory=list, description="more host names the page is opened by (a DNS "
+                             "alias of this computer); its address, host name and localhost always serve")
     leds_every_frames: int = Field(5, ge=0, le=100_000, description="LED stream every N frames; 0: never")
     update_hz: float = _finite(1.0, 240.0, 60.0, "most updates a second pushed to each browser")
     RENAMED: ClassVar[dict[str, str]] = {"leds_every": "leds_every_frames"}

@@ -35,10 +35,11 @@ def session():
     s.close()
 
 
-def _requests(session, *calls):
-    """Run `calls(client)` coroutines against the monitor's app (commands on); returns their results."""
+def _requests(session, *calls, **settings):
+    """Run `calls(client)` coroutines against the monitor's app (commands on, `settings` more [monitor] keys);
+    returns their results."""
     async def run():
-        app = make_app(session, RIG, MonitorSection(commands=True))
+        app = make_app(session, RIG, MonitorSection(commands=True, **settings))
         async with TestClient(TestServer(app)) as client:
             return [await call(client) for call in calls]
     return asyncio.run(run())
@@ -120,6 +121,21 @@ def test_a_name_the_monitor_is_not_served_under_is_refused(session):
         assert "localhost" in text
     assert local[0] == by_address[0] == by_v6[0] == 200, (local, by_address, by_v6)
     assert received == ['{"deg": 90}', '{"deg": 90}']  # only by its own names and addresses
+
+
+def test_a_name_set_in_monitor_hosts_is_served(session):
+    """A DNS alias of the rig computer, named in [monitor] hosts, opens the page; other names are still refused."""
+    session, received = session
+
+    async def post(client, host):
+        r = await client.post("/cmd/rotate_scene", data='{"deg": 45}', headers={
+            "Host": host, "Origin": f"http://{host}", "Content-Type": "application/json"})
+        return r.status
+
+    alias, evil = _requests(session, lambda c: post(c, f"Dome-PC.lab.example:{c.port}"),
+                            lambda c: post(c, f"evil.example:{c.port}"), hosts=["dome-pc.lab.example"])
+    assert (alias, evil) == (200, 403)
+    assert received == ['{"deg": 45}']
 
 
 def test_the_page_may_send_only_the_parameters_its_commands_declare(session):

@@ -199,8 +199,8 @@ def run(args: argparse.Namespace) -> int:
     slots = args.frames if args.frames is not None else int(seconds * rate)
     work = args.work_ms / 1e3
     if not 0.0 <= work < period:
-        raise SystemExit(f"antarium bench jitter: --work-ms must be in [0, {1e3 * period:.2f}) ms (one frame "
-                         f"period at {rate:g} Hz), got {args.work_ms}")
+        raise ValueError(f"--work-ms must be in [0, {1e3 * period:.2f}) ms (one frame period at {rate:g} Hz), "
+                         f"got {args.work_ms:g}")
     setup: dict[str, Any] = {"cpu": None, "realtime_priority": 0, "notes": []}
     out: dict[str, Any] = {}
 

@@ -7,14 +7,15 @@ import math
 from importlib import import_module
 
 from antarium.bench import TARGETS
-from antarium.commands import require_seconds
+from antarium.commands import check_output, require_seconds
 
 HELP = "run a benchmark and report it against the dome's 190 frames/s (5.3 ms frame period)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("target", choices=sorted(TARGETS), help="what to measure")
-    parser.add_argument("--frames", type=int, default=None, help="number of frames (target-specific default)")
-    parser.add_argument("--seconds", type=float, default=None, help="duration (target-specific default)")
+    parser.add_argument("--frames", type=int, default=None,
+                        help="number of frames, at least 1 (default: the target's own)")
+    parser.add_argument("--seconds", type=float, default=None, help="duration in seconds (default: the target's own)")
     parser.add_argument("--work-ms", type=float, default=2.5,
                         help="jitter: busy time standing for one frame's work (ms; default 2.5)")
     parser.add_argument("--machine-probe", action="store_true",
@@ -34,8 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="monitor: run the headless browser SCHED_IDLE, so that it gets only the CPU time the loop "
                              "leaves, as if it ran on the experimenter's computer")
     parser.add_argument("--json", dest="json_out", default=None,
-                        help="also write the results to this JSON file (loop with several --path: one file per path, "
-                             "NAME-gpu.json and NAME-cpu.json)")
+                        help="also write the results to this JSON file, in an existing folder; an existing file is "
+                             "overwritten (loop with several --path: one file per path, NAME-gpu.json and "
+                             "NAME-cpu.json)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -44,5 +46,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--frames must be at least 1, got {args.frames}")
     if not (math.isfinite(args.work_ms) and args.work_ms >= 0):
         raise ValueError(f"--work-ms must be a number of milliseconds >= 0, got {args.work_ms:g}")
+    if args.json_out is not None:  # before the benchmark, which a bad name would throw away
+        check_output(args.json_out, "--json", make_folders=False)
     module_name, func = TARGETS[args.target].split(":")
     return int(getattr(import_module(module_name), func)(args) or 0)

@@ -15,17 +15,21 @@ HELP = "train a virtual ant on a short route and let it follow it in the emulate
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", default="demo-output", help="folder for the outputs (default: demo-output)")
+    parser.add_argument("--out", default="demo-output", metavar="FOLDER",
+                        help="folder for the outputs, made if missing; earlier outputs there are overwritten "
+                             "(default: %(default)s)")
     parser.add_argument("--rig-seconds", type=float, default=0.0, metavar="S",
-                        help="also run the embedded default rig (served, real time, scripted walker) for S seconds")
+                        help="also run the embedded default rig (served, real time, scripted walker) for S seconds, "
+                             "0..3600 (default %(default)s: not run)")
 
 
 def run(args: argparse.Namespace) -> int:
-    from antarium.commands import layout
+    from antarium.commands import check_output, layout
     from antarium.demos.virtual_ant import run_ant_demo
 
     if not 0 <= args.rig_seconds <= 3600:
-        raise ValueError(f"--rig-seconds must be in [0, 3600], got {args.rig_seconds}")
+        raise ValueError(f"--rig-seconds must be in [0, 3600], got {args.rig_seconds:g}")
+    check_output(args.out, "--out", folder=True)
     code = layout.run(argparse.Namespace(out=args.out, no_pictures=False, export=None, regenerate=False,
                                          layout_out=None, margin_mm=None, min_pitch_mm=None))
     if code:

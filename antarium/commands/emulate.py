@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from antarium.commands import require_seconds
+from antarium.commands import require_port, require_seconds
 
 HELP = "run the dome emulator (distributor + 55 panels) on UDP, as the real board would"
 
@@ -13,9 +13,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from antarium.firmware_proto import DEFAULT_HOST, DEFAULT_PORT
 
     parser.add_argument("--host", default=DEFAULT_HOST, help=f"address to listen on (default {DEFAULT_HOST})")
-    parser.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"UDP port (default {DEFAULT_PORT})")
+    parser.add_argument("--port", type=int, default=DEFAULT_PORT,
+                        help=f"UDP port, 0..65535, 0: a free one (default {DEFAULT_PORT})")
     parser.add_argument("--line", choices=("fast", "bits"), default="fast",
-                        help="panel links: fast path, or bit-exact Manchester framing (slower)")
+                        help="panel links: fast (default), or bits: bit-exact Manchester framing (slower)")
     parser.add_argument("--seconds", type=float, default=None, help="stop after this many seconds (default: never)")
     parser.add_argument("--fault", action="append", default=[], metavar="PANEL:LED:KIND",
                         help="inject an LED fault, KIND open or short (repeatable)")
@@ -30,6 +31,7 @@ def _parse_fault(spec: str) -> tuple[int, int, str]:
 
 def run(args: argparse.Namespace) -> int:
     require_seconds(args, "seconds")
+    require_port(args, "port")
     from antarium.firmware_proto.emulator import Emulator
     from antarium.firmware_proto.server import format_stats, serve
 

@@ -4,23 +4,28 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 HELP = "print the LED layout summary, draw it, export the per-LED table, or regenerate the layout"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", default=None,
-                        help="folder for the pictures (default: the current folder, and none with --export or "
+    parser.add_argument("--out", default=None, metavar="FOLDER",
+                        help="folder for the pictures layout_mollweide.png and layout_3d.png, made if missing, "
+                             "existing pictures overwritten (default: the current folder, and none with --export or "
                              "--regenerate unless --out is given)")
     parser.add_argument("--no-pictures", action="store_true", help="print the summary only")
-    parser.add_argument("--export", metavar="FILE", help="write the full per-LED table (.csv or .json)")
+    parser.add_argument("--export", metavar="FILE",
+                        help="write the full per-LED table (.csv or .json, in an existing folder; an existing file is "
+                             "overwritten)")
     parser.add_argument("--regenerate", action="store_true",
-                        help="rerun the seeded layout search and write it to --layout-out")
-    parser.add_argument("--layout-out", metavar="FILE", help="where --regenerate writes (default: the shipped file)")
+                        help="rerun the seeded layout search (about 2 s) and write it to --layout-out")
+    parser.add_argument("--layout-out", metavar="FILE.npz",
+                        help="where --regenerate writes (needed with it; an existing file is overwritten, the shipped "
+                             "geometry/data/layout.npz only when named)")
     parser.add_argument("--margin-mm", type=float, default=None,
-                        help="LED centre to board edge, mm (with --regenerate)")
-    parser.add_argument("--min-pitch-mm", type=float, default=None, help="minimum GB pitch, mm (with --regenerate)")
+                        help="LED centre to board edge, mm (with --regenerate; default: the search's own)")
+    parser.add_argument("--min-pitch-mm", type=float, default=None,
+                        help="minimum GB pitch, mm (with --regenerate; default: the search's own)")
 
 
 def print_summary(summary: dict) -> None:
@@ -40,17 +45,26 @@ def print_summary(summary: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from antarium.commands import check_output
     from antarium.geometry import LayoutParams, generate_layout, load_dome
     from antarium.geometry.layout import SHIPPED_LAYOUT, save_layout
     from antarium.geometry.spacing import layout_summary
 
+    # every output checked before the work: the search, the summary and the pictures are not thrown away
     if args.export:
-        export = Path(args.export)
-        if export.suffix.lower() not in (".csv", ".json"):
-            raise ValueError(f"--export file must end in .csv or .json, got {export.name!r}")
-        if not export.parent.is_dir():
-            raise ValueError(f"--export: folder {str(export.parent)!r} does not exist")
-    layout_path = None
+        check_output(args.export, "--export", suffixes=(".csv", ".json"), make_folders=False)
+    if args.layout_out is not None and not args.regenerate:
+        raise ValueError("--layout-out applies only with --regenerate")
+    if args.regenerate:
+        if args.layout_out is None:
+            raise ValueError("--regenerate needs --layout-out FILE.npz (to replace the shipped layout, name it: "
+                             f"--layout-out {SHIPPED_LAYOUT})")
+        layout_path = check_output(args.layout_out, "--layout-out", suffixes=(".npz",))
+    elif args.margin_mm is not None or args.min_pitch_mm is not None:
+        raise ValueError("--margin-mm and --min-pitch-mm apply only with --regenerate")
+    pictures = not args.no_pictures and (args.out is not None or not (args.export or args.regenerate))
+    if pictures:
+        out = check_output(args.out or ".", "--out", folder=True)
     if args.regenerate:
         kw = {}
         if args.margin_mm is not None:
@@ -58,11 +72,11 @@ def run(args: argparse.Namespace) -> int:
         if args.min_pitch_mm is not None:
             kw["gb_min_pitch"] = args.min_pitch_mm / 1e3
         layout = generate_layout(LayoutParams(**kw), progress=True)
-        layout_path = Path(args.layout_out or SHIPPED_LAYOUT)
+        layout_path.parent.mkdir(parents=True, exist_ok=True)
         save_layout(layout, layout_path)
         print(f"layout written to {layout_path}")
-    elif args.margin_mm is not None or args.min_pitch_mm is not None:
-        raise ValueError("--margin-mm and --min-pitch-mm apply only with --regenerate")
+    else:
+        layout_path = None
     t0 = time.perf_counter()
     dome = load_dome(layout_path)
     dome.directions, dome.gain  # noqa: B018 - measure the full build
@@ -73,10 +87,9 @@ def run(args: argparse.Namespace) -> int:
         from antarium.geometry.table import export_table
 
         print(f"per-LED table: {export_table(dome, args.export)}")
-    if not args.no_pictures and (args.out is not None or not (args.export or args.regenerate)):
+    if pictures:
         from antarium.plots.layout import dome_3d, mollweide_map
 
-        out = Path(args.out or ".")
         out.mkdir(parents=True, exist_ok=True)
         print(f"picture: {mollweide_map(dome, out / 'layout_mollweide.png')}")
         print(f"picture: {dome_3d(dome, out / 'layout_3d.png')}")

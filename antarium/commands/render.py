@@ -36,33 +36,52 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", dest="settings", action="append", metavar="KEY=VALUE",
                         help="scene parameter, e.g. --set period_deg=20 (repeatable; values are JSON)")
     parser.add_argument("--pos", nargs=3, type=float, default=(0.0, 0.0, 0.01), metavar=("X", "Y", "Z"),
-                        help="eye position in metres (default: 0 0 0.01)")
-    parser.add_argument("--heading", type=float, default=0.0, help="heading in degrees (default 0)")
-    parser.add_argument("--time", type=float, default=0.0, help="stimulus time in seconds (drifting stimuli)")
-    parser.add_argument("--out", default="view.png", help="equal-area map of the LED colours (PNG)")
-    parser.add_argument("--cube", default=None, help="also save the raw cube map (six faces, PNG)")
-    parser.add_argument("--face-size", type=int, default=None, help="cube face size in texels")
-    parser.add_argument("--width", type=int, default=1200, help="picture width in pixels (default 1200)")
+                        help="eye position in metres, Z the height above the ground, >= 0 (default: 0 0 0.01)")
+    parser.add_argument("--heading", type=float, default=0.0, help="heading in degrees (default %(default)s)")
+    parser.add_argument("--time", type=float, default=0.0,
+                        help="stimulus time in seconds, for drifting stimuli (default %(default)s)")
+    parser.add_argument("--out", default="view.png", metavar="FILE.png",
+                        help="equal-area map of the LED colours (PNG; default %(default)s; folders made, an existing "
+                             "file is overwritten)")
+    parser.add_argument("--cube", default=None, metavar="FILE.png",
+                        help="also save the raw cube map (six faces, PNG; folders made, an existing file is "
+                             "overwritten)")
+    parser.add_argument("--face-size", type=int, default=None,
+                        help="cube face side in texels (default: the renderer's; allowed: from the smallest that "
+                             "samples every LED's footprint, 55 at the dome's 1.5 degree pitch, to 2048)")
+    parser.add_argument("--width", type=int, default=1200,
+                        help="picture width in pixels, at least 64 (default %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from antarium.commands import check_output
+    from antarium.core.numbers import check_number
     from antarium.core.pose import Pose
     from antarium.geometry import load_dome
-    from antarium.plots.dome_map import atlas_image, check_png_path, dome_picture, save_png
+    from antarium.plots.dome_map import atlas_image, dome_picture, save_png
     from antarium.renderers.library import build_scene
-    from antarium.renderers.renderer import Renderer
+    from antarium.renderers.renderer import MAX_FACE_SIZE, Renderer, smallest_face_size
 
-    pose = Pose.from_deg(*args.pos, heading_deg=args.heading)
+    x, y, z = (check_number(f"--pos {axis} (metres)", v) for axis, v in zip("XYZ", args.pos, strict=True))
+    pose = Pose.from_deg(x, y, z, heading_deg=check_number("--heading (degrees)", args.heading))
     if args.width < 64:
         raise ValueError(f"--width must be at least 64 pixels, got {args.width}")
-    if args.pos[2] < 0:
+    if z < 0:
         raise ValueError(f"--pos Z is the eye's height above the ground (z = 0) in metres and must be >= 0, "
-                         f"got {args.pos[2]:g}")
+                         f"got {z:g}")
     if not math.isfinite(args.time):
         raise ValueError(f"--time must be a finite number of seconds, got {args.time:g}")
-    check_png_path(args.out, "--out")  # both names checked before anything is rendered or written
+    if args.face_size is not None:
+        check_number("--face-size (cube face_size, texels)", args.face_size, smallest_face_size(), MAX_FACE_SIZE,
+                     integer=True)
+    # both names checked before anything is rendered or written
+    check_output(args.out, "--out", suffixes=(".png",))
     if args.cube:
-        check_png_path(args.cube, "--cube")
+        check_output(args.cube, "--cube", suffixes=(".png",))
+        if Path(args.cube).expanduser().resolve() == Path(args.out).expanduser().resolve():
+            raise ValueError(f"--cube and --out name the same file {args.out!r}; give two names")
     scene = build_scene(parse_scene_spec(args.scene, args.settings))  # bad scenes fail before GL starts
     dome = load_dome()
     renderer = Renderer(dome, face_size=args.face_size)

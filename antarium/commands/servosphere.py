@@ -12,9 +12,14 @@ import math
 import sys
 import time
 
-from antarium.commands import require_seconds
+from antarium.commands import check_output, require_seconds
+from antarium.core.numbers import check_number
 
 HELP = "run the servosphere (free ant on a motion-compensating ball); --simulate for the simulated rig"
+
+
+#: the simulated rig's option -> the command-line option that sets it (its range checks name the former)
+SIMULATE_OPTIONS = {"speed": "--speed", "meander": "--meander", "pause_fraction": "--pauses", "slip": "--slip"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -22,14 +27,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default=None, help="rig config TOML whose [locomotion] is the servosphere's")
     parser.add_argument("--seconds", type=float, default=10.0, help="how long to run (s; default 10)")
     parser.add_argument("--realtime", action="store_true", help="--simulate: pace on the wall clock")
-    parser.add_argument("--speed", type=float, default=0.05, help="--simulate: the ant's speed (m/s; default 0.05)")
+    parser.add_argument("--speed", type=float, default=0.05,
+                        help="--simulate: the ant's speed (m/s; default %(default)s)")
     parser.add_argument("--meander", type=float, default=2.0,
-                        help="--simulate: s.d. of the ant's turn rate (rad/s; default 2)")
+                        help="--simulate: s.d. of the ant's turn rate (rad/s, >= 0; default %(default)s)")
     parser.add_argument("--pauses", type=float, default=0.0,
-                        help="--simulate: share of 0.5 s spurts the ant stands still (0..1; default 0)")
-    parser.add_argument("--slip", type=float, default=0.0, help="--simulate: wheel slip fraction (default 0)")
-    parser.add_argument("--seed", type=int, default=0, help="--simulate: the ant's walk (default 0)")
-    parser.add_argument("--plot", default=None, help="write the error distribution and paths to this PNG")
+                        help="--simulate: share of 0.5 s spurts the ant stands still (0..1; default %(default)s)")
+    parser.add_argument("--slip", type=float, default=0.0,
+                        help="--simulate: wheel slip fraction (0..0.5; default %(default)s)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="--simulate: random seed of the ant's walk (an integer >= 0; default %(default)s)")
+    parser.add_argument("--plot", default=None, metavar="FILE.png",
+                        help="write the error distribution and paths to this PNG (folders made; an existing file is "
+                             "overwritten)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -40,6 +50,10 @@ def run(args: argparse.Namespace) -> int:
     from antarium.locomotion import open_source
 
     require_seconds(args, "seconds")
+    if args.simulate:
+        check_number("--seed", args.seed, 0, integer=True)
+    if args.plot is not None:  # before the run, which a bad name would throw away
+        check_output(args.plot, "--plot", suffixes=(".png",))
     simulated = args.simulate and not args.realtime
     clock = SimulatedClock() if simulated else MonotonicClock()
     if args.simulate:
@@ -56,7 +70,11 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"{args.config}: [locomotion] source must be \"servosphere\"")
         # one ball, one tether: the loop's, as `antarium serve` passes them
         options = {"tether": config.loop.tether, "ball_radius": config.loop.ball_radius_m, **locomotion.options}
-    src = open_source("servosphere", clock=clock, process=False, **options)  # the loop here: its rig, its rows
+    try:
+        src = open_source("servosphere", clock=clock, process=False, **options)  # the loop here: its rig, its rows
+    except ValueError as exc:  # the simulated rig's own range checks: name the option that set the value
+        option = next((o for key, o in SIMULATE_OPTIONS.items() if args.simulate and f" {key} " in f" {exc} "), None)
+        raise ValueError(f"{option}: {exc}" if option else str(exc)) from None
     rows: list[tuple] = []
     src.use_log(type("Rows", (), {"add_servosphere": staticmethod(rows.append)})())
     radius = src.loop.geometry.sphere_radius

@@ -112,7 +112,7 @@ def make_app(session, rig: str, settings: MonitorSection):
     period = 1.0 / settings.update_hz
     # the names the page may be opened by: the Origin check below compares with the Host header, so that header
     # must name this monitor (else a name of an attacker's, pointed at this computer, passes both: DNS rebinding)
-    names = served_names(settings.host, getattr(settings, "hosts", ()))
+    names = served_names(settings.host, settings.hosts)
 
     @web.middleware
     async def access(request, handler):

@@ -14,8 +14,9 @@ from antarium.config import ConfigError, RigConfig
 
 #: scene parameters that name files which must exist
 SCENE_FILE_KEYS = ("path", "panorama", "uv")
-#: cube face sides the renderer accepts (texels); 0 in the config means its default
-FACE_SIZE_RANGE = (16, 2048)
+#: scenes built from their parameters alone, in milliseconds: `check_config` builds them to check the parameters
+#: (the habitat's meshes, mesh and panorama files are left to the start: seconds)
+CHEAP_SCENES = ("uniform", "horizon", "bars", "bar", "grating", "checkerboard", "sky")
 
 
 def check_config(config: RigConfig) -> RigConfig:
@@ -23,6 +24,8 @@ def check_config(config: RigConfig) -> RigConfig:
     _check_scene(config.render.scene)
     _check_face_size(config.render.face_size_px)
     _check_locomotion(config)
+    _check_trackball(config)
+    _check_monitor(config)
     _check_ports(config)
     return config
 
@@ -46,10 +49,38 @@ def _check_scene(spec: str | dict) -> None:
         value = params.get(key)
         if isinstance(value, str) and not Path(value).is_file():
             raise ConfigError(f"[render] scene file {value!r} ({key}) does not exist; give an existing file")
+    if name in CHEAP_SCENES:  # its parameters checked as the renderer will: built (no files, no meshes) and dropped
+        from antarium.renderers.library import build_scene
+
+        try:
+            build_scene(spec)
+        except ValueError as exc:
+            raise ConfigError(f"[render] scene {name!r}: {exc}") from None
+
+
+def _check_trackball(config: RigConfig) -> None:
+    """A `[trackball]` section is read as `antarium trackball` and the usb source read it: its keys and values."""
+    section = config.section("trackball")
+    if section is None:
+        return
+    from antarium.locomotion.trackball.config import parse_section
+
+    try:
+        parse_section(section)
+    except ValueError as exc:
+        raise ConfigError(str(exc) if "[trackball]" in str(exc) else f"[trackball] {exc}") from None
+
+
+def face_size_range() -> tuple[int, int]:
+    """Cube face sides (texels) the renderer `serve` builds accepts (its LED footprint is the default, the pitch);
+    0 in the config means its default."""
+    from antarium.renderers.renderer import MAX_FACE_SIZE, smallest_face_size
+
+    return smallest_face_size(), MAX_FACE_SIZE
 
 
 def _check_face_size(size: int) -> None:
-    lo, hi = FACE_SIZE_RANGE
+    lo, hi = face_size_range()
     if size != 0 and not lo <= size <= hi:
         raise ConfigError(f"[render] face_size_px = {size} is not a face size the renderer accepts; allowed: "
                           f"{lo}..{hi} texels, or 0 for its default")
@@ -92,6 +123,13 @@ def _check_locomotion(config: RigConfig) -> None:
         open_source(source, **options)
     except (TypeError, ValueError) as exc:  # an option it does not take, or a value it refuses
         raise ConfigError(str(exc) if str(exc).startswith("[") else f"[locomotion] {exc}") from None
+
+
+def _check_monitor(config: RigConfig) -> None:
+    """The monitor reads the rig's bus streams: it cannot run without the bus."""
+    if config.monitor.enabled and not config.bus.enabled:
+        raise ConfigError("[monitor] enabled = true needs the bus, but [bus] enabled = false: the monitor shows the "
+                          "rig's bus streams; enable [bus] or set [monitor] enabled = false")
 
 
 def _check_ports(config: RigConfig) -> None:
