@@ -34,6 +34,12 @@ def max_frame_rate(link_bps: float = DEFAULT_LINK_BPS, extra_bits: int = 0) -> f
     return link_bps / (FRAME_BITS + extra_bits)
 
 
+def max_rate_with_polarisers(link_bps: float = DEFAULT_LINK_BPS) -> float:
+    """Frames/s above which a polariser update never fits `LinkBudget` (191.1 on 100 Mbit/s): an update may spill
+    into the next period only as far as that frame still ends in time, so two periods must hold two frames and it."""
+    return max_frame_rate(link_bps, POLARISER_BITS // 2)
+
+
 class LinkBudget:
     """Whether a polariser update fits this frame period, sent after the frame's LATCH.
 

@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from antarium.core.clock import SimulatedClock
-from antarium.firmware_proto.budget import FRAME_BITS, POLARISER_BITS, LinkBudget, max_frame_rate, wire_bits
+from antarium.firmware_proto.budget import (
+    FRAME_BITS,
+    POLARISER_BITS,
+    LinkBudget,
+    max_frame_rate,
+    max_rate_with_polarisers,
+    wire_bits,
+)
 from antarium.locomotion import BallSample, LocomotionSource
 from antarium.server.frame_loop import FrameLoop
 
@@ -23,6 +30,15 @@ def test_the_budget_counts_66_bytes_a_datagram_and_pads_the_latch():
 def test_frames_beyond_the_link_are_refused():
     with pytest.raises(ValueError, match="at most 192.7 frames/s"):
         LinkBudget(200.0)
+
+
+def test_above_the_polariser_limit_an_update_never_fits_and_below_it_one_does():
+    """Between 191.1 and 192.7 frames/s the frames fit but no update ever would: `check_config` refuses those."""
+    limit = max_rate_with_polarisers()
+    assert limit == pytest.approx(100e6 / (FRAME_BITS + POLARISER_BITS / 2)) and 191.1 < limit < 191.2
+    assert LinkBudget(limit - 0.01).update_fits()
+    assert not LinkBudget(limit + 0.01).update_fits()
+    assert limit + 0.01 < max_frame_rate()  # frames alone still fit there
 
 
 def test_at_190_hz_an_update_every_frame_does_not_fit_and_is_deferred():

@@ -21,6 +21,8 @@ def _write(tmp_path, text: str) -> str:
     ('[render]\nscene = "/nonexistent/world.glb"\n', "[render] scene file '/nonexistent/world.glb' (path) does not"),
     ('[render]\nscene = {scene = "horizon", panorama = "/no/pano.png"}\n', "(panorama) does not exist"),
     ('[locomotion]\nsource = "scriptd"\n', "[locomotion] source 'scriptd' is unknown; allowed: ant, bus, fictrac"),
+    ('[loop]\nrate_hz = 192.0\n', "[loop] rate_hz = 192 leaves no room on the 100 Mbit/s dome link for a polariser "
+     "update (the polarisers would never move); allowed: at most 191.1 frames/s"),
     ('[render]\nface_size_px = 7\n', "[render] face_size_px = 7 is not a face size the renderer accepts; allowed: 55"),
     ('[locomotion]\nsource = "scripted"\nsped = 0.03\n',
      "[locomotion] source 'scripted' has no option 'sped'; allowed: ball_radius, clock, duration, heading_deg, "

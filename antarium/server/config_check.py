@@ -23,6 +23,7 @@ def check_config(config: RigConfig) -> RigConfig:
     """Raise `ConfigError` for the first thing in `config` that `serve` could not use; return `config`."""
     _check_scene(config.render.scene)
     _check_face_size(config.render.face_size_px)
+    _check_rate(config.loop.rate_hz)
     _check_locomotion(config)
     _check_trackball(config)
     _check_monitor(config)
@@ -77,6 +78,18 @@ def face_size_range() -> tuple[int, int]:
     from antarium.renderers.renderer import MAX_FACE_SIZE, smallest_face_size
 
     return smallest_face_size(), MAX_FACE_SIZE
+
+
+def _check_rate(rate_hz: float) -> None:
+    """A rate whose frames fit the dome link but leave no room for a polariser update: the polarisers would never
+    move (`LinkBudget`). Above the link's frame limit the budget is off (no real dome: emulated benchmarks)."""
+    from antarium.firmware_proto.budget import max_frame_rate, max_rate_with_polarisers
+
+    with_polarisers, frames_only = max_rate_with_polarisers(), max_frame_rate()
+    if with_polarisers < rate_hz <= frames_only:
+        raise ConfigError(f"[loop] rate_hz = {rate_hz:g} leaves no room on the 100 Mbit/s dome link for a polariser "
+                          f"update (the polarisers would never move); allowed: at most {with_polarisers:.1f} frames/s "
+                          f"(190 is the dome's rate)")
 
 
 def _check_face_size(size: int) -> None:
