@@ -194,3 +194,19 @@ def test_a_server_starts_once_and_with_accepts_a_started_one(tmp_path):
             server.start_thread()
         assert wait_for(lambda: server.loop.frame > 0, 5.0)  # the one server runs
     assert not any(t.name == "antarium-server tb" for t in threading.enumerate())  # and its thread ended
+
+
+def test_a_rig_without_renderer_publishes_render_time_as_nan_not_zero(tmp_path):
+    """docs/bus.md: a stage that did not run is NaN; a pose-only rig renders nothing, so `render` is NaN."""
+    config = _config(tmp_path, rig="tstats")
+    server = Server(config, renderer_factory=None, link=False).start_thread()
+    try:
+        received = []
+        with bus.open_session(config.bus, "client") as s:
+            sub = s.declare_subscriber(bus.stats_key("tstats"),
+                                       lambda sample: received.append(bus.decode_stats(sample.payload.to_bytes())))
+            assert wait_for(lambda: len(received) >= 3, 10.0)
+            sub.undeclare()
+        assert all(math.isnan(r["render"]) and math.isnan(r["sample"]) for r in received), received[:3]
+    finally:
+        server.stop()

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import gc
 import json
+import math
 import sys
 import threading
 from collections.abc import Callable
@@ -190,7 +191,7 @@ class Server:
                                                    rec.closed_loop, rec.fixed_tether))
             if self._stats_pub is not None and rec.frame % loop_cfg.stats_every_frames == 0:
                 self._stats_pub.put(bus.encode_stats(rec.frame, self.loop.late_frames, rec.t_start, rec.latency,
-                                                     _nan0(rec.render) + _nan0(rec.sample) + _nan0(rec.convert),
+                                                     _stages(rec.render, rec.sample, rec.convert),
                                                      rec.sample, rec.encode, rec.send, rec.pacing_error))
             if self._leds_pub is not None:
                 self._leds_pub.offer(rec.frame, rec.t_start, self.loop.last_frame)
@@ -539,8 +540,10 @@ def _release(prepared) -> None:
         release()
 
 
-def _nan0(v: float) -> float:
-    return 0.0 if v != v else v
+def _stages(*seconds: float) -> float:
+    """The time of the stages that ran (NaN ones did not): their sum, NaN when none ran (a rig without renderer)."""
+    ran = [v for v in seconds if v == v]
+    return sum(ran) if ran else math.nan
 
 
 def _scene_sha256(scene: str | dict) -> str:
