@@ -527,7 +527,7 @@ def log_path(folder: str | Path, rig: str, name: str, when: _dt.datetime | None 
     when = when or _dt.datetime.now(_dt.UTC)
     safe = "".join(c if c.isascii() and c.isalnum() or c in "-_" else "_" for c in name)[:64] or "trial"
     base = Path(folder) / f"{rig}_{when:%Y%m%d-%H%M%S}_{safe}"
-    path, k = base.with_suffix(".h5"), 1
+    path, k = Path(f"{base}.h5"), 1  # appended: a rig name may hold a dot ("lab.1"), which with_suffix would cut
     while path.exists():
         path, k = Path(f"{base}-{k}.h5"), k + 1
     return path

@@ -1,6 +1,7 @@
 """Trial logs: self-describing tables, nothing lost on SIGKILL, clear errors, a bad value costs only itself, disk full
 keeps going."""
 
+import datetime
 import json
 import os
 import re
@@ -92,6 +93,12 @@ def test_log_path_is_unique(tmp_path):
     assert a.name.startswith("rig1_") and a.name.endswith("_homing_run_1.h5")
     a.write_bytes(b"")
     assert log_path(tmp_path, "rig1", "homing/run 1", when=None) != a
+
+
+def test_a_rig_name_with_a_dot_keeps_its_trial_in_the_file_name(tmp_path):
+    """docs/logs.md: <rig>_<UTC time>_<trial>.h5, for any rig name the config accepts ("lab.1" was cut to lab.h5)."""
+    when = datetime.datetime(2026, 11, 27, 8, 0, 0, tzinfo=datetime.UTC)
+    assert log_path(tmp_path, "lab.1", "familiar", when=when).name == "lab.1_20261127-080000_familiar.h5"
 
 
 def test_log_path_keeps_only_ascii_letters_digits_dash_and_underscore(tmp_path):

@@ -1,4 +1,4 @@
-"""`antarium bench render`: frames/s of the renderer for four workloads, with the per-stage split.
+"""`antarium bench render`: frames/s of the renderer for five workloads, with the per-stage split.
 
 Workloads: the habitat's distant panorama and sky alone (no meshes), a drifting grating (a drum at 30°/s),
 the default habitat, and a 500,000-triangle stress mesh. The eye walks a slow curve at 1 cm above the ground
