@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from antarium import bus
-from antarium.core.numbers import as_real
+from antarium.core.numbers import as_real, check_number
 from antarium.core.pose import Pose
 
 #: the longest `Rig.wait` (s): a day; anything longer is a typo
@@ -87,7 +87,10 @@ class Rig:
         else:
             cfg = resolve(config) if isinstance(config, dict) else load_config(config)
         self.bus_section = cfg.bus.model_copy(update=None if connect is None else {"connect": list(connect)})
-        self.timeout_s = float(timeout_s)
+        value = as_real(timeout_s)
+        if not (math.isfinite(value) and value > 0):
+            raise RigError(f"timeout_s must be a positive number of seconds, got {_shown(timeout_s)}")
+        self.timeout_s = value
         self.log_dir = None if log_dir is None else Path(log_dir).expanduser().resolve()
         self._session = session
         self._own_session = session is None
@@ -167,13 +170,24 @@ class Rig:
             if reply.ok is not None:
                 body = json.loads(reply.ok.payload.to_bytes())
                 return body.get("result")
-            try:
-                message = json.loads(reply.err.payload.to_bytes()).get("error", "")
-            except (ValueError, AttributeError):
-                message = reply.err.payload.to_bytes().decode(errors="replace")
-            raise RigError(message)
+            raise RigError(self._error_message(command, reply.err.payload.to_bytes()))
         raise RigError(f"{command}: no reply from rig {self.name!r} within {self.timeout_s} s "
                        "(server gone, or the command was refused by the bus's access control)")
+
+    def _error_message(self, command: str, raw: bytes) -> str:
+        """The message of an error reply: the server's own (JSON {"error": ...}), or the bus's (zenoh's "Timeout"
+        when the server did not reply in time, or another of its errors) said as what happened."""
+        try:
+            body = json.loads(raw)
+        except ValueError:
+            body = None
+        if isinstance(body, dict) and isinstance(body.get("error"), str):
+            return body["error"]
+        text = raw.decode(errors="replace").strip()
+        if text.lower() == "timeout":
+            return (f"no reply from rig {self.name!r} to {command} within {self.timeout_s:g} s (the server is busy "
+                    "or stuck; raise --timeout, or `timeout_s` of Rig, if it needs longer)")
+        return f"{command}: the bus answered with an error instead of rig {self.name!r}: {text or 'no message'}"
 
     # -- commands --------------------------------------------------------------------------------------
     def load_scene(self, scene: str | Path | dict) -> dict:
@@ -311,30 +325,130 @@ class Rig:
 
 
 # -- helpers for experiment scripts ----------------------------------------------------------------------
+class ScriptArgumentError(ValueError):
+    """An experiment script's option is out of range; the message names the option, its value and what is
+    allowed (`run_script` prints it as one line, exit status 2)."""
+
+
+def _shown(value: Any) -> str:
+    number = as_real(value)
+    return f"{number:g}" if math.isfinite(number) else repr(value)[:60]
+
+
+def seconds_value(name: str, value: Any, *, zero: bool = False) -> float:
+    """`value` as seconds: a finite number > 0 (>= 0 with `zero`) and at most `WAIT_MAX_S`; otherwise
+    ScriptArgumentError naming `name`."""
+    number = as_real(value)
+    low_ok = number >= 0 if zero else number > 0
+    if not (math.isfinite(number) and low_ok and number <= WAIT_MAX_S):
+        what = "a number of seconds >= 0" if zero else "a positive number of seconds"
+        raise ScriptArgumentError(f"{name} must be {what} (at most {WAIT_MAX_S:g}), got {_shown(value)}")
+    return number
+
+
+def finite_value(name: str, value: Any, low: float = -math.inf, high: float = math.inf) -> float:
+    """`value` as a finite number in [low, high] (`antarium.core.numbers.check_number`); otherwise
+    ScriptArgumentError naming `name`."""
+    try:
+        return check_number(name, value, low, high)
+    except ValueError as exc:
+        raise ScriptArgumentError(str(exc)) from None
+
+
+def _option(attribute: str) -> str:
+    return "--" + attribute.replace("_", "-")
+
+
+def check_script_arguments(args, *, seconds: tuple[str, ...] = (), numbers: tuple[str, ...] = ()) -> None:
+    """Check parsed options before anything is written or connected: the shared ones of `add_script_arguments`
+    (--rig a valid rig name, --timeout positive seconds) when present, then the attributes named in `seconds`
+    (positive seconds) and `numbers` (finite numbers). The first bad one raises ScriptArgumentError."""
+    if getattr(args, "rig", None) is not None:
+        try:
+            bus.check_rig_name(args.rig)
+        except ValueError as exc:
+            raise ScriptArgumentError(f"--rig: {exc}") from None
+    if hasattr(args, "timeout"):
+        seconds_value("--timeout", args.timeout)
+    for name in seconds:
+        seconds_value(_option(name), getattr(args, name))
+    for name in numbers:
+        finite_value(_option(name), getattr(args, name))
+
+
+def _script_errors() -> tuple[type[BaseException], ...]:
+    """What `run_script` reports as one line (imported only when something went wrong)."""
+    from antarium.config import ConfigError
+
+    errors: tuple[type[BaseException], ...] = (RigError, ScriptArgumentError, ConfigError)
+    import sys
+
+    server = sys.modules.get("antarium.server.server")  # only a script that started a server can see its errors
+    return errors + ((server.ServerError,) if server is not None else ())
+
+
+def run_script(main: Callable[[list[str] | None], int | None], argv: list[str] | None = None) -> int:
+    """The entry point of an example script: `sys.exit(run_script(main))`. Runs `main(argv)`; a refusal of the
+    server or an unreachable rig (RigError), a bad option (ScriptArgumentError), a bad --config (ConfigError) and
+    a server that could not start here (ServerError, --start-server) are printed as one line,
+    `<script>: error: <message>`, exit status 2; Ctrl-C exits with 130. Anything else is a bug: its traceback."""
+    import sys
+
+    prog = Path(sys.argv[0]).name or "script"
+    try:
+        return int(main(argv) or 0)
+    except Exception as exc:
+        if not isinstance(exc, _script_errors()):
+            raise
+        print(f"{prog}: error: {exc}", file=sys.stderr, flush=True)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr, flush=True)
+        return 130
+
+
 def add_script_arguments(parser) -> None:
     """The options every experiment script shares: which rig, where it is, and whether to start one here."""
-    parser.add_argument("--rig", default="rig1", help="rig name (default rig1)")
-    parser.add_argument("--config", default=None, help="rig config (TOML) telling where the server listens")
+    parser.add_argument("--rig", default=None,
+                        help="rig name (default: the [rig] name of --config; rig1 without --config)")
+    parser.add_argument("--config", default=None,
+                        help="rig config (TOML) telling where the server listens (default: the embedded default, "
+                             "127.0.0.1:7447)")
     parser.add_argument("--start-server", action="store_true",
                         help="start the rig's server in this process first (the embedded default without --config)")
-    parser.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the server and replies")
+    parser.add_argument("--timeout", type=float, default=30.0,
+                        help="seconds to wait for the server and for each reply (default %(default)g)")
+
+
+def script_rig_name(args, config=None) -> str:
+    """The rig a script talks to: --rig, else the [rig] name of --config (the embedded default's without one)."""
+    if getattr(args, "rig", None):
+        return args.rig
+    if config is None:
+        from antarium.config import load_config
+
+        config = load_config(args.config)
+    return config.rig.name
 
 
 @contextlib.contextmanager
 def script_rig(args, out: str | Path | None = None) -> Iterator[Rig]:
     """A connected `Rig` for parsed `add_script_arguments` options (starting the server here if asked); `out`:
-    the script's output folder, where its trial logs go too (on this computer's server; see `Rig` log_dir)."""
+    the script's output folder, where its trial logs go too (on this computer's server; see `Rig` log_dir).
+    The rig is --rig, or the [rig] name of --config when --rig is not given."""
     from antarium.config import load_config
 
+    check_script_arguments(args)
     config = load_config(args.config)
+    name = script_rig_name(args, config)
     server = None
     if args.start_server:
         from antarium.server import Server
 
-        config.rig.name = args.rig
+        config.rig.name = name
         server = Server(config).start_thread(timeout_s=args.timeout)
     try:
-        with Rig(args.rig, config=config, timeout_s=args.timeout, log_dir=out) as rig:
+        with Rig(name, config=config, timeout_s=args.timeout, log_dir=out) as rig:
             yield rig
     finally:
         if server is not None:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from antarium.ant.agent import follow_route, learning_walk
@@ -24,17 +25,21 @@ from antarium.ant.models import make_model
 from antarium.ant.route_following import FACE_SIZE, MODEL_EYES, MODEL_PARAMS, PLACE_LENGTH_M
 from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
+from antarium.client import check_script_arguments, finite_value, run_script
 from antarium.plots.ant import plot_paths, plot_traces, scene_top_view
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="ant-homing")
-    parser.add_argument("--length", type=float, default=3.0, help="outbound route length (m)")
-    parser.add_argument("--seed", type=int, default=5)
-    parser.add_argument("--threshold", type=float, default=0.2, help="lambda_N below which the nest is recognised")
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", default="ant-homing", help="folder for the log and pictures (default %(default)s)")
+    parser.add_argument("--length", type=float, default=3.0, help="outbound route length (m, default %(default)g)")
+    parser.add_argument("--seed", type=int, default=5, help="seed of the route (default %(default)s)")
+    parser.add_argument("--threshold", type=float, default=0.2,
+                        help="lambda_N below which the nest is recognised (default %(default)g)")
     parser.add_argument("--short", action="store_true", help="a 1.2 m route (for tests)")
     args = parser.parse_args(argv)
+    check_script_arguments(args, numbers=("threshold",))
+    finite_value("--length", args.length, 0.1, 100.0)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     length = 1.2 if args.short else args.length
@@ -62,4 +67,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(run_script(main))

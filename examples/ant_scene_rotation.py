@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from antarium.ant.models import make_model
 from antarium.ant.route_following import FACE_SIZE
 from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
+from antarium.client import run_script
 
 SCENES = {"habitat (structured)": "habitat", "horizon only": "horizon"}
 #: rotations per walk, decisions between rotation times, walked before the first and after the last
@@ -64,10 +66,11 @@ def walk_with_rotations(scene: str, decisions: int, seed: int):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="ant-rotation", help="folder for scene_rotation.png")
-    parser.add_argument("--decisions", type=int, default=160)
-    parser.add_argument("--seed", type=int, default=3)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", default="ant-rotation", help="folder for scene_rotation.png (default %(default)s)")
+    parser.add_argument("--decisions", type=int, default=160, help=f"decisions per walk, at least {MIN_DECISIONS} "
+                        "(default %(default)s)")
+    parser.add_argument("--seed", type=int, default=3, help="seed of the route and rotations (default %(default)s)")
     args = parser.parse_args(argv)
     if args.decisions < MIN_DECISIONS:
         parser.error(f"--decisions must be >= {MIN_DECISIONS} ({ROTATIONS} rotations {SPACING} decisions apart, "
@@ -96,4 +99,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(run_script(main))

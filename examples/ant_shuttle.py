@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from antarium.ant.agent import follow_route, learning_walk
@@ -21,18 +22,24 @@ from antarium.ant.models import make_model
 from antarium.ant.route_following import FACE_SIZE, MODEL_EYES, MODEL_PARAMS, PLACE_LENGTH_M
 from antarium.ant.routes import curved_route
 from antarium.ant.world import virtual_rig
+from antarium.client import check_script_arguments, finite_value, run_script
 from antarium.plots.ant import plot_paths, plot_traces, scene_top_view
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="ant-shuttle")
-    parser.add_argument("--length", type=float, default=2.0, help="route length (m)")
-    parser.add_argument("--seed", type=int, default=5)
-    parser.add_argument("--trips", type=float, default=2.0, help="round trips' worth of decisions to run")
-    parser.add_argument("--threshold", type=float, default=0.2, help="lambda below which a place is recognised")
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", default="ant-shuttle", help="folder for the log and pictures (default %(default)s)")
+    parser.add_argument("--length", type=float, default=2.0, help="route length (m, default %(default)g)")
+    parser.add_argument("--seed", type=int, default=5, help="seed of the route (default %(default)s)")
+    parser.add_argument("--trips", type=float, default=2.0,
+                        help="round trips' worth of decisions to run (default %(default)g)")
+    parser.add_argument("--threshold", type=float, default=0.2,
+                        help="lambda below which a place is recognised (default %(default)g)")
     parser.add_argument("--short", action="store_true", help="a 1.2 m route, one round trip (for tests)")
     args = parser.parse_args(argv)
+    check_script_arguments(args, numbers=("threshold",))
+    finite_value("--length", args.length, 0.1, 100.0)
+    finite_value("--trips", args.trips, 0.1, 100.0)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     length, trips = (1.2, 1.0) if args.short else (args.length, args.trips)
@@ -59,4 +66,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(run_script(main))

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from antarium.client import add_script_arguments, script_rig
+from antarium.client import ScriptArgumentError, add_script_arguments, check_script_arguments, run_script, script_rig
 
 
 def write_panoramas(folder: Path, width: int = 720) -> list[Path]:
@@ -52,13 +52,20 @@ def write_panoramas(folder: Path, width: int = 720) -> list[Path]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_script_arguments(parser)
-    parser.add_argument("--panorama", action="append", default=[], help="panorama image (repeat for a sequence)")
-    parser.add_argument("--seconds", type=float, default=20.0, help="seconds each panorama is shown")
-    parser.add_argument("--out", default="panoramas-output", help="folder for generated panoramas and the trial log")
+    parser.add_argument("--panorama", action="append", default=[],
+                        help="panorama image (repeat for a sequence; default: three generated into --out)")
+    parser.add_argument("--seconds", type=float, default=20.0,
+                        help="seconds each panorama is shown (default %(default)g)")
+    parser.add_argument("--out", default="panoramas-output",
+                        help="folder for generated panoramas and the trial log (default %(default)s)")
     parser.add_argument("--short", action="store_true", help="quick run: 0.6 s per panorama")
     args = parser.parse_args(argv)
     if args.short:
         args.seconds = 0.6
+    check_script_arguments(args, seconds=("seconds",))  # before anything is written or connected
+    missing = [p for p in args.panorama if not Path(p).is_file()]
+    if missing:
+        raise ScriptArgumentError(f"--panorama {missing[0]}: no such file (give an image file: PNG, JPEG or EXR)")
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     panoramas = [Path(p).resolve() for p in args.panorama] or write_panoramas(out.resolve())
@@ -77,4 +84,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

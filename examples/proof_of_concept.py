@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from antarium.client import add_script_arguments, script_rig
+from antarium.client import add_script_arguments, check_script_arguments, run_script, script_rig
 
 
 def condition_poses(seed: int = 0) -> dict[str, tuple[object, float, float, float]]:
@@ -119,14 +119,18 @@ def plot(results, window, out: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_script_arguments(parser)
-    parser.add_argument("--out", default="poc-output", help="folder for the plot and the trial logs")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the rotation times and directions")
-    parser.add_argument("--duration", type=float, default=120.0, help="seconds per condition")
-    parser.add_argument("--window", type=float, default=15.0, help="seconds plotted before and after a rotation")
+    parser.add_argument("--out", default="poc-output",
+                        help="folder for the plot and the trial logs (default %(default)s)")
+    parser.add_argument("--seed", type=int, default=1,
+                        help="seed of the rotation times and directions (default %(default)s)")
+    parser.add_argument("--duration", type=float, default=120.0, help="seconds per condition (default %(default)g)")
+    parser.add_argument("--window", type=float, default=15.0,
+                        help="seconds plotted before and after a rotation (default %(default)g)")
     parser.add_argument("--short", action="store_true", help="quick run: 1.2 s per condition, 0.4 s windows")
     args = parser.parse_args(argv)
     if args.short:
         args.duration, args.window = 1.2, 0.4
+    check_script_arguments(args, seconds=("duration", "window"))  # before anything is written or connected
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     rng = random.Random(args.seed)
@@ -145,4 +149,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

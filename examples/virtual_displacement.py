@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from antarium.client import add_script_arguments, script_rig
+from antarium.client import add_script_arguments, check_script_arguments, run_script, script_rig
 
 
 def plot(updates, out: Path) -> Path:
@@ -46,15 +46,18 @@ def plot(updates, out: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_script_arguments(parser)
-    parser.add_argument("--to-x", type=float, default=4.0, help="x of the new place (m)")
-    parser.add_argument("--to-y", type=float, default=-3.0, help="y of the new place (m)")
-    parser.add_argument("--before", type=float, default=30.0, help="seconds before the displacement")
-    parser.add_argument("--after", type=float, default=30.0, help="seconds after it")
-    parser.add_argument("--out", default="displacement-output", help="folder for the plot and the trial logs")
+    parser.add_argument("--to-x", type=float, default=4.0, help="x of the new place (m, default %(default)g)")
+    parser.add_argument("--to-y", type=float, default=-3.0, help="y of the new place (m, default %(default)g)")
+    parser.add_argument("--before", type=float, default=30.0,
+                        help="seconds before the displacement (default %(default)g)")
+    parser.add_argument("--after", type=float, default=30.0, help="seconds after it (default %(default)g)")
+    parser.add_argument("--out", default="displacement-output",
+                        help="folder for the plot and the trial logs (default %(default)s)")
     parser.add_argument("--short", action="store_true", help="quick run: 1 s before and after")
     args = parser.parse_args(argv)
     if args.short:
         args.before = args.after = 1.0
+    check_script_arguments(args, seconds=("before", "after"), numbers=("to_x", "to_y"))  # before connecting
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     updates, lock = [], threading.Lock()
@@ -80,4 +83,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

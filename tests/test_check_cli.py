@@ -103,3 +103,19 @@ def test_the_real_rig_example_loads():
     assert config.link.interface == "udp" and not config.link.spawn_emulator and config.link.port == 19055
     assert config.locomotion.source == "usb" and config.loop.realtime_priority > 0
     assert config.foreign["trackball"]["vendor_id"] == 0x1209
+
+
+@pytest.mark.parametrize("answers, verdict", [
+    ("b\ny\n", "PASS"),        # an unclear answer is asked again; y confirms
+    ("maybe\nno\n", "FAIL"),   # no fails the panel
+    ("yes\n", "PASS"),
+    ("nope\n", "FAIL"),        # asked again, then the input ends: not a confirmation
+])
+def test_only_yes_or_enter_confirms_a_panel(tmp_path, monkeypatch, capsys, answers, verdict):
+    rig = _rig(tmp_path, 'interface = "virtual"')
+    monkeypatch.setattr("sys.stdin", io.StringIO(answers))
+    assert main(["check", "--config", rig, "--panels", "0", "--min-free-gb", "0.01"]) == (0 if verdict == "PASS" else 1)
+    out = capsys.readouterr().out
+    assert f"{verdict} panel mapping: " in out
+    if answers.split("\n")[0] not in ("", "y", "yes", "n", "no"):
+        assert "is not an answer" in out and out.count("panel 0 (pentagon") == 2  # asked twice

@@ -78,3 +78,11 @@ def test_virtual_displacement(rig_config, tmp_path, capsys):
     log = next(tmp_path.glob("*virtual-displacement.h5"))
     frames = read_table(log, "frames")
     assert frames["x"][0] < 1.0 and frames["x"][-1] > 3.9
+
+
+def test_the_rig_is_the_configs_without_rig(rig_config, tmp_path, capsys):
+    """`--config rig.toml` alone talks to the rig that file names ([rig] name = "texamples"), not to rig1."""
+    toml, _ = rig_config
+    args = ["--config", str(toml), "--short", "--out", str(tmp_path)]
+    assert _load("virtual_displacement").main(args) == 0
+    assert "displaced to (4.00, -3.00) m" in capsys.readouterr().out

@@ -1,6 +1,5 @@
 """The [trackball] config section and the calibration procedure (pure and end to end on the emulated device)."""
 
-import math
 import tomllib
 from dataclasses import replace
 
@@ -112,14 +111,105 @@ def test_end_to_end_on_the_emulated_device_recovers_its_lens():
     assert max(result.spread().values()) < 1e-3
 
 
-def test_cli_calibrate_writes_the_rig_config(tmp_path, capsys):
+COMMENTED = """# the lab's rig: keep these notes
+[rig]
+name = "lab2"   # bus prefix
+
+[bus]
+listen = [ "tcp/127.0.0.1:7999",   # loopback only
+]
+
+[trackball]
+vendor_id = 0x1209   # pid.codes
+ball_radius = 0.05
+
+[[trackball.sensors]]   # front sensor
+azimuth_deg = 0.0
+counts_per_mm = [ 47.0,
+  47.5 ]   # measured 2024
+signs = [1, 1]
+
+[[trackball.sensors]]   # left sensor
+azimuth_deg = 90.0
+# counts_per_mm left at its default
+signs = [1, 1]  # mounting
+
+[ant]
+model = "mb"   # trailing notes
+"""
+
+
+def _calibrated(config):
+    cpmm = ((50.5, 44.25), (48.125, 42.0))
+    signs = ((1, 1), (1, -1))
+    return replace(config, sensors=tuple(replace(s, counts_per_mm=c, signs=g)
+                                         for s, c, g in zip(config.sensors, cpmm, signs, strict=True)))
+
+
+def test_write_section_changes_only_the_calibration_and_keeps_every_other_byte(tmp_path):
     rig = tmp_path / "rig.toml"
-    rig.write_text(OTHER)
-    assert main(["trackball", "calibrate", "--emulate", "--config", str(rig), "--turns", "0.25"]) == 0
-    doc = tomllib.loads(rig.read_text())
-    assert doc["rig"] == {"name": "lab2"} and doc["ant"]["weights"] == [1, 2, 3]
-    cpmm = [v for s in doc["trackball"]["sensors"] for v in s["counts_per_mm"]]
-    np.testing.assert_allclose(cpmm, [47.244094 * f for f in calibration.EMULATED_CPMM_FACTORS], rtol=5e-3)
-    assert "wrote [trackball]" in capsys.readouterr().out
-    assert main(["trackball", "calibrate", "--emulate", "--config", str(rig), "--axes", "q"]) == 2
-    assert math.isclose(tbconfig.load(rig).sensors[0].counts_per_mm[0], cpmm[0])  # the failed run changed nothing
+    rig.write_text(COMMENTED)
+    new = _calibrated(tbconfig.load(rig))
+    assert tbconfig.write_section(rig, new) is None  # edited in place: no backup needed
+    expected = (COMMENTED.replace("counts_per_mm = [ 47.0,\n  47.5 ]   # measured",
+                                  "counts_per_mm = [50.5, 44.25]   # measured")
+                .replace("[[trackball.sensors]]   # left sensor\n",
+                         "[[trackball.sensors]]   # left sensor\ncounts_per_mm = [48.125, 42.0]\n")
+                .replace("signs = [1, 1]  # mounting", "signs = [1, -1]  # mounting"))
+    assert rig.read_text() == expected
+    assert tbconfig.load(rig) == new and not (tmp_path / "rig.toml.bak").exists()
+
+
+def test_write_section_appends_sensor_tables_to_a_file_without_them(tmp_path):
+    rig = tmp_path / "rig.toml"
+    text = OTHER.replace("[rig]", "# notes\n[rig]") + "[trackball]   # ours\nvendor_id = 0x1234"  # no final newline
+    rig.write_text(text)
+    new = _calibrated(tbconfig.load(rig))
+    assert tbconfig.write_section(rig, new) is None
+    assert rig.read_text().startswith(text + "\n") and tbconfig.load(rig) == new
+
+
+def test_write_section_backs_up_a_file_it_cannot_edit_in_place(tmp_path):
+    rig = tmp_path / "rig.toml"
+    inline = OTHER + '\n[trackball]\nsensors = [{azimuth_deg = 0.0}, {azimuth_deg = 90.0}]  # inline\n'
+    rig.write_text(inline)
+    new = _calibrated(tbconfig.load(rig))
+    backup = tbconfig.write_section(rig, new)
+    assert backup == tmp_path / "rig.toml.bak" and backup.read_text() == inline
+    assert tbconfig.load(rig) == new and tomllib.loads(rig.read_text())["ant"]["weights"] == [1, 2, 3]
+
+
+def test_cli_calibrate_writes_the_rig_config_keeping_its_comments(tmp_path, capsys, monkeypatch):
+    """Without --emulate (the driver's USB backend replaced by the miscalibrated emulator, the operator's turns by
+    the emulated ones) the results go into the file; its comments stay."""
+    from antarium.commands import trackball as command
+    from antarium.locomotion.trackball import driver as driver_module
+
+    rig = tmp_path / "rig.toml"
+    rig.write_text(COMMENTED)
+    real = driver_module.UsbTrackball
+    monkeypatch.setattr(driver_module, "UsbTrackball", lambda trackball, backend: real(
+        trackball=trackball, backend=calibration.miscalibrated_emulator(trackball, realtime=False)))
+    monkeypatch.setattr(command, "_turn_by_hand", lambda driver, axis, turns: calibration.turn_emulated(
+        driver, driver.backend, axis, turns))
+    assert main(["trackball", "calibrate", "--config", str(rig), "--turns", "0.25"]) == 0
+    out = capsys.readouterr().out
+    assert "every other line is unchanged" in out
+    text = rig.read_text()
+    assert "# measured 2024" in text and "# the lab's rig: keep these notes" in text and "# mounting" in text
+    cpmm = [v for s in tbconfig.load(rig).sensors for v in s.counts_per_mm]
+    expected = [47.0 * 1.06, 47.5 * 0.94, 47.244094 * 1.03, 47.244094 * 0.91]
+    np.testing.assert_allclose(cpmm, expected, rtol=5e-3)
+    assert main(["trackball", "calibrate", "--config", str(rig), "--axes", "q"]) == 2
+    assert rig.read_text() == text  # the failed run changed nothing
+
+
+def test_cli_calibrate_emulate_never_writes_a_rig_config(tmp_path, capsys):
+    rig = tmp_path / "rig.toml"
+    rig.write_text(COMMENTED)
+    assert main(["trackball", "calibrate", "--emulate", "--config", str(rig), "--turns", "0.25"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--emulate" in err and "--dry-run" in err
+    assert main(["trackball", "calibrate", "--emulate", "--dry-run", "--config", str(rig), "--turns", "0.25"]) == 0
+    assert "dry run: rig config not changed" in capsys.readouterr().out
+    assert rig.read_text() == COMMENTED and not (tmp_path / "rig.toml.bak").exists()

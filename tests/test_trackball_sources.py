@@ -141,3 +141,25 @@ def test_frame_loop_holds_the_pose_while_the_usb_trackball_is_unplugged():
     assert "locomotion_lost" in kinds and kinds.index("locomotion_back") > kinds.index("locomotion_lost")
     assert abs(loop.pose.y) < 1e-3 and loop.pose.heading == 0.0
     print(f"frame loop saw the unplug after {seen_after * 1e3:.1f} ms")
+
+
+def test_cli_names_a_usb_trackball_that_never_appears(tmp_path, capsys):
+    """No device: one line naming it (while it waits, and as the error at the end), not only `connected: false`."""
+    usb_backend = pytest.importorskip("usb.backend.libusb1")
+    if usb_backend.get_backend() is None:
+        pytest.skip("no libusb-1.0 here")
+    rig = tmp_path / "rig.toml"
+    rig.write_text("[trackball]\nvendor_id = 0xfffe\nproduct_id = 0xfffd\n")
+    assert main(["trackball", "--config", str(rig), "--seconds", "1.3", "--no-bus"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "no USB trackball fffe:fffd found" in err[-1] and err[-1].startswith("antarium trackball: error:")
+    assert any("still waiting" in line and "fffe:fffd" in line for line in err[:-1])
+
+
+@pytest.mark.parametrize("content", [b"\x89PNG\r\n\x1a\n\x00\x00", b""])
+def test_cli_refuses_a_replay_file_that_is_not_a_fictrac_log(tmp_path, capsys, content):
+    fake = tmp_path / "fake.png"
+    fake.write_bytes(content)
+    assert main(["trackball", "--source", "fictrac-replay", "--path", str(fake), "--seconds", "1", "--no-bus"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"--path {fake}: not a FicTrac .dat log" in err

@@ -267,15 +267,24 @@ class NoAnswer(Exception):
     """The operator's input ended before an answer (stdin closed or not a terminal)."""
 
 
+#: the operator's answers: Enter or y/yes confirms the panel, n/no fails it; anything else is asked again
+YES, NO = ("", "y", "yes"), ("n", "no")
+
+
 def _ask_operator(panel: int, where: str) -> bool:
-    """True when the operator answers that `panel` is lit where expected; `NoAnswer` at the end of the input."""
-    print(f"  panel {panel} ({where}) should be lit green alone: Enter if so, n + Enter if not: ",
-          end="", flush=True)
-    answer = sys.stdin.readline()
-    if not answer:
-        print(flush=True)
-        raise NoAnswer
-    return not answer.strip().lower().startswith("n")
+    """True when the operator answers that `panel` is lit where expected (Enter, y, yes), False for n or no; any
+    other answer is asked again; `NoAnswer` at the end of the input."""
+    prompt = f"  panel {panel} ({where}) should be lit green alone: Enter (or y) if so, n + Enter if not: "
+    while True:
+        print(prompt, end="", flush=True)
+        answer = sys.stdin.readline()
+        if not answer:
+            print(flush=True)
+            raise NoAnswer
+        word = answer.strip().lower()
+        if word in YES or word in NO:
+            return word in YES
+        print(f"  {answer.strip()[:40]!r} is not an answer: Enter or y (lit where expected), n (not)", flush=True)
 
 
 def _panel_list(text: str) -> list[int]:

@@ -39,15 +39,15 @@ def _announce_link(server) -> None:
         print(link_line(server), flush=True)
 
 
-def _print_status(server, every_s: float) -> None:
-    """One line every `every_s` seconds: frame rate, late frames, latency, alarms."""
-    import time
-
+def _print_status(server, every_s: float, stopping) -> None:
+    """One line every `every_s` seconds: frame rate, late frames, latency, alarms; none once `stopping` is set (a
+    signal: the emulator and the link going down then are the shutdown, not alarms)."""
     if every_s <= 0 or not server.wait_ready(None):
         return
-    while True:
-        time.sleep(every_s)
+    while not stopping.wait(every_s):
         s = server.status()
+        if stopping.is_set():
+            return
         if "frames" not in s:
             continue
         lat = s["latency"]
@@ -55,6 +55,36 @@ def _print_status(server, every_s: float) -> None:
         rate = s["frame_rate_hz"] or 0.0
         print(f"antarium serve: {s['frames']} frames, {rate:.1f}/{s['target_rate_hz']:g} Hz, {s['late_frames']} late, "
               f"latency {latency}" + "".join(f"; ALARM: {a}" for a in s["alarms"]), flush=True)
+
+
+def _check_arguments(args: argparse.Namespace) -> None:
+    """ValueError naming a bad --record or --status-every (before anything starts)."""
+    import math
+
+    if args.record is not None and not args.record.strip():
+        raise ValueError("--record needs a trial name (part of the log file's name, e.g. --record ant7), got "
+                         f"{args.record!r}; leave --record out to record nothing")
+    every = args.status_every
+    if not (math.isfinite(every) and every >= 0):
+        raise ValueError(f"--status-every must be a number of seconds >= 0 (0: no status lines), got {every:g}")
+
+
+def _remove_empty_logs(server, frames: int) -> None:
+    """No frame ran (stopped during start-up): the trial logs opened for it hold nothing; remove them."""
+    if frames:
+        return
+    from antarium.trial_log import read_table
+
+    for path in list(server.trial_paths):
+        try:
+            table = read_table(path, "frames")
+        except (OSError, ValueError, KeyError):
+            continue
+        empty = not table or len(next(iter(table.values()))) == 0
+        if empty:
+            path.unlink(missing_ok=True)
+            server.trial_paths.remove(path)
+            print(f"antarium serve: no frame ran: removed the empty trial log {path}", flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -67,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
     from antarium.server.config_check import check_config
 
     require_seconds(args, "seconds")  # before the config's checks, which look at this machine's ports
+    _check_arguments(args)
     config = check_config(load_config(args.config))
     if args.print_config:
         import tomli_w
@@ -74,24 +105,43 @@ def run(args: argparse.Namespace) -> int:
         print(tomli_w.dumps(config.to_toml_dict()), end="")
         return 0
     server = Server(config, record=args.record)
+    stopping = threading.Event()
+    starting = [True]  # True until the first frame is about to run: a signal then interrupts the start-up
 
     def stop(signum, frame):
-        print(f"antarium serve: {signal.Signals(signum).name}: stopping after this frame", file=sys.stderr,
-              flush=True)
+        first = not stopping.is_set()
+        stopping.set()
+        if not first:
+            return  # stopping already; a second Ctrl-C does not interrupt the shutdown
+        interrupt = starting[0] and not server._ready.is_set()  # not yet ready, and not failing either
+        print(f"antarium serve: {signal.Signals(signum).name}: "
+              + ("stopping the start-up" if interrupt else "stopping after this frame"), file=sys.stderr, flush=True)
         server.stop()
+        if interrupt:
+            raise KeyboardInterrupt
 
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
     bus = config.bus
     where = ", ".join(bus.listen) if bus.enabled else "bus disabled"
-    print(f"antarium serve: rig {server.rig_name!r} at {config.loop.rate_hz:g} frames/s; bus: {where}; "
-          f"trial logs in {server.log_dir}", flush=True)
-    threading.Thread(target=_announce_link, args=(server,), daemon=True).start()
-    threading.Thread(target=_print_status, args=(server, args.status_every), daemon=True).start()
-    frames = server.run(seconds=args.seconds)
-    stats = server.final_stats
+    try:
+        print(f"antarium serve: rig {server.rig_name!r} at {config.loop.rate_hz:g} frames/s; bus: {where}; "
+              f"trial logs in {server.log_dir}", flush=True)
+        threading.Thread(target=_announce_link, args=(server,), daemon=True).start()
+        threading.Thread(target=_print_status, args=(server, args.status_every, stopping), daemon=True).start()
+        frames = server.run(seconds=args.seconds)
+    except KeyboardInterrupt:
+        starting[0] = False
+        if server._start_error is None:  # not yet running, or built but before the loop: nothing shut down yet
+            server._shutdown()
+        frames = 0
+    finally:
+        starting[0] = False
+        stopping.set()  # no status line (and no alarm) once the loop ended
+    stats = server.final_stats or {"late_frames": 0, "skipped_frames": 0, "link_outages": 0}
     print(f"antarium serve: {frames} frames, {stats['late_frames']} late, {stats['skipped_frames']} skipped, "
           f"{stats['link_outages']} link outages", flush=True)
+    _remove_empty_logs(server, frames)
     for path in server.trial_paths:
         print(f"antarium serve: trial log {path}", flush=True)
     return 0

@@ -118,7 +118,9 @@ def _run(args: argparse.Namespace) -> int:
         t0 = time.monotonic()
         next_status = t0
         unplug_at = args.unplug_at
+        warned = False
         with source:
+            _check_replay(args, source.status())
             while args.seconds is None or time.monotonic() - t0 < args.seconds:
                 samples = source.read()
                 if pushes:
@@ -133,13 +135,46 @@ def _run(args: argparse.Namespace) -> int:
                     publisher.status(status)
                     print("trackball status: " + json.dumps(status), flush=True)
                     next_status += 1.0
+                    if not warned and now - t0 >= 1.0 and not _ever_read(status):
+                        # once, while it keeps looking: what is missing, not only `"connected": false`
+                        print(f"antarium trackball: {_nothing_read(args, status)}; still waiting", file=sys.stderr,
+                              flush=True)
+                        warned = True
                 time.sleep(0.002)
             final = source.status()
         print("trackball final: " + json.dumps(final), flush=True)
     finally:
         if session is not None:
             session.close()
+    if not _ever_read(final):
+        raise RuntimeError(_nothing_read(args, final))
     return 0
+
+
+def _ever_read(status: dict[str, Any]) -> bool:
+    """Whether the source ever delivered anything: a USB report, a FicTrac frame."""
+    return bool(status.get("reports") or status.get("connects") or status.get("frames"))
+
+
+def _nothing_read(args: argparse.Namespace, status: dict[str, Any]) -> str:
+    """One line naming what was missing when a source delivered nothing."""
+    error = f" (last error: {status['last_error']})" if status.get("last_error") else ""
+    if args.source == "usb":
+        return (f"no USB trackball {status.get('device', '?')} found{error}: plug it in and check `lsusb`, the "
+                "udev rule of docs/trackball_usb.md and [trackball] vendor_id/product_id (--emulate: no hardware)")
+    if args.source == "fictrac":
+        return (f"no FicTrac frame arrived on {args.transport} {args.host}:{args.port}{error}: is FicTrac running "
+                "and sending there (its sock_port)?")
+    return f"--path {args.path}: no FicTrac frame was replayed{error}"
+
+
+def _check_replay(args: argparse.Namespace, status: dict[str, Any]) -> None:
+    """A replayed file without a single FicTrac frame is refused at once (a wrong file, e.g. an image)."""
+    if args.source == "fictrac-replay" and not status.get("frames"):
+        lines = status.get("lines", 0)
+        why = f"none of its {lines} line{'s' * (lines != 1)} is a FicTrac frame" if lines else "it is empty"
+        first = f" ({status['last_error']})" if status.get("last_error") else ""
+        raise ValueError(f"--path {args.path}: not a FicTrac .dat log: {why}{first}")
 
 
 def _calibrate(args: argparse.Namespace) -> int:
@@ -149,6 +184,10 @@ def _calibrate(args: argparse.Namespace) -> int:
 
     if args.config is None and not args.dry_run:
         raise ValueError("calibrate needs --config RIG.toml (the file its results are written to) or --dry-run")
+    if args.emulate and args.config is not None and not args.dry_run:
+        raise ValueError("calibrate --emulate measures the emulated device, not this rig's ball: add --dry-run "
+                         "(nothing is written), or leave out --emulate to calibrate the real trackball into "
+                         f"{args.config}")
     axes = [a.strip() for a in args.axes.split(",") if a.strip()]
     bad = [a for a in axes if a not in calibration.AXES]
     if bad or not axes:
@@ -177,8 +216,15 @@ def _calibrate(args: argparse.Namespace) -> int:
     if args.dry_run:
         print("dry run: rig config not changed")
     else:
-        tbconfig.write_section(args.config, result.config)
-        print(f"wrote [trackball] to {args.config}")
+        existed = Path(args.config).exists()
+        backup = tbconfig.write_section(args.config, result.config)
+        if not existed:
+            print(f"wrote [trackball] to {args.config} (a new file)")
+        elif backup is None:
+            print(f"wrote [trackball] counts_per_mm and signs to {args.config}; every other line is unchanged")
+        else:
+            print(f"wrote [trackball] to {args.config}, rewriting the whole file (its comments are not kept); "
+                  f"the previous file is {backup}")
     return 0
 
 

@@ -16,16 +16,18 @@
     signs = [1, 1]                   # +1 or -1 per sensor axis (mounting)
 
 A missing key takes its default (`ball_radius`: in a rig file, its `[loop] ball_radius_m` if it sets one); an
-unknown key or a bad value raises `TrackballConfigError` naming it. `write_section` replaces `[trackball]` in a
-rig file and keeps every other section's values.
+unknown key or a bad value raises `TrackballConfigError` naming it. `write_section` writes a calibration's result
+into a rig file: only the `counts_per_mm` and `signs` of its `[[trackball.sensors]]`, every other byte (comments
+included) kept; a file it cannot edit that way is rewritten whole after a copy to `<file>.bak`.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import re
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -187,16 +189,172 @@ def load(source: str | Path | dict[str, Any] | TrackballConfig | None) -> Trackb
     return parse_section(trackball_table(_read_toml(Path(source))))
 
 
-def write_section(path: str | Path, config: TrackballConfig) -> None:
-    """Replace `[trackball]` in the rig file `path` (created if missing); other sections keep their values.
+def write_section(path: str | Path, config: TrackballConfig) -> Path | None:
+    """Write `config` as `[trackball]` of the rig file `path` (created if missing); returns the backup's path when
+    the file had to be rewritten whole, None when only the calibration's keys changed.
 
-    The file is rewritten atomically (TOML comments are not kept: tomli-w writes values only).
-    """
+    What a calibration changes, the sensors' `counts_per_mm` and `signs`, is replaced in place in the file's
+    `[[trackball.sensors]]` tables (appended as such tables when the file has none), and every other byte of the
+    file stays as it was, comments included. Anything else (other `[trackball]` keys changed, sensors written as
+    an inline array, ...) rewrites the whole file with tomli-w, which keeps values but not comments: the previous
+    file is first copied to `<path>.bak`. Every write is atomic (a temporary file, then a rename)."""
     import tomli_w
 
     path = Path(path)
-    doc = _read_toml(path) if path.exists() else {}
+    if not path.exists():
+        _write_atomic(path, tomli_w.dumps({"trackball": to_section(config)}).encode())
+        return None
+    raw = path.read_bytes()
+    doc = _read_toml(path)
+    edited = _edit_calibration(raw.decode("utf-8"), doc, config)
+    if edited is not None:
+        _write_atomic(path, edited.encode("utf-8"))
+        return None
+    backup = path.with_name(path.name + ".bak")
+    _write_atomic(backup, raw)
     doc["trackball"] = to_section(config)
+    _write_atomic(path, tomli_w.dumps(doc).encode())
+    return backup
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(tomli_w.dumps(doc).encode())
+    tmp.write_bytes(data)
     os.replace(tmp, path)
+
+
+def _edit_calibration(text: str, doc: dict[str, Any], config: TrackballConfig) -> str | None:
+    """`text` with the sensors' counts_per_mm and signs of `config` written in place, or None when the file's
+    [trackball] differs from `config` in more than those, or its layout is not one edited safely here."""
+    try:
+        old = parse_section(trackball_table(doc))
+    except TrackballConfigError:
+        return None
+    if len(old.sensors) != len(config.sensors) or replace(old, sensors=tuple(
+            replace(o, counts_per_mm=n.counts_per_mm, signs=n.signs)
+            for o, n in zip(old.sensors, config.sensors, strict=True))) != config:
+        return None
+    values = [{"counts_per_mm": _toml_list(s.counts_per_mm), "signs": _toml_list(s.signs)} for s in config.sensors]
+    newline = "\r\n" if "\r\n" in text else "\n"
+    try:
+        entries = _top_level(text)
+    except (ValueError, IndexError):
+        return None
+    headers = [k for k, e in enumerate(entries) if e[0] == "header"]
+    sensor_headers = [k for k in headers if re.sub(r"\s", "", entries[k][1]) == "[[trackball.sensors]]"]
+    table = doc.get("trackball", {})
+    if not sensor_headers and isinstance(table, dict) and "sensors" not in table:
+        if text and not text.endswith(("\n", "\r")):
+            text += newline
+        for s, v in zip(config.sensors, values, strict=True):
+            text += newline.join(["", "[[trackball.sensors]]", f"azimuth_deg = {s.azimuth_deg!r}",
+                                  f"elevation_deg = {s.elevation_deg!r}", f"roll_deg = {s.roll_deg!r}",
+                                  f"counts_per_mm = {v['counts_per_mm']}", f"signs = {v['signs']}", ""])
+        return _checked(text, doc, config)
+    if len(sensor_headers) != len(config.sensors):
+        return None
+    edits: list[tuple[int, int, str]] = []  # (start, end, replacement), applied from the end
+    for number, k in enumerate(sensor_headers):
+        later = [h for h in headers if h > k]
+        body = entries[k + 1: later[0] if later else len(entries)]
+        missing = dict(values[number])
+        for kind, key, start, end in body:
+            if kind == "key" and key in missing:
+                edits.append((start, end, missing.pop(key)))
+        header_end = entries[k][3]
+        line_end = text.find("\n", header_end)
+        at = len(text) if line_end < 0 else line_end + 1
+        for key, value in missing.items():  # a key the table leaves to its default: right below the header
+            edits.append((at, at, f"{key} = {value}{newline}"))
+    for start, end, replacement in sorted(edits, reverse=True):
+        text = text[:start] + replacement + text[end:]
+    return _checked(text, doc, config)
+
+
+def _toml_list(values) -> str:
+    return "[" + ", ".join(repr(v) for v in values) + "]"
+
+
+def _checked(text: str, doc: dict[str, Any], config: TrackballConfig) -> str | None:
+    """`text` when it parses to `doc` with only the sensors' calibration changed to `config`'s; None otherwise."""
+    try:
+        new = tomllib.loads(text)
+        ok = parse_section(trackball_table(new)) == config
+    except (tomllib.TOMLDecodeError, TrackballConfigError):
+        return None
+    rest = {k: v for k, v in new.items() if k != "trackball"} == {k: v for k, v in doc.items() if k != "trackball"}
+    old_top = {k: v for k, v in doc.get("trackball", {}).items() if k != "sensors"}
+    new_top = {k: v for k, v in new.get("trackball", {}).items() if k != "sensors"}
+    return text if ok and rest and old_top == new_top else None
+
+
+def _top_level(text: str) -> list[tuple[str, str, int, int]]:
+    """The file's top-level entries in order: ("header", "[name]", start, end) or ("key", key, value_start,
+    value_end); comments and blank lines are skipped. ValueError for what this small reader does not follow."""
+    entries: list[tuple[str, str, int, int]] = []
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        if c in " \t\r\n":
+            i += 1
+        elif c == "#":
+            i = _line_end(text, i)
+        elif c == "[":
+            end = text.index("]", i + 1)
+            end = end + 2 if text.startswith("]]", end) else end + 1
+            entries.append(("header", text[i:end], i, end))
+            i = _line_end(text, end)
+        else:
+            eq = text.find("=", i, _line_end(text, i))
+            if eq < 0:
+                raise ValueError(f"no '=' in {text[i:_line_end(text, i)]!r}")
+            key = text[i:eq].strip()
+            start = eq + 1
+            while start < n and text[start] in " \t":
+                start += 1
+            end = _value_end(text, start)
+            entries.append(("key", key, start, end))
+            i = _line_end(text, end)
+    return entries
+
+
+def _line_end(text: str, i: int) -> int:
+    end = text.find("\n", i)
+    return len(text) if end < 0 else end + 1
+
+
+def _value_end(text: str, i: int) -> int:
+    """Where the TOML value starting at `i` ends (exclusive)."""
+    for quote in ('"""', "'''"):
+        if text.startswith(quote, i):
+            end = text.index(quote, i + 3) + 3
+            while end < len(text) and text[end] == quote[0]:
+                end += 1
+            return end
+    c = text[i] if i < len(text) else ""
+    if c == '"':
+        j = i + 1
+        while text[j] != '"':
+            j += 2 if text[j] == "\\" else 1
+        return j + 1
+    if c == "'":
+        return text.index("'", i + 1) + 1
+    if c in "[{":
+        depth, j = 0, i
+        while True:
+            ch = text[j]
+            if ch in "[{":
+                depth += 1
+            elif ch in "]}":
+                depth -= 1
+                if depth == 0:
+                    return j + 1
+            elif ch == "#":
+                j = _line_end(text, j) - 1
+            elif ch in "\"'":
+                j = _value_end(text, j) - 1
+            j += 1
+    end = i
+    while end < len(text) and text[end] not in "#\r\n":
+        end += 1
+    return len(text[:end].rstrip(" \t"))

@@ -1,0 +1,169 @@
+"""Experiment scripts (examples/) and `antarium.client`'s helpers for them: the rig named by --config, options
+checked before anything is written or connected, every refusal one line with exit status 2, a slow reply named as
+such, help texts that show their defaults."""
+
+import argparse
+import importlib.util
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+import antarium
+from antarium import bus, client
+from antarium.client import RigError, add_script_arguments, script_rig
+from antarium.config import load_config, resolve
+from antarium.server import Server
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+SCRIPTS = sorted(p.stem for p in EXAMPLES.glob("*.py"))
+
+
+def _load(name):
+    spec = importlib.util.spec_from_file_location(f"script_{name}", EXAMPLES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _toml(tmp_path, rig: str) -> Path:
+    """A rig config on a free port (nothing listens there unless a test starts a server)."""
+    path = tmp_path / "rig.toml"
+    path.write_text(f'[rig]\nname = "{rig}"\n[bus]\nlisten = ["{bus.free_tcp_endpoint()}"]\n'
+                    f'[log]\ndir = "{tmp_path / "logs"}"\n')
+    return path
+
+
+def _script_args(argv):
+    parser = argparse.ArgumentParser()
+    add_script_arguments(parser)
+    return parser.parse_args(argv)
+
+
+# -- 1: the rig is the config's ---------------------------------------------------------------------------
+def test_the_rig_defaults_to_the_configs_rig_name(tmp_path):
+    toml = _toml(tmp_path, "tclirig")
+    server = Server(load_config(toml), renderer_factory=None, link=False, echo=lambda line: None).start_thread()
+    try:
+        with script_rig(_script_args(["--config", str(toml), "--timeout", "10"])) as rig:
+            assert rig.name == "tclirig" and "frames" in rig.status()
+    finally:
+        server.stop()
+    assert client.script_rig_name(_script_args([])) == "rig1"  # the embedded default's
+    assert client.script_rig_name(_script_args(["--config", str(toml), "--rig", "other"])) == "other"
+
+
+def test_no_server_is_one_line_naming_the_configs_rig(tmp_path, capsys):
+    toml = _toml(tmp_path, "tclinobody")
+    code = client.run_script(_load("virtual_displacement").main,
+                      ["--config", str(toml), "--timeout", "0.3", "--short", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert ": error: no antarium server for rig 'tclinobody' answered within 0.3 s" in err[0]
+
+
+# -- 2: a slow reply ------------------------------------------------------------------------------------------
+def test_a_slow_reply_is_a_rig_error_naming_rig_command_and_timeout():
+    config = resolve({"rig": {"name": "tclislow"}, "bus": {"listen": [bus.free_tcp_endpoint()]}})
+    release = threading.Event()
+
+    def on_query(query):  # a server that takes longer than the client waits
+        release.wait(10.0)
+        query.reply(query.key_expr, json.dumps({"ok": True, "result": {}}))
+
+    session = bus.open_session(config.bus, role="server")
+    entities = [session.declare_queryable(bus.rig_key("tclislow", "cmd", "*"), on_query),
+                session.liveliness().declare_token(bus.alive_key("tclislow"))]
+    try:
+        with antarium.Rig("tclislow", config=config, timeout_s=0.5) as rig, pytest.raises(RigError) as info:
+            rig.status()
+    finally:
+        release.set()
+        for entity in entities:
+            entity.undeclare()
+        session.close()
+    assert type(info.value) is RigError
+    assert "no reply from rig 'tclislow' to status within 0.5 s" in str(info.value)
+    assert "raise --timeout" in str(info.value) and str(info.value) != "Timeout"
+
+
+def test_a_rig_refuses_a_timeout_that_is_not_positive():
+    for bad in (-1.0, 0, float("nan"), "10"):
+        with pytest.raises(RigError, match="timeout_s must be a positive number of seconds"):
+            antarium.Rig("tclitimeout", timeout_s=bad)
+
+
+# -- 3: options checked first, one line ----------------------------------------------------------------------
+@pytest.mark.parametrize("script, args, message", [
+    ("open_loop_panoramas", ["--seconds", "-1"], "--seconds must be a positive number of seconds"),
+    ("open_loop_panoramas", ["--panorama", "missing.png"], "--panorama missing.png: no such file"),
+    ("proof_of_concept", ["--duration", "-1"], "--duration must be a positive number of seconds"),
+    ("proof_of_concept", ["--window", "nan"], "--window must be a positive number of seconds"),
+    ("virtual_displacement", ["--timeout", "-1"], "--timeout must be a positive number of seconds (at most 86400), "
+                                                  "got -1"),
+    ("virtual_displacement", ["--to-x", "nan"], "--to-x must be a finite number, got nan"),
+    ("virtual_displacement", ["--to-y", "inf"], "--to-y must be a finite number, got inf"),
+    ("virtual_displacement", ["--before", "-2"], "--before must be a positive number of seconds"),
+])
+def test_rig_scripts_check_their_options_before_writing_or_connecting(tmp_path, capsys, script, args, message):
+    toml = _toml(tmp_path, "tclinever")  # nothing listens: a script that connected first would say so instead
+    out = tmp_path / "out"
+    code = client.run_script(_load(script).main, ["--config", str(toml), "--out", str(out), *args])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and ": error: " in err[0] and message in err[0], err
+    assert not out.exists()  # nothing generated, no trial log
+
+
+@pytest.mark.parametrize("script, args, message", [
+    ("ant_homing", ["--length", "-1"], "--length must be a finite number >= 0.1"),
+    ("ant_homing", ["--threshold", "nan"], "--threshold must be a finite number, got nan"),
+    ("ant_shuttle", ["--trips", "0"], "--trips must be a finite number >= 0.1"),
+])
+def test_ant_scripts_check_their_options_first(tmp_path, capsys, script, args, message):
+    out = tmp_path / "out"
+    assert client.run_script(_load(script).main, ["--out", str(out), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0] and not out.exists()
+
+
+def test_a_script_run_as_a_program_prints_one_line_and_exits_2(tmp_path):
+    done = subprocess.run([sys.executable, str(EXAMPLES / "virtual_displacement.py"), "--to-x", "nan",
+                           "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.strip() == "virtual_displacement.py: error: --to-x must be a finite number, got nan"
+
+
+@pytest.mark.parametrize("script", SCRIPTS)
+def test_every_script_enters_through_run_script(script):
+    assert "sys.exit(run_script(main))" in (EXAMPLES / f"{script}.py").read_text()
+
+
+class _Parsed(Exception):
+    def __init__(self, parser):
+        super().__init__()
+        self.parser = parser
+
+
+@pytest.mark.parametrize("script", SCRIPTS)
+def test_help_shows_every_default_and_a_whole_description(script, monkeypatch):
+    def capture(self, args=None, namespace=None):
+        raise _Parsed(self)
+
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", capture)
+    with pytest.raises(_Parsed) as info:
+        _load(script).main([])
+    parser = info.value.parser
+    assert parser.description.rstrip().endswith(".") and parser.description == parser.description.strip()
+    for action in parser._actions:
+        if action.default in (None, False, [], argparse.SUPPRESS) or action.required:
+            continue
+        assert action.help and "default" in action.help, f"{script} {action.option_strings}: {action.help!r}"
+    formatter = parser._get_formatter()
+    for option in ("--out", "--seed", "--duration", "--seconds", "--to-x", "--to-y", "--timeout"):
+        action = parser._option_string_actions.get(option)
+        if action is not None and not action.required:  # the help as printed shows the value
+            shown = f"{action.default:g}" if isinstance(action.default, float) else str(action.default)
+            assert f"default {shown}" in formatter._expand_help(action), (script, option)
