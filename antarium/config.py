@@ -5,7 +5,7 @@ Each section is a pydantic model (`LoopSection`, `LinkSection`, ...) whose field
 read as attributes (`config.loop.rate_hz`). Anything wrong (an unknown section or key, a wrong type, a value out
 of range) raises `ConfigError` with one line naming the key and what is allowed, before anything starts. Keys
 renamed since (`[loop] eye_height` is now `eye_height_m`) are still read, with a `ConfigDeprecationWarning`.
-Sections owned by another part (`[trackball]`, `[ant]`) are kept as tables for that part to parse (a
+A section owned by another part (`[trackball]`) is kept as a table for that part to parse (a
 `[trackball]` without `ball_radius` gets the loop's: the ball has one radius). With no file
 the embedded default rig is used: emulator on loopback, default habitat, scripted walker in closed loop.
 See `docs/rig.example.toml`.
@@ -239,7 +239,7 @@ class MonitorSection(Section):
 SECTIONS: dict[str, type[Section]] = {s.NAME: s for s in (
     RigSection, LoopSection, LocomotionSection, LinkSection, RenderSection, BusSection, LogSection, MonitorSection)}
 #: sections owned by another part, kept as tables for it to parse with its own code
-FOREIGN_SECTIONS = ("trackball", "ant")
+FOREIGN_SECTIONS = ("trackball",)
 
 #: the embedded default's walker, used when the config has no [locomotion] section: an ant-like scripted walk
 #: (about 3 cm/s, in spurts, meandering), seeded so that every run is the same
@@ -262,7 +262,7 @@ class RigConfig(BaseModel):
     foreign: dict[str, dict[str, Any]] = Field(default_factory=dict)
 
     def section(self, name: str) -> dict[str, Any] | None:
-        """A foreign section's table (`[trackball]`, `[ant]`), or None when the file has none."""
+        """A foreign section's table (`[trackball]`), or None when the file has none."""
         return self.foreign.get(name)
 
     def to_toml_dict(self) -> dict[str, Any]:

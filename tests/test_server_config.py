@@ -49,10 +49,16 @@ def test_embedded_default_walks_a_seeded_scripted_walker():
 
 
 def test_foreign_sections_are_kept_verbatim_for_their_owners():
-    raw = {"trackball": {"cpi": 1200, "sensors": [{"azimuth_deg": 0}]}, "ant": {"model": "mb"}}
+    raw = {"trackball": {"cpi": 1200, "sensors": [{"azimuth_deg": 0}]}}
     resolved = resolve(raw)
-    assert resolved.section("trackball") == raw["trackball"] and resolved.section("ant") == {"model": "mb"}
-    assert resolved.to_toml_dict()["ant"] == {"model": "mb"}
+    assert resolved.section("trackball") == raw["trackball"]
+    assert resolved.to_toml_dict()["trackball"] == raw["trackball"]
+
+
+def test_a_section_no_part_reads_is_refused():
+    """[ant] was kept for a part that never read it: its keys were accepted and silently ignored."""
+    with pytest.raises(ConfigError, match=r"^unknown section \[ant\]; allowed: "):
+        resolve({"ant": {"model": "mb"}})
 
 
 @pytest.mark.parametrize("raw, message", [
@@ -141,5 +147,5 @@ def test_the_trackball_file_named_by_locomotion_has_the_loops_radius(tmp_path):
 def test_the_architecture_doc_says_what_happens_to_unknown_sections():
     doc = (EXAMPLE.parent / "architecture.md").read_text()
     assert "kept verbatim" not in doc and "any other section\nis refused, naming the sections allowed" in doc
-    with pytest.raises(ConfigError, match=r"^unknown section \[mypart\]; allowed: \[rig\], .*\[trackball\], \[ant\]$"):
+    with pytest.raises(ConfigError, match=r"^unknown section \[mypart\]; allowed: \[rig\], .*\[trackball\]$"):
         resolve({"mypart": {"k": 1}})

@@ -18,9 +18,8 @@ name = "lab2"
 [bus]
 listen = ["tcp/127.0.0.1:7999"]
 
-[ant]
-model = "mb"
-weights = [1, 2, 3]
+[monitor]
+allow = ["127.0.0.1/32", "10.1.2.0/24", "::1/128"]
 """
 
 
@@ -55,7 +54,7 @@ def test_write_section_keeps_other_sections(tmp_path):
     new = replace(c, sensors=(replace(c.sensors[0], counts_per_mm=(40.5, 41.5), signs=(1, -1)), c.sensors[1]))
     tbconfig.write_section(rig, new)
     doc = tomllib.loads(rig.read_text())
-    assert doc["rig"] == {"name": "lab2"} and doc["ant"] == {"model": "mb", "weights": [1, 2, 3]}
+    assert doc["rig"] == {"name": "lab2"} and doc["monitor"] == {"allow": ["127.0.0.1/32", "10.1.2.0/24", "::1/128"]}
     assert doc["bus"] == {"listen": ["tcp/127.0.0.1:7999"]}
     assert tbconfig.load(rig) == new
 
@@ -134,8 +133,8 @@ azimuth_deg = 90.0
 # counts_per_mm left at its default
 signs = [1, 1]  # mounting
 
-[ant]
-model = "mb"   # trailing notes
+[log]
+dir = "trials"   # trailing notes
 """
 
 
@@ -176,7 +175,7 @@ def test_write_section_backs_up_a_file_it_cannot_edit_in_place(tmp_path):
     new = _calibrated(tbconfig.load(rig))
     backup = tbconfig.write_section(rig, new)
     assert backup == tmp_path / "rig.toml.bak" and backup.read_text() == inline
-    assert tbconfig.load(rig) == new and tomllib.loads(rig.read_text())["ant"]["weights"] == [1, 2, 3]
+    assert tbconfig.load(rig) == new and tomllib.loads(rig.read_text())["monitor"]["allow"][1] == "10.1.2.0/24"
 
 
 def test_cli_calibrate_writes_the_rig_config_keeping_its_comments(tmp_path, capsys, monkeypatch):
