@@ -54,6 +54,40 @@ def test_nothing_answering_fails_with_what_to_do(tmp_path, capsys):
     assert "3 failed: distributor, panels, panel mapping" in out
 
 
+def test_a_distributor_of_another_protocol_version_is_named_not_called_silent(tmp_path, capsys):
+    """A board answering VERSION in protocol version 2 (header VERSION byte 2) is what the check names."""
+    import socket
+    import threading
+
+    board = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    board.bind(("127.0.0.1", 0))
+    board.settimeout(0.1)
+    done = threading.Event()
+
+    def answer():  # HELLO (TD 0x7F: control to all, opcode 0x06) -> VERSION of protocol 2
+        while not done.is_set():
+            try:
+                data, peer = board.recvfrom(2048)
+            except TimeoutError:
+                continue
+            if len(data) >= 4 and data[2] == 0x06:
+                board.sendto(bytes([0xBF, 0x02, 0x81, data[3], 2, 2, 0, 55, 1, 0x72, 0, 0x3F]), peer)
+
+    thread = threading.Thread(target=answer, daemon=True)
+    thread.start()
+    try:
+        rig = _rig(tmp_path, f'host = "127.0.0.1"\nport = {board.getsockname()[1]}\nspawn_emulator = false')
+        assert main(["check", "--config", rig, "--auto", "--timeout-s", "1", "--min-free-gb", "0.01"]) == 1
+    finally:
+        done.set()
+        thread.join()
+        board.close()
+    out = capsys.readouterr().out
+    assert _lines(out)["distributor"] == "FAIL"
+    assert "answers but the distributor speaks protocol version 2; this host speaks 1" in out, out
+    assert "no answer from" not in out
+
+
 def test_the_operator_confirms_each_panel(tmp_path, monkeypatch, capsys):
     rig = _rig(tmp_path, 'interface = "virtual"')
     monkeypatch.setattr("sys.stdin", io.StringIO("\nn\n"))  # panel 7 lit where expected, panel 30 not

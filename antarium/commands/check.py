@@ -105,6 +105,9 @@ def _ask_version(link, timeout_s: float) -> dict | None:
 def check_distributor(report: Report, link, where: str, timeout_s: float) -> dict | None:
     """Distributor reachable and answering VERSION and STATUS; returns its telemetry (None when silent)."""
     version = _ask_version(link, timeout_s)
+    if link.incompatible:  # it answered VERSION, in another protocol version: no frames can go to it
+        report.fail("distributor", f"{where} answers but {link.incompatible}")
+        return None
     telemetry = link.telemetry(wait_s=timeout_s) if version is not None else None
     if version is None or not telemetry.get("counters"):
         report.fail("distributor", f"no answer from {where} within {timeout_s:g} s: check the distributor is "
