@@ -5,6 +5,11 @@ main script (multiprocessing's spawn would). With `connect=True` the two process
 connection: the child finds its end's file descriptor as its first argument (`connection_from_arg`). The child's
 output goes to a temporary file, never to a pipe that could fill and block it; `output()` reads its end.
 
+A child ends with its parent through that connection: its end reads end-of-file once the parent is gone (even
+killed by SIGKILL), as the trial-log writer notices. A module that does not take the connection (`antarium emulate`)
+gets it with `end_with_parent=True`: it then runs under this module's `__main__`, which watches the connection
+in a thread and ends the child (SIGTERM, then exit after END_GRACE_S) when it closes.
+
     child = ChildProcess("antarium.trial_log", connect=True)
     child.conn.send(("open", path, attrs))
     ...
@@ -19,20 +24,29 @@ import sys
 import tempfile
 from collections.abc import Sequence
 
+#: a child watching its parent (`end_with_parent`) that has not ended this long after SIGTERM exits at once (s)
+END_GRACE_S = 5.0
+
 
 class ChildProcess:
     """`python -m module *args` started at once. conn: the parent's end of the connection (None unless
     `connect`); proc: the `subprocess.Popen`. idle: run it under SCHED_IDLE (Linux), so that it has only CPU time
-    nothing else wants from its first instruction on; it may leave that class itself (`os.sched_setscheduler`)."""
+    nothing else wants from its first instruction on; it may leave that class itself (`os.sched_setscheduler`).
+    end_with_parent: the child (a module that takes no connection) ends when this process ends or `close()`s it
+    (module docstring); a `connect` child watches its connection itself."""
 
-    def __init__(self, module: str, args: Sequence[str] = (), *, connect: bool = False, idle: bool = False) -> None:
+    def __init__(self, module: str, args: Sequence[str] = (), *, connect: bool = False, idle: bool = False,
+                 end_with_parent: bool = False) -> None:
         from multiprocessing import Pipe
 
+        if connect and end_with_parent:
+            raise ValueError("end_with_parent is for a child without a connection (a connect child watches its own)")
         argv = [sys.executable, "-m", module]
         self.conn = child_end = None
-        if connect:
+        if connect or end_with_parent:
             self.conn, child_end = Pipe()
-            argv.append(str(child_end.fileno()))
+            fd = str(child_end.fileno())
+            argv = [sys.executable, "-m", "antarium.core.childproc", fd, module] if end_with_parent else [*argv, fd]
         self._output = tempfile.TemporaryFile()
         try:
             self.proc = subprocess.Popen([*argv, *args], stdin=subprocess.DEVNULL, stdout=self._output,
@@ -92,7 +106,8 @@ class ChildProcess:
         self.close()
 
     def close(self) -> None:
-        """Release the connection and the output file (the child may go on running)."""
+        """Release the connection and the output file (the child may go on running; one started `end_with_parent`
+        then ends)."""
         if self.conn is not None:
             self.conn.close()
         self._output.close()
@@ -103,3 +118,34 @@ def connection_from_arg(arg: str):
     from multiprocessing.connection import Connection
 
     return Connection(int(arg))
+
+
+def _watch_parent(conn) -> None:
+    """In the child (a thread): return when the parent's end of `conn` closes, then end this process."""
+    import signal
+    import time
+
+    try:
+        while True:
+            conn.recv()
+    except (EOFError, OSError):  # the parent is gone, or closed us
+        pass
+    os.kill(os.getpid(), signal.SIGTERM)  # its own way of ending (statistics, sockets closed)
+    time.sleep(END_GRACE_S)
+    os._exit(1)
+
+
+def _run_watched(argv: Sequence[str]) -> None:
+    """`python -m antarium.core.childproc FD MODULE ARGS`: `python -m MODULE ARGS` that ends with its parent."""
+    import runpy
+    import threading
+
+    fd, module, *args = argv
+    conn = connection_from_arg(fd)
+    threading.Thread(target=_watch_parent, args=(conn,), name="parent-watch", daemon=True).start()
+    sys.argv = [module, *args]
+    runpy.run_module(module, run_name="__main__", alter_sys=True)
+
+
+if __name__ == "__main__":
+    _run_watched(sys.argv[1:])

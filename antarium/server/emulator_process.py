@@ -12,7 +12,8 @@ class EmulatorProcess:
     """The distributor and its 55 panels, emulated in a child process listening on UDP `host`:`port`.
 
     port: 0 for a free port chosen now; realtime_priority: 1..99 to run it SCHED_FIFO at that priority (as
-    hardware would answer), 0 for ordinary scheduling; not granted, it runs ordinary.
+    hardware would answer), 0 for ordinary scheduling; not granted, it runs ordinary. It ends with this process
+    (even one killed by SIGKILL: `ChildProcess(end_with_parent=True)`), never left holding its port and priority.
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, extra_args: list[str] | None = None,
@@ -28,7 +29,7 @@ class EmulatorProcess:
         if self.child is not None:
             self.child.stop()
         self.child = ChildProcess("antarium", ["emulate", "--host", self.host, "--port", str(self.port),
-                                               *self.extra_args])
+                                               *self.extra_args], end_with_parent=True)
         if self.realtime_priority:
             try:
                 realtime.set_realtime(self.realtime_priority, self.child.pid)
@@ -42,6 +43,11 @@ class EmulatorProcess:
     @property
     def pid(self) -> int | None:
         return None if self.child is None else self.child.pid
+
+    @property
+    def exitcode(self) -> int | None:
+        """How it ended (-N: killed by signal N); None while it runs or when it was never started."""
+        return None if self.child is None else self.child.exitcode
 
     @property
     def running(self) -> bool:

@@ -56,6 +56,8 @@ LINK_TIMEOUT_S = 0.5
 #: the link is down from the start until the distributor answers; one that has not answered this long after the
 #: first frame (or by the end of a shorter run) counts as an outage
 LINK_STARTUP_S = 5.0
+#: locomotion_lost / locomotion_back events: at most one per this many seconds (the state itself is exact at once)
+LOCOMOTION_EVENT_EVERY_S = 1.0
 #: `when_idle` work runs after a frame only when at least this much time (s) is left before the next slot
 IDLE_MARGIN_S = 2.5e-3
 #: with keep_gpu_busy, the GPU's busy work stops this long (s) before a frame's slot
@@ -150,6 +152,11 @@ class FrameLoop:
         self.skipped_frames = 0
         self.samples_used = 0
         self.locomotion_connected = True
+        self.locomotion_losses = 0  # how often the source was lost (read() raising, or status() not connected)
+        self._loco_reported = True  # the state the last locomotion event told
+        self._loco_status: dict = {}
+        self._loco_changes = 0  # state changes since the last locomotion event
+        self._last_loco_event_t = -math.inf
         self.link_ok = link is None  # a link is down until the distributor has answered
         self.link_outages = 0
         self.last_link_error = "" if link is None else "the distributor has not answered yet"
@@ -166,6 +173,8 @@ class FrameLoop:
         self.rejected_frames = 0
         self._last_reject_event_t = -math.inf
         self.faults: dict[str, int] = {}
+        self.last_fault_t: dict[str, float] = {}  # per part: when it last failed (loop clock), and how
+        self.last_fault_error: dict[str, str] = {}
         self._source_failing = False
         self._last_fault_event_t: dict[str, float] = {}
         self._last_late_event_t = -math.inf
@@ -307,13 +316,38 @@ class FrameLoop:
         if self.source is not None:
             try:
                 status = self.source.status()
+                if not isinstance(status, dict):
+                    raise TypeError(f"status() returned {type(status).__name__}, not a dict")
+                connected = bool(status.get("connected", True))
             except Exception as exc:  # noqa: BLE001 - a failing status is a failing source
                 self.fault("locomotion", now, exc)
                 status = {"connected": False, "error": f"{type(exc).__name__}: {exc}"}
-            connected = bool(status.get("connected", True)) and not self._source_failing
+                connected = False
+            connected = connected and not self._source_failing
             if connected != self.locomotion_connected:
-                self.locomotion_connected = connected
-                self.event("locomotion_back" if connected else "locomotion_lost", status=status)
+                self._locomotion_changed(now, connected, status)
+
+    def _locomotion_changed(self, t: float, connected: bool, status: dict) -> None:
+        """The source was lost or came back: the state changes now (status, the frames' log rows); the event
+        follows at most once every LOCOMOTION_EVENT_EVERY_S (a flaky source would flood the bus and stderr)."""
+        self.locomotion_connected = connected
+        if not connected:
+            self.locomotion_losses += 1
+        self._loco_status = status
+        self._loco_changes += 1
+        self._report_locomotion(t)
+
+    def _report_locomotion(self, t: float, now: bool = False) -> None:
+        """A locomotion_lost / locomotion_back event when the state differs from the last one told and the last
+        event is LOCOMOTION_EVENT_EVERY_S old (`now`: at once): `losses` so far, `changes` since the last event
+        (1 unless changes were held back)."""
+        connected = self.locomotion_connected
+        if connected == self._loco_reported or (not now and t - self._last_loco_event_t < LOCOMOTION_EVENT_EVERY_S):
+            return
+        self._loco_reported, self._last_loco_event_t = connected, t
+        changes, self._loco_changes = self._loco_changes, 0
+        self.event("locomotion_back" if connected else "locomotion_lost", status=self._loco_status,
+                   losses=self.locomotion_losses, changes=changes)
 
     def _check_link(self, now: float) -> None:
         """Poll the distributor's telemetry every TELEMETRY_EVERY_S; report outages and recoveries.
@@ -370,13 +404,13 @@ class FrameLoop:
             self._source_failing = True
             self.fault("locomotion", t, exc)
             if self.locomotion_connected:
-                self.locomotion_connected = False
-                self.event("locomotion_lost", status={"error": f"{type(exc).__name__}: {exc}"})
+                self._locomotion_changed(t, False, {"error": f"{type(exc).__name__}: {exc}"})
             return []
 
     def fault(self, part: str, t: float, exc: Exception) -> None:
         """Count an exception of a part (render, locomotion, bus); an event at most once a second per part."""
         self.faults[part] = self.faults.get(part, 0) + 1
+        self.last_fault_t[part], self.last_fault_error[part] = t, f"{type(exc).__name__}: {exc}"
         if t - self._last_fault_event_t.get(part, -math.inf) >= 1.0:
             self._last_fault_event_t[part] = t
             self.event(f"{part}_error", error=f"{type(exc).__name__}: {exc}", count=self.faults[part])
@@ -455,6 +489,8 @@ class FrameLoop:
                 self._check_locomotion(t_start)  # samples again: a replugged source is taken at once
             if self.closed_loop and self.locomotion_connected:
                 self._integrate(samples, t_start)
+        if self.locomotion_connected != self._loco_reported:  # a change held back: told once a second has passed
+            self._report_locomotion(t_start)
         pose = self.pose
         render = sample = convert = encode = send = math.nan
         full_render = False
@@ -538,6 +574,7 @@ class FrameLoop:
             self._stop.clear()
             self._run_pending()
             self._report_unanswered(self.clock.now())  # a run shorter than LINK_STARTUP_S with the dome dark
+            self._report_locomotion(self.clock.now(), now=True)  # the log's last word is the state at the end
         return n
 
     def stop(self) -> None:

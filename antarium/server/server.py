@@ -34,7 +34,9 @@ if TYPE_CHECKING:
     from antarium.config import RenderSection, RigConfig
 
 #: events that are also printed on stderr: an operator must notice them
-ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "frame_rejected")
+ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "frame_rejected", "render_error", "server_failed")
+#: printed on stderr too: the end of an alarm event's trouble (stderr's last word is not the outage)
+RECOVERY_EVENTS = ("link_back", "locomotion_back")
 COMMAND_TIMEOUT_S = 60.0
 #: how long a scene load waits for the loop to run one slice of its meshes' upload before leaving the rest to
 #: the swap itself (s)
@@ -42,7 +44,31 @@ UPLOAD_STEP_WAIT_S = 1.0
 
 
 class ServerError(RuntimeError):
-    """The server cannot start as configured (the message says what to change)."""
+    """The server cannot start as configured (the message says what to change), or its frame loop stopped on an
+    error (`stop()` of a server run by `start_thread`)."""
+
+
+#: servers running with the garbage collector's objects frozen (`Server.run`); the last one to stop unfreezes
+_frozen = 0
+_frozen_lock = threading.Lock()
+
+
+def _freeze_gc() -> None:
+    """Move every object there is now out of the cyclic garbage collector's way (`gc.freeze`)."""
+    global _frozen
+    with _frozen_lock:
+        gc.collect()
+        gc.freeze()
+        _frozen += 1
+
+
+def _unfreeze_gc() -> None:
+    """Undo `_freeze_gc` once no server runs any more: a stopped server's objects can then be collected."""
+    global _frozen
+    with _frozen_lock:
+        _frozen -= 1
+        if _frozen == 0:
+            gc.unfreeze()
 
 
 def default_renderer_factory(render_cfg: RenderSection, clock: Clock | None = None):
@@ -99,6 +125,10 @@ class Server:
         self._thread: threading.Thread | None = None
         self._status_thread: threading.Thread | None = None
         self._start_error: BaseException | None = None
+        self.loop_error: BaseException | None = None  # what ended the frame loop (None: it ended as asked)
+        self._loop_error_raised = False
+        self._gc_frozen = False
+        self._alarms_echoed: set[str] = set()
         self._last_log_error: str | None = None
         self._trial_lock = threading.Lock()
         self._loop_thread: threading.Thread | None = None
@@ -174,7 +204,7 @@ class Server:
         query.reply(query.key_expr, json.dumps({"ok": True, "result": result}, default=_json_default))
 
     def _publish_event(self, t: float, kind: str, data: dict) -> None:
-        if kind in ALARM_EVENTS:
+        if kind in ALARM_EVENTS or kind in RECOVERY_EVENTS:
             self.echo(f"antarium serve: {kind}: {json.dumps(data, default=_json_default)}")
         if self.session is not None:
             try:
@@ -222,8 +252,21 @@ class Server:
 
     def _publish_status(self) -> None:
         status = self.status()
+        self._echo_alarms(status["alarms"])
         if self.session is not None:
             self.session.put(bus.status_key(self.rig_name), json.dumps(status, default=_json_default))
+
+    def _echo_alarms(self, alarms: list[str]) -> None:
+        """Print each status alarm on stderr when it appears, and when it has cleared (not while stopping: what
+        the shutdown stops is no alarm)."""
+        if self._stopping.is_set():
+            return
+        now = {_alarm_key(a): a for a in alarms}
+        for key in self._alarms_echoed - now.keys():
+            self.echo(f"antarium serve: alarm cleared: {key}")
+        for key in now.keys() - self._alarms_echoed:
+            self.echo(f"antarium serve: ALARM: {now[key]}")
+        self._alarms_echoed = set(now)
 
     def status(self) -> dict[str, Any]:
         """`antarium.server.status.rig_status`; a trial-log error seen for the first time also goes out as an event."""
@@ -434,8 +477,8 @@ class Server:
         # Everything long-lived exists now (renderer, scene, link, bus): move it out of the garbage collector's
         # way, so that a collection during the experiment scans only what frames allocate — a full collection
         # over these object graphs would stall a frame for milliseconds.
-        gc.collect()
-        gc.freeze()
+        _freeze_gc()
+        self._gc_frozen = True
         self._status_thread = threading.Thread(target=self._status_loop, name="status", daemon=True)
         self._status_thread.start()
         self._loop_thread = threading.current_thread()
@@ -449,15 +492,33 @@ class Server:
             until = end if until is None else min(until, end)
         try:
             return self.loop.run(until=until, frames=frames)
+        except Exception as exc:
+            self._loop_failed(exc)
+            raise
         finally:
             self._shutdown()
+
+    def _loop_failed(self, exc: Exception) -> None:
+        """The frame loop ended on an error (a link that raises, an incompatible distributor): say so on stderr,
+        as a `server_failed` event (into the trial log before it closes) and as a status alarm."""
+        self.loop_error = exc
+        try:
+            self.loop.event("server_failed", error=f"{type(exc).__name__}: {exc}", frames=self.loop.frame)
+        except Exception as failure:  # noqa: BLE001 - the log is closed after all the same
+            self.echo(f"antarium serve: server_failed: {type(exc).__name__}: {exc} (not logged: {failure})")
+        self._alarms_echoed.add("frame loop stopped")  # printed just now, as the event
+        try:
+            self._publish_status()  # the last status, with the alarm (the status thread ends now)
+        except Exception:  # noqa: BLE001 - said on stderr already
+            pass
 
     def wait_ready(self, timeout_s: float | None = None) -> bool:
         """Block until the first frame is about to run (or starting failed); False on timeout."""
         return self._ready.wait(timeout_s) and self._start_error is None
 
     def start_thread(self, timeout_s: float = 60.0) -> Server:
-        """Run the server in a thread of its own; returns when it runs (or raises why it could not start).
+        """Run the server in a thread of its own; returns when it runs (or raises why it could not start: not
+        running within `timeout_s`, what was starting is stopped first, waiting up to 30 s for it).
         A server starts once: a second call raises ServerError (`with Server(...).start_thread():` is fine)."""
         if self._thread is not None:
             raise ServerError(f"server {self.rig_name!r} was started already; a server starts once (start_thread() or "
@@ -465,7 +526,12 @@ class Server:
         self._thread = threading.Thread(target=self._run_quietly, name=f"antarium-server {self.rig_name}", daemon=True)
         self._thread.start()
         if not self._ready.wait(timeout_s):
-            raise ServerError(f"the server did not start within {timeout_s} s")
+            try:  # no server left starting, and then running, behind the caller's back
+                self.stop()
+            except ServerError:
+                pass
+            stopped = "stopped it" if not self._thread.is_alive() else "it is still stopping"
+            raise ServerError(f"the server did not start within {timeout_s} s; {stopped}")
         if self._start_error is not None:
             raise ServerError(f"the server could not start: {self._start_error}") from self._start_error
         return self
@@ -477,29 +543,31 @@ class Server:
             self._start_error = self._start_error or exc
 
     def stop(self, timeout_s: float = 30.0) -> None:
-        """Stop the frame loop (thread-safe); with a server thread, wait until everything is closed."""
+        """Stop the frame loop (thread-safe); with a server thread, wait until everything is closed. A server thread
+        whose frame loop had ended on an error (see `loop_error`: it was printed, logged as `server_failed` and
+        is a status alarm) makes the first `stop()` raise it as a ServerError, as `run()` would have."""
         self._stopping.set()
         if self.loop is not None:
             self.loop.stop()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout_s)
+            error = self.loop_error
+            if error is not None and not self._loop_error_raised and not self._thread.is_alive():
+                self._loop_error_raised = True
+                raise ServerError(f"the frame loop stopped: {type(error).__name__}: {error}") from error
 
     def _shutdown(self) -> None:
+        """Close everything, each step on its own: one that fails (a device gone) is printed and the others still
+        run; the emulator is always stopped and the loop's placement always undone."""
         self._stopping.set()
+        step = self._shutdown_step
         if self.loop is not None:
-            self.final_stats = self.loop.stats()
-            if self.renderer is not None and hasattr(self.renderer, "far_layer_status"):
-                self.final_stats["far_layer"] = self.renderer.far_layer_status()
-            if self.loop.last_frame is not None:
-                self.final_frame = self.loop.last_frame.copy()
+            step("keeping the final statistics", self._keep_final_stats)
         if self.trial_log is not None:
-            try:
-                self.trial_stop()
-            except RuntimeError as exc:
-                self.echo(f"antarium serve: closing the trial log: {exc}")
+            step("closing the trial log", self.trial_stop)
         for part in (self.monitor, self._leds_pub):
             if part is not None:
-                part.close()
+                step(f"closing {type(part).__name__}", part.close)
         for entity in reversed(self._entities):
             try:
                 entity.undeclare()
@@ -507,18 +575,34 @@ class Server:
                 pass
         self._entities = []
         if self._own_session and self.session is not None:
-            self.session.close()
+            step("closing the bus session", self.session.close)
             self.session = None
         if self.source is not None:
-            self.source.stop()
+            step("stopping the locomotion source", self.source.stop)
         if self.link is not None and self._link_arg is None:
-            self.link.close()
+            step("closing the dome link", self.link.close)
         if self.emulator is not None:
-            self.emulator.stop()
+            step("stopping the dome emulator", self.emulator.stop)
         release = getattr(self.renderer, "release", None)
         if release is not None:
-            release()
-        self._unpin()
+            step("releasing the renderer", release)
+        step("undoing the loop's CPU placement", self._unpin)
+        if self._gc_frozen:
+            self._gc_frozen = False
+            _unfreeze_gc()
+
+    def _shutdown_step(self, what: str, fn: Callable[[], Any]) -> None:
+        try:
+            fn()
+        except Exception as exc:  # noqa: BLE001 - the steps after it must run all the same
+            self.echo(f"antarium serve: {what} failed: {type(exc).__name__}: {exc}")
+
+    def _keep_final_stats(self) -> None:
+        self.final_stats = self.loop.stats()
+        if self.renderer is not None and hasattr(self.renderer, "far_layer_status"):
+            self.final_stats["far_layer"] = self.renderer.far_layer_status()
+        if self.loop.last_frame is not None:
+            self.final_frame = self.loop.last_frame.copy()
 
     def _unpin(self) -> None:
         """Undo the loop's placement (a script goes on running); the status thread places threads until it ends."""
@@ -531,6 +615,11 @@ class Server:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def _alarm_key(alarm: str) -> str:
+    """What an alarm is about, without its changing details ("dome link down: no telemetry for 0.63 s")."""
+    return alarm.split(":", 1)[0].split(" (", 1)[0]
 
 
 def _release(prepared) -> None:

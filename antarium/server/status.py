@@ -7,6 +7,9 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
+#: a renderer that failed within this many seconds (loop clock) is an alarm: the dome keeps its last frame
+RENDER_ALARM_S = 2.0
+
 if TYPE_CHECKING:
     from antarium.server.frame_loop import FrameLoop
     from antarium.server.server import Server
@@ -27,6 +30,8 @@ def rig_status(server: Server) -> dict[str, Any]:
     out: dict[str, Any] = {"rig": server.rig_name, "t": server.clock.now(), "trial": server.trial_name,
                            "scene": server.scene_name, "alarms": []}
     alarms = out["alarms"]
+    if server.loop_error is not None:
+        alarms.append(f"frame loop stopped: {_describe(server.loop_error)}")
     if loop is not None:
         out.update(loop.stats())
         out.update(loop_state(loop))
@@ -34,22 +39,47 @@ def rig_status(server: Server) -> dict[str, Any]:
             alarms.append("dome link down: " + (loop.last_link_error or "no telemetry"))
         if not loop.locomotion_connected:
             alarms.append("locomotion source disconnected: pose held")
+        failed_t = loop.last_fault_t.get("render")
+        if failed_t is not None and out["t"] - failed_t <= RENDER_ALARM_S:
+            alarms.append(f"renderer failing, the dome keeps its last frame: {loop.faults['render']} render errors, "
+                          f"the last: {loop.last_fault_error['render']}")
     renderer = server.renderer
     if renderer is not None and hasattr(renderer, "far_layer_status"):
         out["far_layer"] = renderer.far_layer_status()
         if out["far_layer"]["error"]:
             alarms.append("far layer stopped, every frame drawn in full: " + out["far_layer"]["error"])
     if server.source is not None:
-        out["locomotion"] = server.source.status()
+        try:
+            out["locomotion"] = server.source.status()
+        except Exception as exc:  # noqa: BLE001 - the frame loop counts it as a locomotion fault
+            out["locomotion"] = {"connected": False, "error": _describe(exc)}
     if loop is not None and server.link is not None:
         out["telemetry"] = loop.telemetry  # polled by the loop's thread (the link is not shared)
     if server.emulator is not None:
         out["emulator_running"] = server.emulator.running
         if not out["emulator_running"]:
-            last = server.emulator.output().strip().splitlines()[-1:] or ["no output"]
-            alarms.append(f"the dome emulator process is not running ({last[0]})")
+            alarms.append(f"the dome emulator process is not running ({_exit_status(server.emulator.exitcode)})")
     if server.trial_log is not None:
         out["log"] = server.trial_log.status()
         if out["log"]["error"]:
             alarms.append("TRIAL LOG NOT WRITTEN: " + out["log"]["error"])
     return out
+
+
+def _describe(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}"
+
+
+def _exit_status(code: int | None) -> str:
+    """How a child process ended, from its exit code (-N: killed by signal N; None: stopped, released)."""
+    if code is None:  # stopped by the server
+        return "stopped"
+    if code < 0:
+        import signal
+
+        try:
+            name = f" ({signal.Signals(-code).name})"
+        except ValueError:
+            name = ""
+        return f"exit status {code}: killed by signal {-code}{name}"
+    return f"exit status {code}"

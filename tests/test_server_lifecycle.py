@@ -1,0 +1,270 @@
+"""A server's life in a script (`start_thread`/`stop`) when something goes wrong: a start that times out, a frame
+loop that dies, a shutdown step that fails, a renderer failing every frame, a flaky source, the emulator killed;
+and what a stopped server leaves behind (nothing: its objects can be collected)."""
+
+import gc
+import os
+import signal
+import sys
+import weakref
+
+import numpy as np
+import pytest
+from conftest import wait_for
+
+from antarium import bus
+from antarium.config import resolve
+from antarium.core.clock import SimulatedClock
+from antarium.firmware_proto.link import IncompatibleDistributor
+from antarium.locomotion.scripted import ScriptedSource
+from antarium.server import Server, ServerError
+from antarium.server.frame_loop import FrameLoop
+from antarium.trial_log import read_table
+
+
+def _config(tmp_path, rig, link=None, **extra):
+    raw = {"rig": {"name": rig}, "bus": {"listen": [bus.free_tcp_endpoint()]},
+           "log": {"dir": str(tmp_path / "logs"), "flush_s": 0.1},
+           "locomotion": {"source": "scripted", "speed": 0.02},
+           "link": link or {"interface": "virtual"}, "loop": {"rate_hz": 100.0}, **extra}
+    return resolve(raw)
+
+
+EMULATOR = {"interface": "udp", "spawn_emulator": True}
+
+
+def _gone(pid: int) -> bool:
+    """The process has ended (a zombie not yet reaped counts as ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return True
+
+
+def _kill(pid: int | None) -> None:
+    if pid is not None and not _gone(pid):
+        os.kill(pid, signal.SIGKILL)
+
+
+class LedRenderer:
+    """The lowest seam of a renderer: a dark LED frame every frame, or an exception while `failing`."""
+
+    scene = None
+
+    def __init__(self, failing: bool = False) -> None:
+        self.failing = failing
+
+    def set_scene(self, scene) -> None:
+        pass
+
+    def render(self, pose, out=None):
+        if self.failing:
+            raise RuntimeError("GL context lost")
+        return np.zeros((20350, 2), np.uint16) if out is None else out
+
+
+def test_a_start_that_times_out_leaves_no_server_behind(tmp_path):
+    """start_thread() timing out stops what was starting: no frames, no trial, no emulator left running."""
+
+    class SlowStart(ScriptedSource):  # a device that takes long to open: here, until the server is asked to stop
+        def start(self):
+            wait_for(server._stopping.is_set, 60.0, 0.01)
+            super().start()
+
+    config = _config(tmp_path, "tlife_timeout", EMULATOR)
+    server = Server(config, source=SlowStart(rate_hz=100.0), renderer_factory=None, record="ghost",
+                    echo=lambda line: None)
+    try:
+        with pytest.raises(ServerError, match="did not start within"):
+            server.start_thread(timeout_s=0.2)
+        assert not server._thread.is_alive()
+        assert server.loop.frame == 0
+        assert server.emulator is not None and not server.emulator.running
+        assert server.trial_log is None
+    finally:
+        pid = server.emulator.pid if server.emulator is not None else None
+        server.stop()
+        _kill(pid)
+
+
+class DyingLink:
+    """A link whose telemetry() raises after a few polls (a network interface gone), or whose frames are refused
+    (a distributor of another protocol version)."""
+
+    counters = {"datagrams_failed": 0}
+    last_timings = {}
+
+    def __init__(self, how: str) -> None:
+        self.how, self.polls = how, 0
+
+    def telemetry(self):
+        self.polls += 1
+        if self.how == "telemetry" and self.polls > 10:
+            raise OSError(19, "No such device")
+        return {"age_s": 0.0, "link": {"datagrams_failed": 0}}
+
+    def send_frame(self, frame):
+        if self.how == "version" and self.polls > 10:
+            raise IncompatibleDistributor("the distributor speaks protocol 9")
+        return 0
+
+    def close(self):
+        pass
+
+
+@pytest.mark.parametrize("how, error", [("telemetry", "OSError"), ("version", "IncompatibleDistributor")])
+def test_a_frame_loop_that_dies_in_a_server_thread_is_reported(tmp_path, how, error):
+    lines = []
+    config = _config(tmp_path, f"tlife_dies_{how}")
+    server = Server(config, link=DyingLink(how), renderer_factory=lambda cfg, clock=None: LedRenderer(),
+                    record="dies", echo=lines.append).start_thread()
+    try:
+        assert wait_for(lambda: not server._thread.is_alive(), 30.0)
+        assert any("server_failed" in line and error in line for line in lines), lines
+        assert any(a.startswith(f"frame loop stopped: {error}") for a in server.status()["alarms"])
+        with pytest.raises(ServerError, match=f"frame loop stopped: {error}"):
+            server.stop()
+    finally:
+        try:
+            server.stop()
+        except ServerError:
+            pass
+    kinds = list(read_table(server.trial_paths[0], "events")["kind"])
+    assert "server_failed" in kinds and kinds.index("server_failed") < kinds.index("trial_stopped")
+
+
+def test_a_failing_shutdown_step_does_not_skip_the_others(tmp_path):
+    """A source whose stop() raises (USB device gone): said on stderr; emulator stopped, placement undone."""
+
+    class BadStop(ScriptedSource):
+        def stop(self):
+            raise OSError(5, "Input/output error (USB device gone)")
+
+    lines = []
+    switch_interval = sys.getswitchinterval()
+    config = _config(tmp_path, "tlife_badstop", EMULATOR)
+    server = Server(config, source=BadStop(rate_hz=100.0), renderer_factory=None, echo=lines.append)
+    server.start_thread()
+    pid = server.emulator.pid
+    try:
+        assert wait_for(lambda: server.loop.frame > 5, 20.0)
+        server.stop()
+        assert not server._thread.is_alive()
+        assert wait_for(lambda: _gone(pid), 10.0), "the emulator was left running"
+        assert sys.getswitchinterval() == switch_interval
+        assert any("stopping the locomotion source failed: OSError" in line for line in lines), lines
+    finally:
+        _kill(pid)
+
+
+def test_a_renderer_failing_every_frame_is_an_alarm_while_it_fails(tmp_path):
+    lines = []
+    renderer = LedRenderer(failing=True)
+    config = _config(tmp_path, "tlife_render", link=None)
+    server = Server(config, link=False, renderer_factory=lambda cfg, clock=None: renderer, echo=lines.append)
+    server.start_thread()
+    try:
+        assert wait_for(lambda: server.loop.faults.get("render", 0) > 10, 20.0)
+        alarms = server.status()["alarms"]
+        assert any(a.startswith("renderer failing") and "GL context lost" in a for a in alarms), alarms
+        assert any("render_error" in line and "GL context lost" in line for line in lines), lines
+        renderer.failing = False  # it recovers: the alarm goes
+        assert wait_for(lambda: not any(a.startswith("renderer failing") for a in server.status()["alarms"]), 20.0)
+    finally:
+        server.stop()
+
+
+def _run_and_stop(tmp_path) -> weakref.ref:
+    """A server run a few frames and stopped; a weak reference to its frame loop."""
+    config = _config(tmp_path, "tlife_gc")
+    server = Server(config, renderer_factory=lambda cfg, clock=None: LedRenderer(), echo=lambda line: None)
+    server.start_thread()
+    try:
+        assert wait_for(lambda: server.loop.frame > 5, 20.0)
+        assert gc.get_freeze_count() > 0  # while it runs
+    finally:
+        server.stop()
+    return weakref.ref(server.loop)
+
+
+def test_a_stopped_server_can_be_collected(tmp_path):
+    """gc.freeze() keeps the collector off the frame loop's objects while it runs, and is undone at the end."""
+    loop = _run_and_stop(tmp_path)
+    gc.collect()
+    assert gc.get_freeze_count() == 0
+    assert loop() is None
+
+
+class Flaky(ScriptedSource):
+    """read() raises on every third frame (a flaky driver)."""
+
+    def __init__(self, **kw):
+        super().__init__(**kw)
+        self.reads = 0
+
+    def read(self):
+        self.reads += 1
+        out = super().read()
+        if self.reads % 3 == 0:
+            raise OSError(5, "read failed")
+        return out
+
+
+def test_a_flaky_source_gives_one_locomotion_event_a_second_and_exact_frames():
+    clock = SimulatedClock()
+    events, records = [], []
+    loop = FrameLoop(clock=clock, source=Flaky(rate_hz=200.0, clock=clock), rate_hz=100.0,
+                     on_event=lambda t, kind, data: events.append((t, kind, data)), on_frame=records.append)
+    loop.source.start()
+    loop.run(until=5.0)
+    told = [(t, kind, data) for t, kind, data in events if kind in ("locomotion_lost", "locomotion_back")]
+    times = [t for t, _, _ in told]
+    # at most one a second, but for the last: the state at the end of the run
+    assert len(told) >= 2 and all(b - a >= 1.0 for a, b in zip(times[:-2], times[1:-1], strict=True))
+    assert [kind for _, kind, _ in told] == ["locomotion_lost", "locomotion_back"] * (len(told) // 2) \
+        + ["locomotion_lost"] * (len(told) % 2)  # alternating: never two of a kind in a row
+    connected = [r.locomotion_connected for r in records]
+    losses = sum(1 for a, b in zip([True, *connected[:-1]], connected, strict=True) if a and not b)
+    assert losses > 100  # the frames keep every change
+    assert told[-1][1] == ("locomotion_back" if loop.locomotion_connected else "locomotion_lost")
+    assert loop.locomotion_losses == losses
+    assert [d["losses"] for _, kind, d in told if kind == "locomotion_lost"][-1] > 100  # counted, not told
+
+
+@pytest.mark.parametrize("status", [None, "connected", ["connected"]])
+def test_a_source_status_that_is_no_dict_is_a_fault_not_the_end_of_the_loop(status):
+    class OddStatus(ScriptedSource):
+        def status(self):
+            return status
+
+    clock = SimulatedClock()
+    loop = FrameLoop(clock=clock, source=OddStatus(rate_hz=200.0, clock=clock), rate_hz=100.0)
+    loop.source.start()
+    assert loop.run(frames=50) == 50
+    assert loop.faults["locomotion"] >= 1 and not loop.locomotion_connected
+
+
+def test_an_emulator_killed_and_restarted_is_printed_with_its_exit_status_and_recovery(tmp_path):
+    lines = []
+    config = _config(tmp_path, "tlife_emu", EMULATOR)
+    server = Server(config, renderer_factory=None, echo=lines.append).start_thread()
+    pids = [server.emulator.pid]
+    try:
+        loop = server.loop
+        assert wait_for(lambda: loop.link_ok and loop.frame > 20, 20.0)
+        os.kill(server.emulator.pid, signal.SIGKILL)
+        assert wait_for(lambda: not server.emulator.running and not loop.link_ok, 10.0)
+        alarms = server.status()["alarms"]
+        assert any("emulator process is not running (exit status -9: killed by signal 9" in a for a in alarms), alarms
+        assert wait_for(lambda: any("ALARM: the dome emulator process is not running" in line for line in lines), 10.0)
+        server.emulator.start()
+        pids.append(server.emulator.pid)
+        assert wait_for(lambda: loop.link_ok, 20.0)
+        assert wait_for(lambda: any("link_back" in line for line in lines), 10.0), lines
+        assert wait_for(lambda: any("alarm cleared: the dome emulator process is not running" in line
+                                    for line in lines), 10.0), lines
+    finally:
+        server.stop()
+        for pid in pids:
+            _kill(pid)
