@@ -74,3 +74,35 @@ def test_bench_loop_writes_a_file_per_path_and_reports_the_clocks_on_the_gpu_pat
     assert gpu["device"]["gpu_clocks"]["0"]["sm_mhz"]["median"] == 1215.0
     assert cpu["device"]["gpu_clocks"] is None  # the CPU path's frames do not wait for a GPU
     assert text.count("GPU 0: SM clock median 1,215 MHz") == 1
+
+
+def test_the_sampler_reads_the_tool_as_it_writes_so_it_never_blocks_on_a_full_pipe(tmp_path, monkeypatch):
+    import time
+
+    # a stand-in 8-GPU nvidia-smi on PATH that writes 2,000 rounds (over 400 kB, far more than a pipe holds) as
+    # fast as it can, then says it got that far and waits to be stopped
+    done = tmp_path / "done"
+    tools = tmp_path / "bin"
+    tools.mkdir()
+    exe = tools / "nvidia-smi"
+    exe.write_text(textwrap.dedent(f"""\
+        #!/bin/sh
+        [ "$1" = "--query-gpu={','.join(FIELDS)}" ] || exit 2
+        i=0
+        while [ $i -lt 2000 ]; do
+          for g in 0 1 2 3 4 5 6 7; do echo "$g, $((1000 + i)), 1980, 109.22, 27"; done
+          i=$((i + 1))
+        done
+        touch {done}
+        exec sleep 60
+        """))
+    exe.chmod(exe.stat().st_mode | stat.S_IXUSR)
+    monkeypatch.setenv("PATH", f"{tools}{os.pathsep}{os.environ['PATH']}")
+    sampler = GpuClocks().start()
+    deadline = time.monotonic() + 60  # the tool blocked on a full pipe never gets there (not a timing figure)
+    while not done.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    s = sampler.stop()
+    assert done.exists()
+    assert all(s[str(g)]["samples"] == 2000 for g in range(8))
+    assert s["0"]["sm_mhz"]["max"] == 2999.0

@@ -64,6 +64,7 @@ def measure(seconds: float = 2.0, n_frames: int = 20) -> dict:
         rate = _rate(lambda f, m=model: m.decide(eye.look(f)), frames, seconds)
         out[f"{kind}_decisions_per_s"] = rate
         out[f"{kind}_ms_per_decision"] = 1e3 / rate
+        out[f"{kind}_learned_views"] = int(model.learned_views)
     views = [eye.look(f) for f in frames]
     out["antcar_model_only_decisions_per_s"] = _rate(antcar.decide, views, seconds)
     out["eye_views_per_s"] = _rate(eye.look, frames, seconds)
@@ -105,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
           f"= {r['learning_vs_goal_100']:.2f} x goal 100/s, {r['learning_vs_dome_190']:.2f} x dome 190 frames/s")
     print(f"  Ardin decisions (61-direction scan):     {result['ardin_decisions_per_s']:8.0f} /s "
           f"({result['ardin_ms_per_decision']:.2f} ms)")
-    print(f"  perfect memory decisions (20 views):     {result['perfect_memory_decisions_per_s']:8.0f} /s "
+    views = f"perfect memory decisions ({result['perfect_memory_learned_views']} views):"
+    print(f"  {views:40s} {result['perfect_memory_decisions_per_s']:8.0f} /s "
           f"({result['perfect_memory_ms_per_decision']:.2f} ms)")
     print(f"  eye (LED frame -> view):                 {result['eye_views_per_s']:8.0f} /s")
     print(f"  memory per route MBON: {result['bytes_per_route_mbon']} B "

@@ -14,6 +14,7 @@ from __future__ import annotations
 import shutil
 import statistics
 import subprocess
+import threading
 from typing import Any
 
 #: what is sampled, in `nvidia-smi --query-gpu` names
@@ -23,11 +24,15 @@ PERIOD_MS = 100
 
 class GpuClocks:
     """`nvidia-smi` sampling every PERIOD_MS in a child process between `start()` and `stop()`; `exe`: the tool's
-    path (default: `nvidia-smi` on PATH; None there: the sampler does nothing and `stop()` returns None)."""
+    path (default: `nvidia-smi` on PATH; None there: the sampler does nothing and `stop()` returns None). A thread
+    reads its output as it comes: left in the pipe, it would block the tool once the pipe is full (64 kB, a few
+    minutes on an 8-GPU machine) and the rest of the run would go unsampled."""
 
     def __init__(self, exe: str | None = None) -> None:
         self.exe = exe or shutil.which("nvidia-smi")
         self._proc: subprocess.Popen | None = None
+        self._reader: threading.Thread | None = None
+        self.lines: list[str] = []
 
     def start(self) -> GpuClocks:
         if self.exe is not None:
@@ -37,7 +42,16 @@ class GpuClocks:
                      "-lms", str(PERIOD_MS)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
             except OSError:  # not executable after all: nothing to report
                 self._proc = None
+            else:
+                self.lines = []
+                self._reader = threading.Thread(target=self._drain, args=(self._proc.stdout,),
+                                                name="nvidia-smi-reader", daemon=True)
+                self._reader.start()
         return self
+
+    def _drain(self, stream) -> None:
+        for line in stream:
+            self.lines.append(line)
 
     def stop(self) -> dict[str, dict[str, Any]] | None:
         """Per GPU index: SM clock median/min/max and the GPU's maximum (MHz), power and utilisation medians (W,
@@ -46,12 +60,15 @@ class GpuClocks:
             return None
         self._proc.terminate()
         try:
-            out, _ = self._proc.communicate(timeout=5)
+            self._proc.wait(timeout=5)
         except subprocess.TimeoutExpired:
             self._proc.kill()
-            out, _ = self._proc.communicate()
-        self._proc = None
-        return summarise(out.splitlines())
+            self._proc.wait()
+        if self._reader is not None:
+            self._reader.join(5)  # the rest of the pipe, up to its end
+        self._proc.stdout.close()
+        self._proc, self._reader = None, None
+        return summarise(self.lines)
 
 
 def _number(text: str) -> float | None:

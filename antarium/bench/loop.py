@@ -4,7 +4,10 @@ Runs the embedded default rig (default habitat, scripted walker in closed loop, 
 log being recorded) — or the rig config named by `$ANTARIUM_RIG_CONFIG` — for `--seconds` (default 30;
 the goal is stated for 600) or `--frames`, then reads the recorded per-frame table and reports achieved
 frame rate against target, late and skipped frames, closed-loop latency p50/p99/max and per-stage times,
-as ratios to the dome's needs (190 frames/s, 5.3 ms frame period). The first second (warm-up) is excluded.
+as ratios to the dome's needs (190 frames/s, 5.3 ms frame period). The first second (warm-up) is excluded from
+runs longer than 2 s (`warmup_excluded` says whether it was); the far layer's frame counts and the link outages
+are counted over the same frames, what the table does not have (rejected frames, GPU busy passes, far layers
+built) over the whole run, and the report says which.
 
 With `--load-every S`, `--displace-every S`, `--edit-every S` and `--sky-every S` a script thread sends the rig's
 scene again (`load_scene`), a virtual displacement (`set_pose` 0.5 m away and back), an object move (`scene_edit`)
@@ -12,8 +15,12 @@ or a move of the sun (`sky`, 60° and back) on that schedule, as an experiment s
 each kind's reply times and the late frames from its sending to 1 s after its reply.
 
 With `--machine-probe`, a stall probe runs on every CPU beside it (`antarium.bench.jitter.StallProbes`, real-time
-above the loop): the report then says how often the machine itself stopped a CPU, and how many late frames
-overlap such a stall (the machine's) and how many do not (the loop's own).
+above the loop; each stays on its CPU when the server's CPU placement moves our processes, and says where it ran):
+the report then says how often the machine itself stopped each CPU, and how many late frames overlap such a stall
+on the loop's own CPU (the machine's) and how many do not (the loop's own). Only the loop's CPU counts (`[loop]
+cpu`; every CPU when the loop has none of its own): the frame's work runs in the loop's thread, and what else
+runs there (scene preparation beside the loop) runs on that CPU too. When a probe is not real-time (`[loop]
+realtime_priority = 0`, or refused), its late wake-ups include our own load: the split is then unknown (null).
 """
 
 from __future__ import annotations
@@ -45,11 +52,14 @@ def _pct(values: np.ndarray) -> dict[str, float] | None:
 
 
 def summarise(frames: dict[str, np.ndarray], rate_hz: float,
-              stalls: dict[int, tuple[bool, np.ndarray]] | None = None) -> dict[str, Any]:
-    """Figures from a trial log's per-frame table (see docs/logs.md), and from `StallProbes.stop()`'s `stalls`
-    when given."""
+              stalls: dict[int, tuple[bool, np.ndarray]] | None = None,
+              final_stats: dict[str, Any] | None = None, loop_cpus: set[int] | None = None) -> dict[str, Any]:
+    """Figures from a trial log's per-frame table (see docs/logs.md), from `StallProbes.stop()`'s `stalls` when
+    given (only the probes on `loop_cpus` count; None: all, the loop having no CPU of its own), and from the
+    server's `final_stats` (its whole run; the figures the table also has are counted over the kept frames)."""
     t = frames["t_start"]
-    keep = t >= t[0] + WARMUP_S if len(t) and t[-1] - t[0] > 2 * WARMUP_S else np.ones(len(t), bool)
+    excluded = bool(len(t) and t[-1] - t[0] > 2 * WARMUP_S)
+    keep = t >= t[0] + WARMUP_S if excluded else np.ones(len(t), bool)
     f = {k: v[keep] for k, v in frames.items()}
     n = int(keep.sum())
     span = float(f["t_start"][-1] - f["t_start"][0]) if n > 1 else 0.0
@@ -67,15 +77,44 @@ def summarise(frames: dict[str, np.ndarray], rate_hz: float,
         "frame_work": _pct(f["t_sent"] - f["t_start"]),
         "pacing_error": _pct(f["pacing_error"]),
         "link_down_frames": int((f["link_ok"] == 0).sum()),
-        "machine": None if stalls is None else _machine_stalls(f, stalls, period),
+        "warmup_excluded": excluded, "warmup_s": WARMUP_S if excluded else 0.0,
+        "machine": None if stalls is None else _machine_stalls(f, stalls, period, loop_cpus),
+        **_run_counts(frames, keep, final_stats or {}),
     }
 
 
+def _run_counts(frames: dict[str, np.ndarray], keep: np.ndarray, stats: dict[str, Any]) -> dict[str, Any]:
+    """Link outages and the far layer's frame counts over the kept frames (from the table); rejected frames, GPU busy
+    passes and far layers built over the whole run (the server's counters: the table has no such column), named in
+    `whole_run`."""
+    ok = frames["link_ok"].astype(bool)
+    began = np.zeros(len(ok), dtype=bool)
+    began[1:] = ok[:-1] & ~ok[1:]  # a frame whose link was down after one whose link was up: an outage began
+    out: dict[str, Any] = {"link_outages": int((began & keep).sum()),
+                           "link_outages_whole_run": stats.get("link_outages", 0),
+                           "rejected_frames": stats.get("rejected_frames", 0),
+                           "gpu_busy_passes": stats.get("gpu_busy_passes", 0),
+                           "whole_run": ["rejected_frames", "gpu_busy_passes", "link_outages_whole_run"]}
+    layer = stats.get("far_layer")
+    if layer is not None:
+        layer = dict(layer)
+        if "full_render" in frames:
+            full = int(frames["full_render"][keep].astype(bool).sum())
+            layer.update(full_frames=full, layer_frames=int(keep.sum()) - full, frames_counted="kept frames")
+        else:  # a table written before the column (format 1): the renderer's counts
+            layer["frames_counted"] = "whole run"
+        out["whole_run"].append("far_layer.builds")
+    out["far_layer"] = layer
+    return out
+
+
 def _machine_stalls(f: dict[str, np.ndarray], stalls: dict[int, tuple[bool, np.ndarray]],
-                    period: float) -> dict[str, Any]:
-    """Per CPU, the probe's late wake-ups during the frames; and the late frames that overlap one. A frame spans
-    from a probe period before its slot (the loop wakes 0.5 ms before it, and a stall may begin up to a probe
-    period before the wake-up it delays) to its last datagram."""
+                    period: float, loop_cpus: set[int] | None = None) -> dict[str, Any]:
+    """Per CPU, the probe's late wake-ups during the frames; and the late frames that overlap one on the loop's
+    CPUs (`loop_cpus`; None: every CPU, the loop having none of its own). A frame spans from a probe period
+    before its slot (the loop wakes 0.5 ms before it, and a stall may begin up to a probe period before the
+    wake-up it delays) to its last datagram. With a probe that is not real-time the split is unknown (None): its
+    late wake-ups include the delays our own load caused it."""
     from antarium.bench.jitter import LATENESS_EDGES_S, PROBE_PERIOD_S, overlapping
 
     t0, t1 = f["t_target"] - PROBE_PERIOD_S, f["t_sent"]
@@ -83,15 +122,27 @@ def _machine_stalls(f: dict[str, np.ndarray], stalls: dict[int, tuple[bool, np.n
     late = f["late"].astype(bool)
     in_stall = np.zeros(len(t0), dtype=bool)
     probes = {}
-    for cpu, (realtime, events) in sorted(stalls.items()):
+    for cpu, report in sorted(stalls.items()):
+        realtime, events = report[0], report[1]
+        counted = loop_cpus is None or cpu in loop_cpus
         events = events[(events[:, 0] >= span[0]) & (events[:, 0] <= span[1])]
-        in_stall |= overlapping(t0, t1, events)
+        if counted:
+            in_stall |= overlapping(t0, t1, events)
         lateness = events[:, 1]
-        probes[str(cpu)] = {"realtime": realtime, "max_ms": 1e3 * float(lateness.max()) if len(lateness) else 0.0,
+        ran_on = getattr(report, "ran_on", None)
+        probes[str(cpu)] = {"realtime": realtime, "counted": counted,
+                            "max_ms": 1e3 * float(lateness.max()) if len(lateness) else 0.0,
                             "late_wakeups_at_least_ms": {f"{1e3 * e:g}": int((lateness >= e).sum())
-                                                         for e in LATENESS_EDGES_S}}
-    return {"probes": probes, "late_frames_in_stalls": int((late & in_stall).sum()),
-            "late_frames_own": int((late & ~in_stall).sum()), "frames_in_stalls": int(in_stall.sum())}
+                                                         for e in LATENESS_EDGES_S},
+                            "ran_on": None if ran_on is None else {str(c): n for c, n in sorted(ran_on.items())},
+                            "moved": getattr(report, "moved", None)}
+    not_realtime = sorted(int(c) for c, p in probes.items() if not p["realtime"])
+    known = not not_realtime
+    return {"probes": probes, "loop_cpus": None if loop_cpus is None else sorted(loop_cpus),
+            "probes_not_realtime": not_realtime,
+            "late_frames_in_stalls": int((late & in_stall).sum()) if known else None,
+            "late_frames_own": int((late & ~in_stall).sum()) if known else None,
+            "frames_in_stalls": int(in_stall.sum())}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -132,20 +183,18 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None,
             else None
         script = ScriptedCommands(server, config.render.scene,
                                   {kind: getattr(args, option, None) for kind, option in SCRIPTED.items()})
+        watch = ServerWatch(server, getattr(args, "on_frames_end", None))
         clocks = GpuClocks().start() if device["path"] == "gpu" else None
         try:
             server.run(seconds=seconds, frames=args.frames)
         finally:
+            watch.join()
             stalls = probes.stop() if probes is not None else None
             script.stop()
             gpu_clocks = clocks.stop() if clocks is not None else None
         frames = read_table(server.trial_paths[0], "frames")
-        result = summarise(frames, config.loop.rate_hz, stalls)
+        result = summarise(frames, config.loop.rate_hz, stalls, server.final_stats, watch.loop_cpus)
         result["commands"] = script.summary(frames)
-        result["rejected_frames"] = server.final_stats.get("rejected_frames", 0)
-        result["link_outages"] = server.final_stats.get("link_outages", 0)
-        result["far_layer"] = server.final_stats.get("far_layer")
-        result["gpu_busy_passes"] = server.final_stats.get("gpu_busy_passes", 0)
         result["device"] = {**device, "gpu_clocks": gpu_clocks}
         result["config"] = {"render": config.render.model_dump(), "loop_rate_hz": config.loop.rate_hz,
                             "keep_gpu_busy": config.loop.keep_gpu_busy,
@@ -155,6 +204,33 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None,
         with open(json_out, "w") as fh:
             json.dump(result, fh, indent=2)
         print(f"  figures written to {json_out}")
+
+
+class ServerWatch:
+    """A thread beside `server.run`: once the frames are about to run, which CPUs the frame loop has (`loop_cpus`:
+    {its own CPU}, or None when it has none of its own, so that it may run on any); when they end (the server
+    begins to stop), `on_frames_end()` if given (`bench monitor` ends the page's measuring there)."""
+
+    def __init__(self, server, on_frames_end=None) -> None:
+        import threading
+
+        self.server, self.on_frames_end = server, on_frames_end
+        self.loop_cpus: set[int] | None = None
+        self._thread = threading.Thread(target=self._run, name="bench-watch", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        server = self.server
+        if server.wait_ready(None):
+            isolation = server.placement._isolation  # set before the frames, None without a CPU of its own
+            self.loop_cpus = None if isolation is None else {isolation.cpu}
+        server._stopping.wait()
+        if self.on_frames_end is not None:
+            self.on_frames_end()
+
+    def join(self) -> None:
+        self.server._stopping.set()  # set already once the server has stopped (and should it not have started)
+        self._thread.join(30.0)
 
 
 #: after a scripted command's reply, its late frames are counted for this long (s)
@@ -264,23 +340,27 @@ def _fmt(p: dict | None) -> str:
 
 def _print(r: dict[str, Any]) -> None:
     period_ms = 1e3 / r["target_rate_hz"]
-    print(f"loop bench: {r['frames']} frames over {r['seconds']:.1f} s (first {WARMUP_S:g} s excluded), "
+    cut = f"first {r['warmup_s']:g} s excluded" if r["warmup_excluded"] else "no warm-up excluded: a run of 2 s or less"
+    print(f"loop bench: {r['frames']} frames over {r['seconds']:.1f} s ({cut}), "
           f"scene {r['config']['render']['scene']!r}, face size {r['config']['render']['face_size_px'] or 'default'}")
     print(f"  frame rate      {r['achieved_rate_hz']:.1f} / {r['target_rate_hz']:.0f} Hz = {r['rate_ratio']:.3f} x "
           f"target")
     print(f"  late frames     {r['late_frames']} ({r['late_full_render']} of them drawn in full)   skipped slots "
-          f"{r['skipped_slots']}   rejected frames {r['rejected_frames']}   link outages {r['link_outages']}")
+          f"{r['skipped_slots']}   link outages {r['link_outages']}   rejected frames {r['rejected_frames']} "
+          f"(whole run)")
     layer = r.get("far_layer")
     if layer and layer["mode"] != "off":
         error = f", ERROR {layer['error']}" if layer["error"] else ""
+        counted = "" if layer.get("frames_counted") == "kept frames" else " (whole run)"
         print(f"  far layer       {layer['mode']}: {layer['layer_frames']} frames with it, "
-              f"{layer['full_frames']} in full (start-up, edits, eye jumps), {layer['builds']} layers built{error}")
+              f"{layer['full_frames']} in full (start-up, edits, eye jumps){counted}, {layer['builds']} layers "
+              f"built (whole run){error}")
     for line in describe_clocks(r["device"]["gpu_clocks"]):
         print(f"  {line}")
     busy = r["config"]["keep_gpu_busy"]
     if r["gpu_busy_passes"] or busy is True:
-        print(f"  GPU kept busy   {r['gpu_busy_passes']} busy passes between frames ([loop] keep_gpu_busy = "
-              f"{json.dumps(busy)})")
+        print(f"  GPU kept busy   {r['gpu_busy_passes']} busy passes between frames, whole run ([loop] "
+              f"keep_gpu_busy = {json.dumps(busy)})")
     ratio = r["latency_p99_over_period"]
     print(f"  latency         {_fmt(r['latency'])}"
           + ("" if ratio is None else f"   (p99 = {ratio:.2f} x the {period_ms:.2f} ms frame period)"))
@@ -299,6 +379,20 @@ def _print(r: dict[str, Any]) -> None:
         for cpu, p in m["probes"].items():
             counts = ", ".join(f">= {k} ms: {v}" for k, v in p["late_wakeups_at_least_ms"].items())
             kind = "" if p["realtime"] else " (probe not real-time: it measures our load too)"
+            elsewhere = {c: n for c, n in (p.get("ran_on") or {}).items() if c != cpu}
+            if elsewhere:
+                where = ", ".join(f"{n} on {'another CPU' if c == '-1' else f'CPU {c}'}" for c, n in elsewhere.items())
+                kind += (f"; moved off CPU {cpu} {p['moved']} times and pinned back: {where} "
+                         f"of its {sum(p['ran_on'].values())} wake-ups, not counted")
+            kind += "" if p["counted"] else "; not the loop's CPU, not counted below"
             print(f"  machine, CPU {cpu}  a probe woken late {counts}; max {p['max_ms']:.2f} ms{kind}")
-        print(f"  late frames     {m['late_frames_in_stalls']} overlap a machine stall (the machine's), "
-              f"{m['late_frames_own']} do not (the loop's own); {m['frames_in_stalls']} frames overlap one in all")
+        where = ("any CPU (the loop has none of its own)" if m["loop_cpus"] is None
+                 else "the loop's CPU " + ", ".join(map(str, m["loop_cpus"])))
+        if m["late_frames_in_stalls"] is None:
+            print(f"  late frames     the machine's and the loop's own: unknown, the probe(s) on CPU "
+                  f"{', '.join(map(str, m['probes_not_realtime']))} not real-time, their late wake-ups include our "
+                  f"own load; {m['frames_in_stalls']} frames overlap a probe's late wake-up on {where}")
+        else:
+            print(f"  late frames     {m['late_frames_in_stalls']} overlap a machine stall on {where} (the "
+                  f"machine's), {m['late_frames_own']} do not (the loop's own); {m['frames_in_stalls']} frames "
+                  f"overlap one in all")

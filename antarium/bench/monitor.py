@@ -4,8 +4,9 @@ Runs `antarium bench loop` three times on the same rig config (`$ANTARIUM_RIG_CO
 "off" (no LED stream, no monitor), "monitor" (`[monitor] enabled`: the LED stream every `leds_every` frames and the
 monitor process, no page open) and "page" (the same with the page open in Debian's headless chromium, driven by
 Selenium, for the whole run). Reports the
-loop's figures for both (late frames, latency) and, from the page itself: first paint, first LED frame drawn,
-updates drawn per second, frame -> screen latency (the LED frame's hand-over on the server, `t_wall`, to the
+loop's figures for both (late frames, latency) and, from the page itself over a window from 2 s after it opened to
+the loop's last frame: first paint, first LED frame drawn, updates drawn per second, frame -> screen latency (every
+LED frame drawn in that window) (the LED frame's hand-over on the server, `t_wall`, to the
 end of its drawing in the browser's animation frame; both clocks are this computer's) and the browser's CPU time per
 update drawn (all its processes). On a small machine the browser takes CPU from the loop, where in a lab it runs on
 the experimenter's computer: `--browser-idle` runs it SCHED_IDLE, so that it gets only what the loop leaves.
@@ -50,8 +51,27 @@ def idle_browser(binary: str, folder: str) -> str:
     return path
 
 
+def page_figures(m: dict[str, Any], seconds: float, cpu_s: float) -> dict[str, Any]:
+    """The page's figures over a measuring window of `seconds` (s) in which the browser took `cpu_s` of CPU time:
+    `m` is what the page reported at the window's end, `measured` the frame -> screen latencies (s) of the LED
+    frames it drew in the window (the page keeps them from the window's start: `M.measured`), `drawn` the frames
+    drawn in the window."""
+    lat = np.asarray(m["measured"], dtype=float) * 1e3
+    drawn = m["drawn"]
+    out = {"updates_per_s": drawn / seconds, "seconds": seconds, "browser_cpu_per_s": cpu_s / seconds,
+           "browser_cpu_ms_per_update": 1e3 * cpu_s / drawn if drawn else None,
+           "first_contentful_paint_ms": (m["paint"] or [None])[0], "first_led_frame_drawn_ms": m["first_draw_ms"],
+           "frame_to_screen_ms": {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
+                                  "max": float(lat.max()), "n": int(lat.size)} if lat.size else None}
+    draw = np.asarray(m["draw_ms"], dtype=float).reshape(-1, 2)
+    if len(draw):  # the page's own drawing of one LED frame: the map (2D canvas), the 3D view (WebGL)
+        out["draw_ms_p50"] = {"map": float(np.median(draw[:, 0])), "3d": float(np.median(draw[:, 1]))}
+    return out
+
+
 class PageWatcher(threading.Thread):
-    """Opens `url` in headless chromium once it answers and reads the page's figures until `stop`."""
+    """Opens `url` in headless chromium once it answers and measures the page from a warm-up after it opened until
+    `stop_event` (set when the loop's frames end: `bench loop`'s `on_frames_end`)."""
 
     def __init__(self, url: str, browser: str = CHROMIUM) -> None:
         super().__init__(name="page-watcher", daemon=True)
@@ -79,29 +99,20 @@ class PageWatcher(threading.Thread):
         try:
             driver.get(self.url)
             time.sleep(2.0)  # warm-up
-            start = driver.execute_script("return window.antariumMonitor.drawn")
+            # the window opens: the frames drawn from here on, each one's latency kept by the page
+            start = driver.execute_script("const M = window.antariumMonitor; M.measured = []; return M.drawn")
             browser_pid = driver.service.process.pid
             t0, cpu0 = time.monotonic(), process_tree_cpu_s(browser_pid)
-            self.stop_event.wait()
+            self.stop_event.wait()  # the loop's frames ended: the window closes
+            seconds = time.monotonic() - t0
             cpu = process_tree_cpu_s(browser_pid) - cpu0
             m = driver.execute_script(
-                "const M = window.antariumMonitor; return {drawn: M.drawn, latencies: M.latencies, "
-                "first_draw_ms: M.firstDrawMs, updates: M.updates, draw_ms: M.drawMs, "
+                "const M = window.antariumMonitor; const measured = M.measured; M.measured = null; "
+                "return {drawn: M.drawn, measured: measured, first_draw_ms: M.firstDrawMs, updates: M.updates, "
+                "draw_ms: M.drawMs, "
                 "paint: performance.getEntriesByName('first-contentful-paint').map(p => p.startTime)}")
-            seconds = time.monotonic() - t0
-            lat = np.asarray(m["latencies"]) * 1e3
-            drawn = m["drawn"] - start
-            self.result = {"updates_per_s": drawn / seconds, "seconds": seconds,
-                           "browser_cpu_per_s": cpu / seconds,
-                           "browser_cpu_ms_per_update": 1e3 * cpu / drawn if drawn else None,
-                           "first_contentful_paint_ms": (m["paint"] or [None])[0],
-                           "first_led_frame_drawn_ms": m["first_draw_ms"],
-                           "frame_to_screen_ms": {"p50": float(np.percentile(lat, 50)),
-                                                  "p99": float(np.percentile(lat, 99)), "max": float(lat.max()),
-                                                  "n": int(lat.size)} if lat.size else None}
-            draw = np.asarray(m["draw_ms"], dtype=float).reshape(-1, 2)
-            if len(draw):  # the page's own drawing of one LED frame: the map (2D canvas), the 3D view (WebGL)
-                self.result["draw_ms_p50"] = {"map": float(np.median(draw[:, 0])), "3d": float(np.median(draw[:, 1]))}
+            m["drawn"] -= start
+            self.result = page_figures(m, seconds, cpu)
         finally:
             driver.quit()
 
@@ -133,8 +144,9 @@ def run(args: argparse.Namespace) -> int:
                 watcher.browser_ready.wait(60)  # the browser is started before the loop, not during it
             os.environ["ANTARIUM_RIG_CONFIG"] = path
             loop_json = os.path.join(tmp, f"loop-{mode}.json")
-            loop_bench.run(argparse.Namespace(seconds=args.seconds, frames=args.frames, json_out=loop_json,
-                                              machine_probe=False))
+            loop_bench.run(argparse.Namespace(
+                seconds=args.seconds, frames=args.frames, json_out=loop_json, machine_probe=False,
+                on_frames_end=watcher.stop_event.set if watcher is not None else None))
             if watcher is not None:
                 watcher.stop_event.set()
                 watcher.join(30)

@@ -56,6 +56,30 @@ def _tracker(n: int) -> dict:
     return {"frames": n, "frames_per_s": n / dt, "us_per_frame": dt / n * 1e6}
 
 
+class SimulatedTime:
+    """The time spent in the simulated rig (camera, physics, firmware emulator: not the host's work on a real rig),
+    from the functions wrapped with `timed`. A wrapped function called from within another (the firmware emulator
+    runs inside the camera's grab, which advances the rig) is counted once, in the outer call. `clock`: seconds
+    (default: time.perf_counter, the clock the step's own time is taken with)."""
+
+    def __init__(self, clock=None) -> None:
+        self.clock = clock or (lambda: time.perf_counter())
+        self.seconds, self._depth = 0.0, 0
+
+    def timed(self, fn):
+        def wrapped(*args, **kwargs):
+            outer = self._depth == 0
+            self._depth += 1
+            t0 = self.clock() if outer else 0.0
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self._depth -= 1
+                if outer:
+                    self.seconds += self.clock() - t0
+        return wrapped
+
+
 def _loop(seconds: float) -> dict:
     from antarium.core.ball import pole_motion
     from antarium.core.clock import SimulatedClock
@@ -65,25 +89,10 @@ def _loop(seconds: float) -> dict:
     src = ServosphereSource(clock=clock, simulation={"speed": 0.05, "meander": 2.0, "seed": 7})
     rows: list[tuple] = []
     src.use_log(type("Rows", (), {"add_servosphere": staticmethod(rows.append)})())
+    sim = SimulatedTime()
     camera = src.loop.camera
-    grab = camera.grab
-    sim_s = [0.0]
-
-    def timed_grab():  # the simulated camera and the rig's physics: not the host's work on a real rig
-        t0 = time.perf_counter()
-        out = grab()
-        sim_s[0] += time.perf_counter() - t0
-        return out
-
-    camera.grab = timed_grab
-    link_read = src.rig.port.deliver
-
-    def timed_deliver(t):  # the firmware emulator, run when the rig advances
-        t0 = time.perf_counter()
-        link_read(t)
-        sim_s[0] += time.perf_counter() - t0
-
-    src.rig.port.deliver = timed_deliver
+    camera.grab = sim.timed(camera.grab)  # the simulated camera, and the rig's physics it advances
+    src.rig.port.deliver = sim.timed(src.rig.port.deliver)  # the firmware emulator (within the grab when it runs there)
     path = np.zeros(2)
     radius = src.loop.geometry.sphere_radius
     for _ in range(int(seconds * DOME_RATE_HZ)):
@@ -91,7 +100,7 @@ def _loop(seconds: float) -> dict:
         for s in src.read():
             path += pole_motion(s.rotation, radius)[:2]
     n = len(rows)
-    host_s = src.step_s - sim_s[0]
+    host_s = src.step_s - sim.seconds
     err = np.hypot([r[2] for r in rows[70:]], [r[3] for r in rows[70:]])
     rig = src.rig
     return {"steps": n, "simulated_s": seconds, "whole_step_hz": n / src.step_s, "host_step_hz": n / host_s,
