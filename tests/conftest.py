@@ -30,6 +30,15 @@ def free_tcp_port(host: str = "127.0.0.1") -> int:
         return s.getsockname()[1]
 
 
+def process_gone(pid: int) -> bool:
+    """The process `pid` has ended (a zombie not yet reaped counts as ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return True
+
+
 @pytest.fixture
 def bus_endpoint() -> str:
     """A zenoh endpoint on loopback that no other test uses."""

@@ -6,7 +6,7 @@ import signal
 import subprocess
 import sys
 
-from conftest import wait_for
+from conftest import process_gone, wait_for
 
 PARENT = """
 import time
@@ -18,30 +18,21 @@ time.sleep(600)
 """
 
 
-def _gone(pid: int) -> bool:
-    """The process has ended (a zombie not yet reaped counts as ended)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
-    except OSError:
-        return True
-
-
 def test_the_emulator_ends_when_its_parent_is_killed():
     parent = subprocess.Popen([sys.executable, "-c", PARENT], stdout=subprocess.PIPE, text=True)
     emulator = None
     try:
         emulator = int(parent.stdout.readline())
-        assert not _gone(emulator)
+        assert not process_gone(emulator)
         parent.kill()  # SIGKILL: the parent cleans nothing up
         parent.wait(30)
-        assert wait_for(lambda: _gone(emulator), 30.0, 0.05), "the emulator outlived its parent"
+        assert wait_for(lambda: process_gone(emulator), 30.0, 0.05), "the emulator outlived its parent"
     finally:
         if parent.poll() is None:
             parent.kill()
             parent.wait()
         parent.stdout.close()
-        if emulator is not None and not _gone(emulator):
+        if emulator is not None and not process_gone(emulator):
             os.kill(emulator, signal.SIGKILL)
 
 

@@ -50,8 +50,8 @@ def _wait(predicate, timeout_s, what):
     raise AssertionError(f"not within {timeout_s} s: {what}")
 
 
-@pytest.fixture(scope="module")
-def browser():
+def open_chromium():
+    """Debian's headless chromium through Selenium (the test fails naming the packages when they are missing)."""
     if not (shutil.which(CHROMIUM) and shutil.which(CHROMEDRIVER)):  # the Makefile's system check installs them
         pytest.fail("Debian's chromium and chromium-driver are missing: sudo apt-get install -y chromium "
                     "chromium-driver (make system-check does it as root)")
@@ -66,6 +66,12 @@ def browser():
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
     driver.set_page_load_timeout(20)
     driver.set_script_timeout(20)
+    return driver
+
+
+@pytest.fixture(scope="module")
+def browser():
+    driver = open_chromium()
     yield driver
     driver.quit()
 

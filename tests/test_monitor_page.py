@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from test_monitor_browser import CHROMEDRIVER, CHROMIUM, _start_monitor, _stop, _wait
+from test_monitor_browser import _start_monitor, _stop, _wait, open_chromium
 
 from antarium import bus
 from antarium.monitor.led_stream import encode_leds, led_key
@@ -22,22 +22,7 @@ RIG = "tpage"
 
 @pytest.fixture(scope="module")
 def page_browser():
-    import shutil
-
-    if not (shutil.which(CHROMIUM) and shutil.which(CHROMEDRIVER)):  # the Makefile's system check installs them
-        pytest.fail("Debian's chromium and chromium-driver are missing: sudo apt-get install -y chromium "
-                    "chromium-driver (make system-check does it as root)")
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1500,1100",
-                "--use-angle=swiftshader", "--enable-unsafe-swiftshader"):
-        options.add_argument(arg)
-    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
-    driver.set_page_load_timeout(20)
-    driver.set_script_timeout(20)
+    driver = open_chromium()
     yield driver
     driver.quit()
 

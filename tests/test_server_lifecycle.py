@@ -10,7 +10,7 @@ import weakref
 
 import numpy as np
 import pytest
-from conftest import wait_for
+from conftest import process_gone, wait_for
 
 from antarium import bus
 from antarium.config import resolve
@@ -33,17 +33,8 @@ def _config(tmp_path, rig, link=None, **extra):
 EMULATOR = {"interface": "udp", "spawn_emulator": True}
 
 
-def _gone(pid: int) -> bool:
-    """The process has ended (a zombie not yet reaped counts as ended)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
-    except OSError:
-        return True
-
-
 def _kill(pid: int | None) -> None:
-    if pid is not None and not _gone(pid):
+    if pid is not None and not process_gone(pid):
         os.kill(pid, signal.SIGKILL)
 
 
@@ -151,7 +142,7 @@ def test_a_failing_shutdown_step_does_not_skip_the_others(tmp_path):
         assert wait_for(lambda: server.loop.frame > 5, 20.0)
         server.stop()
         assert not server._thread.is_alive()
-        assert wait_for(lambda: _gone(pid), 10.0), "the emulator was left running"
+        assert wait_for(lambda: process_gone(pid), 10.0), "the emulator was left running"
         assert sys.getswitchinterval() == switch_interval
         assert any("stopping the locomotion source failed: OSError" in line for line in lines), lines
     finally:

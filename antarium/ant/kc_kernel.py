@@ -186,6 +186,13 @@ def _winners(ep, k, block_max, size, cand, vals, scratch, counts, chosen):
     return j
 
 
+@njit(cache=True, nogil=True)
+def _winner_work(n_kc, k):
+    """`_winners`' work arrays for `n_kc` KCs and k winners: cand, vals, scratch, counts, chosen."""
+    return (np.empty(n_kc, np.int32), np.empty(n_kc, np.float32), np.empty(n_kc, np.float32),
+            np.empty(_BINS, np.int64), np.empty(k, np.int32))
+
+
 @njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
 def _select(ep_t, k, block_max, weights, out):
     """novelty (G, n_out) float64 into `out` from EP (G, n_kc) and the MBONs' weights (n_out, n_kc) uint8: the
@@ -193,11 +200,7 @@ def _select(ep_t, k, block_max, weights, out):
     n_kc = ep_t.shape[1]
     size = (n_kc + block_max.shape[1] - 1) // block_max.shape[1]
     n_out = weights.shape[0]
-    cand = np.empty(n_kc, np.int32)
-    vals = np.empty(n_kc, np.float32)
-    scratch = np.empty(n_kc, np.float32)
-    counts = np.empty(_BINS, np.int64)
-    chosen = np.empty(k, np.int32)
+    cand, vals, scratch, counts, chosen = _winner_work(n_kc, k)
     for d in range(out.shape[0]):
         j = _winners(ep_t[d], k, block_max[d], size, cand, vals, scratch, counts, chosen)
         for o in range(n_out):
@@ -213,11 +216,7 @@ def _pick(ep_t, k, block_max, out):
     fewer than k winners (EPs not finite)."""
     n_kc = ep_t.shape[1]
     size = (n_kc + block_max.shape[1] - 1) // block_max.shape[1]
-    cand = np.empty(n_kc, np.int32)
-    vals = np.empty(n_kc, np.float32)
-    scratch = np.empty(n_kc, np.float32)
-    counts = np.empty(_BINS, np.int64)
-    chosen = np.empty(k, np.int32)
+    cand, vals, scratch, counts, chosen = _winner_work(n_kc, k)
     for d in range(out.shape[0]):
         j = _winners(ep_t[d], k, block_max[d], size, cand, vals, scratch, counts, chosen)
         for i in range(k):
