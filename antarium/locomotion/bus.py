@@ -2,8 +2,12 @@
 structs), so a trackball driver on another computer or a simulated ant can drive the loop.
 
 Each sample is stamped with this process's clock when it arrives (clocks of different computers are never
-compared). Malformed payloads are counted and dropped. `connected` is False when no sample arrived for
-`timeout_s` seconds after one did (publisher gone), so the loop holds the pose until samples come back.
+compared). Malformed payloads (wrong size or version, unknown flag bits, a non-zero reserved field, a
+non-finite number) are counted and dropped; samples dropped because `read()` fell `max_pending` behind are
+counted (`dropped_samples`); a jump of the u32 sequence number (wrapping at 2**32) is counted as a gap (`gaps`,
+`lost_samples`), a step back (or the same number again: more than 2**31 ahead) as a reset (`seq_resets`).
+`connected` is False when no sample arrived for `timeout_s` seconds after one did (publisher gone), so the
+loop holds the pose until samples come back.
 
 A device driver on another computer also reports on `antarium/<rig>/events` (JSON with "event" and
 "source", e.g. the USB trackball's "locomotion_lost" at an unplug): such a "locomotion_lost" makes
@@ -21,6 +25,7 @@ from typing import Any
 
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.locomotion import BufferedSource, positive, wire
+from antarium.locomotion.trackball.protocol import seq_gap
 
 
 class BusSource(BufferedSource):
@@ -45,6 +50,10 @@ class BusSource(BufferedSource):
         self._straggler_seq: int | None = None  # the driver's last sample before a loss, not arrived yet
         self.received = 0
         self.malformed = 0
+        self.dropped_samples = 0  # the oldest waiting sample dropped: read() fell max_pending behind
+        self.gaps = 0  # jumps of the sequence number (u32, wrapping): samples lost before they arrived
+        self.lost_samples = 0
+        self.seq_resets = 0  # steps back of the sequence number
         self.last_error = ""
         self._last_t: float | None = None
 
@@ -73,9 +82,17 @@ class BusSource(BufferedSource):
                 self.malformed += 1
                 self.last_error = str(exc)
             return
-        self._push(decoded)
+        dropped = self._push(decoded)
         with self._lock:
             self.received += 1
+            if dropped:
+                self.dropped_samples += 1
+            gap = seq_gap(self._last_seq, decoded.seq)
+            if gap >= 1 << 31:  # a step back (or the same number again): the publisher restarted
+                self.seq_resets += 1
+            elif gap:
+                self.gaps += 1
+                self.lost_samples += gap
             self._last_t = t
             self._last_seq = decoded.seq
             if self._straggler_seq is None:
@@ -110,7 +127,8 @@ class BusSource(BufferedSource):
             last = self._last_t
             connected = not self._device_lost and (last is None or self.clock.now() - last <= self.timeout_s)
             return {"connected": connected, "received": self.received, "malformed": self.malformed,
-                    "last_error": self.last_error}
+                    "dropped_samples": self.dropped_samples, "gaps": self.gaps, "lost_samples": self.lost_samples,
+                    "seq_resets": self.seq_resets, "last_error": self.last_error}
 
     def stop(self) -> None:
         for sub in (self._sub, self._events_sub):

@@ -2,8 +2,11 @@
 
 A CSV file has a header row naming at least `t, rx, ry, rz` (seconds; radians about the dome axes),
 optionally `seq`, `t_device`, `quality`. Samples come out at their recorded time offsets on the injected
-clock (the first sample at `start()` + its offset from the first recorded time), with their recorded
-sequence numbers, so a replayed trial drives the loop exactly as the original did. Looped, each lap's sequence
+clock, with their recorded sequence numbers: offsets from the trial's own start for a trial log (its first
+frame's `t_start`, when the original loop first read its source), so a replayed trial drives the loop exactly
+as the original did (a source that delivered its first sample 2 s into the trial does so in the replay too).
+A CSV file (or a trial log without frames) knows no trial start: its first sample comes at `start()`, the
+others at their offsets from it. Looped, each lap's sequence
 numbers are the recorded ones + lap x (largest - smallest recorded + 1): gaps recur, numbers never repeat.
 """
 
@@ -18,6 +21,21 @@ import numpy as np
 
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.locomotion import BallSample, LocomotionSource
+
+
+def trial_start(path: str | Path) -> float | None:
+    """The start of the trial a trial log recorded (its first frame's `t_start`, on the loop's clock), or None
+    for a CSV file or a log without frames."""
+    from antarium.trial_log import open_log
+
+    path = Path(path)
+    if path.suffix.lower() not in (".h5", ".hdf5"):
+        return None
+    with open_log(path) as f:
+        if "frames" not in f or len(f["frames"]) == 0:
+            return None
+        t = float(f["frames"][0]["t_start"])
+    return t if math.isfinite(t) else None
 
 
 def load_samples(path: str | Path) -> np.ndarray:
@@ -50,6 +68,10 @@ def load_samples(path: str | Path) -> np.ndarray:
     return _finite(np.array(rows, dtype=SAMPLE_DTYPE), f"replay CSV {str(path)!r} line", 2)
 
 
+#: a sample due within this many seconds after now is due now: a recorded time rounded just past the reading
+#: that took it (the scripted source's tolerance) comes in the same frame as in the original
+DUE_EPS_S = 1e-12
+
 #: columns that must hold finite numbers (t is checked with its order by `ReplaySource`; t_device may be nan: none)
 FINITE_COLUMNS = ("rx", "ry", "rz", "quality")
 
@@ -78,7 +100,10 @@ class ReplaySource(LocomotionSource):
             raise ValueError(f"replay file {path!r}: sample times must be finite and non-decreasing")
         self.speed, self.loop = float(speed), bool(loop)
         self.clock = clock or MonotonicClock()
-        self._offsets = (self.data["t"] - self.data["t"][0]) / self.speed
+        start = trial_start(path)
+        anchor = self.data["t"][0] if start is None else start
+        # a sample read by the original's first frame (arrived before the trial's start) comes at start() too
+        self._offsets = np.maximum(self.data["t"] - anchor, 0.0) / self.speed
         self._span = float(self._offsets[-1]) + (float(np.median(np.diff(self._offsets))) if len(self.data) > 1
                                                   else 1.0)
         seqs = self.data["seq"]
@@ -99,7 +124,7 @@ class ReplaySource(LocomotionSource):
     def read(self) -> list[BallSample]:
         if self._t0 is None:
             self.start()
-        now = self.clock.now() - self._t0
+        now = self.clock.now() - self._t0 + DUE_EPS_S
         out = []
         n = len(self.data)
         while True:

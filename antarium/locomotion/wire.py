@@ -3,8 +3,8 @@
 | offset | type | field     | unit / meaning                                        |
 |-------:|------|-----------|-------------------------------------------------------|
 | 0      | u8   | version   | 1                                                     |
-| 1      | u8   | flags     | bit 0: t_device valid                                 |
-| 2      | u16  | reserved  | 0                                                     |
+| 1      | u8   | flags     | bit 0: t_device valid; other bits 0 (else refused)    |
+| 2      | u16  | reserved  | 0 (else refused)                                      |
 | 4      | u32  | seq       | source sequence number (wraps at 2**32)               |
 | 8      | f64  | t_device  | device time, s (0 when flag bit 0 is clear)           |
 | 16     | f64  | rx, ry, rz| ball rotation increment, rad, dome frame (3 x f64)    |
@@ -41,9 +41,14 @@ def decode(payload: bytes, t: float) -> BallSample:
     """Decode a payload received at host time `t` (s)."""
     if len(payload) != SIZE:
         raise LocomotionWireError(f"locomotion payload must be {SIZE} bytes, got {len(payload)}")
-    version, flags, _, seq, t_dev, rx, ry, rz, quality = _STRUCT.unpack(payload)
+    version, flags, reserved, seq, t_dev, rx, ry, rz, quality = _STRUCT.unpack(payload)
     if version != VERSION:
         raise LocomotionWireError(f"locomotion payload version {version} not supported (allowed: {VERSION})")
+    if flags & ~_FLAG_DEVICE_TIME:  # a later version's meaning must not be misread as this one's
+        raise LocomotionWireError(f"locomotion payload flags 0x{flags:02x} set unknown bits (allowed mask "
+                                  f"0x{_FLAG_DEVICE_TIME:02x})")
+    if reserved:
+        raise LocomotionWireError(f"locomotion payload reserved field must be 0, got 0x{reserved:04x}")
     if not all(math.isfinite(v) for v in (t_dev, rx, ry, rz, quality)):
         raise LocomotionWireError("locomotion payload holds a non-finite number")
     return BallSample(t, seq, (rx, ry, rz), t_dev if flags & _FLAG_DEVICE_TIME else None, quality)

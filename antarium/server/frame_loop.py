@@ -155,6 +155,8 @@ class FrameLoop:
         self.locomotion_losses = 0  # how often the source was lost (read() raising, or status() not connected)
         self._loco_reported = True  # the state the last locomotion event told
         self._loco_status: dict = {}
+        #: while the source is lost: (its last sample's seq as its status named it, or None; when the loop saw it)
+        self._loss: tuple[int | None, float] | None = None
         self._loco_changes = 0  # state changes since the last locomotion event
         self._last_loco_event_t = -math.inf
         self.link_ok = link is None  # a link is down until the distributor has answered
@@ -311,6 +313,23 @@ class FrameLoop:
                                                    "number of radians"))
         self.pose = Pose(x, y, self.pose.z, math.remainder(heading, math.tau))
 
+    def _before_loss(self, samples) -> list:
+        """Of `samples` read while the source is lost, those it measured before the loss (its driver queued them
+        before it noticed the unplug; the pose moves by them as the log says), the rest held: up to the one with
+        the sequence number the source's status named as its last (`last_seq`), else (none named, or not read
+        yet) those that arrived by the time the loop saw the loss (`t` on the loop's clock, which the server
+        gives every source)."""
+        loss = self._loss
+        if loss is None:
+            return []
+        last_seq, t_lost = loss
+        if last_seq is not None:
+            for k, s in enumerate(samples):
+                if s.seq == last_seq:
+                    self._loss = None  # everything after it was measured after the loss
+                    return samples[:k + 1]
+        return [s for s in samples if s.t <= t_lost]
+
     def _check_locomotion(self, now: float) -> None:
         """The source says whether it is connected (a USB trackball unplugged): hold the pose while it is not."""
         if self.source is not None:
@@ -333,6 +352,10 @@ class FrameLoop:
         self.locomotion_connected = connected
         if not connected:
             self.locomotion_losses += 1
+            last_seq = status.get("last_seq")
+            self._loss = (last_seq if isinstance(last_seq, int) and not isinstance(last_seq, bool) else None, t)
+        else:
+            self._loss = None
         self._loco_status = status
         self._loco_changes += 1
         self._report_locomotion(t)
@@ -487,8 +510,9 @@ class FrameLoop:
                 self.log.add_samples(samples)
             if not self.locomotion_connected and not self._source_failing:
                 self._check_locomotion(t_start)  # samples again: a replugged source is taken at once
-            if self.closed_loop and self.locomotion_connected:
-                self._integrate(samples, t_start)
+            moved = samples if self.locomotion_connected else self._before_loss(samples)
+            if self.closed_loop and moved:
+                self._integrate(moved, t_start)
         if self.locomotion_connected != self._loco_reported:  # a change held back: told once a second has passed
             self._report_locomotion(t_start)
         pose = self.pose

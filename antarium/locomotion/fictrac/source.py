@@ -4,7 +4,9 @@
     open_source("fictrac", transport="tcp", host="127.0.0.1", port=5000)   # FicTrac 2.0 (2.1 sends UDP only)
     open_source("fictrac-replay", path="run.dat", speed=1.0, clock=clock)
 
-Malformed lines, and frames that do not convert to a sample, are counted (`status()["malformed"]`) and skipped;
+Malformed lines (a TCP line cut by a disconnect included), and frames that do not convert to a sample, are counted
+(`status()["malformed"]`) and skipped; samples dropped from a full queue (`read()` fell `max_queue` behind) are
+counted (`dropped_samples`);
 a jump of FicTrac's frame counter is counted as a gap; a step back of it, or of the sequence counter (column 23:
 FicTrac reset its tracking), as a reset. The live source calls itself connected while frames arrive at least
 every `timeout_s`.
@@ -101,6 +103,7 @@ class FicTracSource(ReaderSource):
         self._last_frame: float | None = None
         self._tcp_connected = False
         self._sender_terminates = False  # the sender ends its lines with a newline (FicTrac does)
+        self._dropped = 0  # samples dropped from a full queue (read() fell max_queue behind)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -134,14 +137,22 @@ class FicTracSource(ReaderSource):
         fresh = self._last_frame is not None and now - self._last_frame <= self.timeout_s
         connected = fresh and (self.transport == "udp" or self._tcp_connected)
         return {"connected": connected, "source": f"fictrac-{self.transport}", "address": list(self.address),
-                "last_error": self._stats.last_error, **self._stats.counts}
+                "last_error": self._stats.last_error, **self._stats.counts, "dropped_samples": self._dropped}
 
     def _line(self, line: bytes) -> None:
         t = self.clock.now()
         parsed = self._stats.parse(line, t)
         if parsed is not None:
-            self._push(parsed[1])
+            if self._push(parsed[1]):  # read() fell max_queue behind: the oldest sample went
+                self._dropped += 1
             self._last_frame = t
+
+    def _cut(self, pending: bytes, reason: str) -> None:
+        """The TCP connection ended (`reason`): a line it cut (`pending`, without its end of line) is counted
+        malformed, as the UDP path and the .dat replay count theirs."""
+        if pending.strip():
+            self._stats.malformed("FicTrac line cut by disconnect")
+        self._stats.last_error = reason if not pending.strip() else f"FicTrac line cut by disconnect ({reason})"
 
     def _run(self) -> None:
         if self.transport == "udp":
@@ -187,10 +198,10 @@ class FicTracSource(ReaderSource):
                     except TimeoutError:
                         continue
                     except OSError as exc:
-                        self._stats.last_error = f"FicTrac connection lost: {exc}"
+                        self._cut(pending, f"FicTrac connection lost: {exc}")
                         break
                     if not data:
-                        self._stats.last_error = "FicTrac closed the connection"
+                        self._cut(pending, "FicTrac closed the connection")
                         break
                     *lines, pending = (pending + data).split(b"\n")
                     for line in lines:

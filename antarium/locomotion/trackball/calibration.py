@@ -39,7 +39,7 @@ class Step:
 
 @dataclass(frozen=True)
 class Result:
-    config: TrackballConfig  # the input config with new counts_per_mm and signs
+    config: TrackballConfig  # the input config with new counts_per_mm and signs, calibration_cpi its resolution
     estimates: dict[str, list[float]]  # sensor axis -> counts per mm from each step that covered it
 
     def spread(self) -> dict[str, float]:
@@ -87,7 +87,7 @@ def calibrate(config: TrackballConfig, steps: list[Step], min_share: float = 0.5
     for i, sensor in enumerate(config.sensors):
         cpmm = tuple(float(np.mean(estimates[f"{a}{i}"])) for a in "xy")
         sgn = tuple(signs[f"{a}{i}"][0] for a in "xy")
-        sensors.append(replace(sensor, counts_per_mm=cpmm, signs=sgn))
+        sensors.append(replace(sensor, counts_per_mm=cpmm, signs=sgn, calibration_cpi=config.resolution_cpi))
     return Result(replace(config, sensors=tuple(sensors)), {k: v for k, v in estimates.items()})
 
 

@@ -12,13 +12,15 @@
     azimuth_deg = 0.0
     elevation_deg = 0.0
     roll_deg = 0.0
-    counts_per_mm = [47.24, 47.24]   # sensor x, sensor y (written by `antarium trackball calibrate`)
+    counts_per_mm = [47.24, 47.24]   # sensor x, sensor y (written by `antarium trackball calibrate`);
+                                     # left out: resolution_cpi / 25.4 (the sensor's nominal value)
     signs = [1, 1]                   # +1 or -1 per sensor axis (mounting)
+    calibration_cpi = 1200           # the resolution counts_per_mm were calibrated at (written by calibrate)
 
 A missing key takes its default (`ball_radius`: in a rig file, its `[loop] ball_radius_m` if it sets one); an
 unknown key or a bad value raises `TrackballConfigError` naming it. `write_section` writes a calibration's result
-into a rig file: only the `counts_per_mm` and `signs` of its `[[trackball.sensors]]`, every other byte (comments
-included) kept; a file it cannot edit that way is rewritten whole after a copy to `<file>.bak`.
+into a rig file: only the `counts_per_mm`, `signs` and `calibration_cpi` of its `[[trackball.sensors]]`, every
+other byte (comments included) kept; a file it cannot edit that way is rewritten whole after a copy to `<file>.bak`.
 """
 
 from __future__ import annotations
@@ -39,19 +41,30 @@ from antarium.locomotion.trackball.protocol import N_SENSORS
 DEFAULT_CPI = 1200
 
 
+def nominal_counts_per_mm(resolution_cpi: float) -> float:
+    """Counts per mm of a sensor at `resolution_cpi` counts per inch, before calibration (the one place)."""
+    return resolution_cpi / 25.4
+
+
 class TrackballConfigError(ValueError):
     """A `[trackball]` section that cannot be used; the message names the key and what is allowed."""
 
 
 @dataclass(frozen=True)
 class SensorConfig:
-    """One sensor: placement (degrees at this edge), calibration of its x and y counts."""
+    """One sensor: placement (degrees at this edge), calibration of its x and y counts.
+
+    counts_per_mm None: the nominal value of the config's `resolution_cpi` (`TrackballConfig` fills it in).
+    calibration_cpi: the resolution `counts_per_mm` were calibrated at (None: not recorded); a config whose
+    `resolution_cpi` differs is refused.
+    """
 
     azimuth_deg: float
     elevation_deg: float = 0.0
     roll_deg: float = 0.0
-    counts_per_mm: tuple[float, float] = (DEFAULT_CPI / 25.4, DEFAULT_CPI / 25.4)
+    counts_per_mm: tuple[float, float] | None = None
     signs: tuple[int, int] = (1, 1)
+    calibration_cpi: int | None = None
 
     def placement(self) -> SensorPlacement:
         return SensorPlacement(
@@ -71,12 +84,35 @@ class TrackballConfig:
         default_factory=lambda: (SensorConfig(0.0), SensorConfig(90.0))
     )
 
+    def __post_init__(self) -> None:
+        nominal = nominal_counts_per_mm(self.resolution_cpi)
+        sensors = tuple(replace(s, counts_per_mm=(nominal, nominal)) if s.counts_per_mm is None else s
+                        for s in self.sensors)
+        object.__setattr__(self, "sensors", sensors)
+        for i, s in enumerate(sensors):
+            if s.calibration_cpi is not None and s.calibration_cpi != self.resolution_cpi:
+                raise TrackballConfigError(
+                    f"[[trackball.sensors]] #{i} counts_per_mm were calibrated at calibration_cpi = "
+                    f"{s.calibration_cpi} but [trackball] resolution_cpi = {self.resolution_cpi}: set resolution_cpi "
+                    f"= {s.calibration_cpi} or calibrate again (antarium trackball calibrate)")
+
     def solver(self) -> BallSolver:
         return BallSolver(tuple(s.placement() for s in self.sensors), self.ball_radius, self.slip_floor_mm * 1e-3)
 
-    def metres_per_count(self) -> list[float]:
-        """Signed metres per count of each sensor axis, in report order (x0, y0, x1, y1)."""
-        return [sign * 1e-3 / cpmm for s in self.sensors for cpmm, sign in zip(s.counts_per_mm, s.signs, strict=True)]
+    def metres_per_count(self, applied_cpi: int | None = None) -> list[float]:
+        """Signed metres per count of each sensor axis, in report order (x0, y0, x1, y1).
+
+        applied_cpi: the resolution the device says it applied (GET_INFO; the sensor rounds to its own step):
+        a sensor left at the nominal counts per mm of `resolution_cpi` takes the applied one's instead (a
+        calibrated sensor keeps its own: the calibration measured the applied resolution)."""
+        asked = nominal_counts_per_mm(self.resolution_cpi)
+        out = []
+        for s in self.sensors:
+            cpmm = s.counts_per_mm
+            if applied_cpi is not None and s.calibration_cpi is None and cpmm == (asked, asked):
+                cpmm = (nominal_counts_per_mm(applied_cpi),) * 2
+            out += [sign * 1e-3 / c for c, sign in zip(cpmm, s.signs, strict=True)]
+        return out
 
 
 _TOP_KEYS = {
@@ -87,7 +123,7 @@ _TOP_KEYS = {
     "resolution_cpi": (int, 100, 12000),
     "slip_floor_mm": (float, 1e-6, 100.0),
 }
-_SENSOR_KEYS = {"azimuth_deg", "elevation_deg", "roll_deg", "counts_per_mm", "signs"}
+_SENSOR_KEYS = {"azimuth_deg", "elevation_deg", "roll_deg", "counts_per_mm", "signs", "calibration_cpi"}
 
 
 def _number(where: str, value: Any, kind: type, lo: float, hi: float) -> Any:
@@ -111,15 +147,22 @@ def _sensor(i: int, table: Any) -> SensorConfig:
         raise TrackballConfigError(f"{where} needs azimuth_deg (degrees, 0 = front, 90 = left)")
     angles = {k: _number(f"{where} {k}", table.get(k, 0.0), float, -360.0, 360.0)
               for k in ("azimuth_deg", "elevation_deg", "roll_deg")}
-    cpmm = table.get("counts_per_mm", SensorConfig.counts_per_mm)
-    if not isinstance(cpmm, (list, tuple)) or len(cpmm) != 2:
-        raise TrackballConfigError(f"{where} counts_per_mm must be two numbers [x, y], got {cpmm!r}")
-    cpmm = tuple(_number(f"{where} counts_per_mm", v, float, 1e-3, 1e5) for v in cpmm)
+    cpmm = table.get("counts_per_mm")  # None: the nominal value of resolution_cpi
+    if cpmm is not None:
+        if not isinstance(cpmm, (list, tuple)) or len(cpmm) != 2:
+            raise TrackballConfigError(f"{where} counts_per_mm must be two numbers [x, y], got {cpmm!r}")
+        cpmm = tuple(_number(f"{where} counts_per_mm", v, float, 1e-3, 1e5) for v in cpmm)
+    cal_cpi = table.get("calibration_cpi")
+    if cal_cpi is not None:
+        if cpmm is None:
+            raise TrackballConfigError(f"{where} has calibration_cpi but no counts_per_mm (it says which "
+                                       "resolution the counts_per_mm were calibrated at)")
+        cal_cpi = _number(f"{where} calibration_cpi", cal_cpi, int, *_TOP_KEYS["resolution_cpi"][1:])
     signs = table.get("signs", SensorConfig.signs)
     if not isinstance(signs, (list, tuple)) or len(signs) != 2 or any(s not in (1, -1) or isinstance(s, bool)
                                                                     for s in signs):
         raise TrackballConfigError(f"{where} signs must be two of +1 / -1 [x, y], got {signs!r}")
-    return SensorConfig(counts_per_mm=cpmm, signs=tuple(int(s) for s in signs), **angles)
+    return SensorConfig(counts_per_mm=cpmm, signs=tuple(int(s) for s in signs), calibration_cpi=cal_cpi, **angles)
 
 
 def parse_section(section: dict[str, Any] | None) -> TrackballConfig:
@@ -161,7 +204,8 @@ def to_section(config: TrackballConfig) -> dict[str, Any]:
         "slip_floor_mm": config.slip_floor_mm,
         "sensors": [
             {"azimuth_deg": s.azimuth_deg, "elevation_deg": s.elevation_deg, "roll_deg": s.roll_deg,
-             "counts_per_mm": list(s.counts_per_mm), "signs": list(s.signs)}
+             "counts_per_mm": list(s.counts_per_mm), "signs": list(s.signs),
+             **({} if s.calibration_cpi is None else {"calibration_cpi": s.calibration_cpi})}
             for s in config.sensors
         ],
     }
@@ -230,11 +274,16 @@ def _edit_calibration(text: str, doc: dict[str, Any], config: TrackballConfig) -
         old = parse_section(trackball_table(doc))
     except TrackballConfigError:
         return None
-    if len(old.sensors) != len(config.sensors) or replace(old, sensors=tuple(
-            replace(o, counts_per_mm=n.counts_per_mm, signs=n.signs)
-            for o, n in zip(old.sensors, config.sensors, strict=True))) != config:
+    try:
+        if len(old.sensors) != len(config.sensors) or replace(old, sensors=tuple(
+                replace(o, counts_per_mm=n.counts_per_mm, signs=n.signs, calibration_cpi=n.calibration_cpi)
+                for o, n in zip(old.sensors, config.sensors, strict=True))) != config:
+            return None
+    except TrackballConfigError:  # a calibration at another resolution than the file's
         return None
-    values = [{"counts_per_mm": _toml_list(s.counts_per_mm), "signs": _toml_list(s.signs)} for s in config.sensors]
+    values = [{"counts_per_mm": _toml_list(s.counts_per_mm), "signs": _toml_list(s.signs),
+               **({} if s.calibration_cpi is None else {"calibration_cpi": str(s.calibration_cpi)})}
+              for s in config.sensors]
     newline = "\r\n" if "\r\n" in text else "\n"
     try:
         entries = _top_level(text)
@@ -249,7 +298,8 @@ def _edit_calibration(text: str, doc: dict[str, Any], config: TrackballConfig) -
         for s, v in zip(config.sensors, values, strict=True):
             text += newline.join(["", "[[trackball.sensors]]", f"azimuth_deg = {s.azimuth_deg!r}",
                                   f"elevation_deg = {s.elevation_deg!r}", f"roll_deg = {s.roll_deg!r}",
-                                  f"counts_per_mm = {v['counts_per_mm']}", f"signs = {v['signs']}", ""])
+                                  f"counts_per_mm = {v['counts_per_mm']}", f"signs = {v['signs']}",
+                                  *(f"{k} = {v[k]}" for k in ("calibration_cpi",) if k in v), ""])
         return _checked(text, doc, config)
     if len(sensor_headers) != len(config.sensors):
         return None

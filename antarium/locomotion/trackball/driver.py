@@ -60,16 +60,19 @@ class UsbTrackball(ReaderSource):
         self.retry_s = float(retry_s)
         self._solver = self.config.solver()
         self._metres_per_count = self.config.metres_per_count()
+        self._lost_seq: int | None = None  # the seq of the last sample before the latest loss
+        self.resolution_applied: int | None = None  # the resolution (cpi) the device applied (GET_INFO)
         super().__init__(max_queue)
         self._connected = False
         self._latency = np.zeros(LATENCY_WINDOW)
         self._raw = [0] * (2 * P.N_SENSORS)
         self.counters = dict.fromkeys(
             ("reports", "gaps", "lost_reports", "seq_resets", "short_reports", "bad_reports", "overflows",
-             "unplugs", "connects", "dropped_samples", "publish_errors"), 0)
+             "unplugs", "connects", "dropped_samples", "publish_errors", "duplicate_reports"), 0)
         self.quality_avg = 1.0
         self._prev_seq: int | None = None
         self._prev_t_us = 0  # the device time of report `_prev_seq` (µs)
+        self._prev_counts: tuple[int, ...] | None = None  # its counts (a duplicate report repeats all three)
         self._last_report = 0.0
         self.last_error = ""
 
@@ -98,7 +101,8 @@ class UsbTrackball(ReaderSource):
         age = time.monotonic() - self._last_report if self._last_report else None
         return {"connected": self._connected, "source": "usb",
                 "device": f"{self.config.vendor_id:04x}:{self.config.product_id:04x}",
-                "rate_hz": self.config.sample_rate_hz, "last_report_age_s": age,
+                "rate_hz": self.config.sample_rate_hz, "resolution_cpi": self.resolution_applied,
+                "last_report_age_s": age, "last_seq": None if self._connected else self._lost_seq,
                 "quality_avg": self.quality_avg, "last_error": self.last_error, **self.counters}
 
     # --- statistics ---------------------------------------------------------------------------
@@ -142,6 +146,9 @@ class UsbTrackball(ReaderSource):
                 )
             dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_SET_RATE, self.config.sample_rate_hz, 0)
             dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_SET_RESOLUTION, self.config.resolution_cpi, 0)
+            applied = P.decode_info(dev.ctrl_transfer(P.REQUEST_TYPE_IN, P.REQ_GET_INFO, 0, 0, P.INFO.size))
+            self.resolution_applied = applied.resolution_cpi  # the sensor rounds to its own step
+            self._metres_per_count = self.config.metres_per_count(applied.resolution_cpi)
             dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_START, 0, 0)
         except (usb.core.USBError, P.ReportError) as exc:
             self.last_error = str(exc)
@@ -172,6 +179,7 @@ class UsbTrackball(ReaderSource):
                 reason = self._read_loop(dev)
             except Exception as exc:  # never die silently: report, reconnect
                 reason = f"driver error: {type(exc).__name__}: {exc}"
+            self._lost_seq = self._prev_seq  # before `connected` turns False: status() names it with the loss
             if reason is not None:
                 self._connected = False
                 self.counters["unplugs"] += 1
@@ -238,13 +246,16 @@ class UsbTrackball(ReaderSource):
         except P.BadReportError:
             counters["bad_reports"] += 1
             return
+        if report.seq == self._prev_seq and report.t_us == self._prev_t_us and report.counts == self._prev_counts:
+            counters["duplicate_reports"] += 1  # the same report again (not a restart): its motion counted once
+            return
         gap = P.seq_gap(self._prev_seq, report.seq)
         if self._prev_seq is not None and self._restarted(gap, report.t_us):
             counters["seq_resets"] += 1
         elif gap:
             counters["gaps"] += 1
             counters["lost_reports"] += gap
-        self._prev_seq, self._prev_t_us = report.seq, report.t_us
+        self._prev_seq, self._prev_t_us, self._prev_counts = report.seq, report.t_us, report.counts
         if report.overflow[0] or report.overflow[1]:
             counters["overflows"] += 1
         raw = self._raw

@@ -19,7 +19,8 @@ benchmarks). `transfers` counts the transfers handed to the host, `due()` says w
 
 Faults, by report index n (0 = first report after START): `faults={n: kind}` with kind
 "short" (a 7-byte transfer), "garbage" (32 bytes with a wrong id), "drop" (the report is lost: a
-sequence gap), "lift" (sensor 1 reads nothing: slip) or "unplug" (the device vanishes before report n).
+sequence gap), "lift" (sensor 1 reads nothing: slip), "duplicate" (the report is sent twice, the same bytes) or
+"unplug" (the device vanishes before report n).
 `unplug()` / `replug()` do the same from any thread; `replug_after_s` replugs by itself.
 """
 
@@ -44,7 +45,7 @@ from antarium.locomotion.trackball.config import TrackballConfig
 LIBUSB_ERROR_NO_DEVICE = -4
 LIBUSB_ERROR_TIMEOUT = -7
 LIBUSB_ERROR_PIPE = -9
-FAULT_KINDS = ("short", "garbage", "drop", "lift", "unplug")
+FAULT_KINDS = ("short", "garbage", "drop", "lift", "duplicate", "unplug")
 #: tolerance (s) when comparing clock readings with report ends, so that a frame loop's slots on a period
 #: that is a multiple of the report period meet the reports exactly despite rounding
 _TIME_EPS_S = 1e-9
@@ -153,6 +154,7 @@ class EmulatedTrackball(usb.backend.IBackend):
         self._t_dev = 0.0  # device time of the end of the last report (s)
         self._t0 = 0.0  # clock time of START (realtime)
         self._remainder = np.zeros(2 * P.N_SENSORS)
+        self._repeat: bytes | None = None  # a report sent again on the next read ("duplicate" fault)
 
     def _describe(self) -> None:
         self._dev_desc = SimpleNamespace(
@@ -256,6 +258,9 @@ class EmulatedTrackball(usb.backend.IBackend):
 
     def _next_report(self, handle: SimpleNamespace, timeout_ms: int) -> bytes | None:
         """The next transfer's bytes (called with the lock held); None on timeout."""
+        if self._repeat is not None:  # a "duplicate" fault: the previous report again
+            data, self._repeat = self._repeat, None
+            return data
         period = 1.0 / self.rate_hz
         if self.realtime:
             deadline = time.monotonic() + timeout_ms / 1000.0 if timeout_ms else None
@@ -291,6 +296,8 @@ class EmulatedTrackball(usb.backend.IBackend):
         if fault == "drop":
             return self._next_report(handle, timeout_ms)
         data = P.encode_report(report)
+        if fault == "duplicate":
+            self._repeat = data
         if fault == "short":
             return data[:7]
         if fault == "garbage":
@@ -402,6 +409,7 @@ class EmulatedTrackball(usb.backend.IBackend):
                 self._t_dev = 0.0
                 self._t0 = self._clock_now()
                 self._remainder[:] = 0.0
+                self._repeat = None
             elif bRequest == P.REQ_STOP:
                 self.running = False
             elif bRequest == P.REQ_SET_RATE:
