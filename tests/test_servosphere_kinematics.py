@@ -43,6 +43,28 @@ def test_paper_rig_axes_and_a_pure_roll():
     assert roll_y[0] == pytest.approx(0.0, abs=1e-12) and roll_y[1] == pytest.approx(-roll_y[2])
 
 
+def test_omniwheel_contact_model_each_wheel_sees_only_its_own_axis():
+    """R_s (omega . a_i) = R_w M_i: turning wheel 1 alone asks no surface speed of the locked wheels 2 and 3 along
+    their drive directions (the paper's Eq. 4 would: omega = (0.25, 0, 0.433) at the rig's 60 deg axes)."""
+    geo = RotorGeometry()
+    omega = geo.sphere_omega([1.0, 0.0, 0.0])
+    assert omega == pytest.approx([2 / 3, 0.0, 1 / (3 * math.sqrt(3))], abs=1e-12)  # (0.667, 0, 0.192) rad/s
+    surface = geo.sphere_radius * (geo.rmat.T @ omega)  # m/s along each wheel's drive direction
+    assert surface == pytest.approx([geo.wheel_radius, 0.0, 0.0], abs=1e-12)
+    # and the motor speeds for a roll are the ball's rotation about each axis, scaled
+    omega = np.array([0.3, -1.0, 0.2])
+    assert geo.motor_speeds(omega) == pytest.approx(geo.rmat.T @ omega * geo.sphere_radius / geo.wheel_radius)
+
+
+def test_contact_model_is_eq4_for_orthogonal_axes():
+    el = math.degrees(math.atan(1 / math.sqrt(2)))  # 35.26 deg: axes 120 deg apart in azimuth are orthogonal
+    geo = RotorGeometry(elevation_deg=(el, el, el))
+    assert geo.rmat.T @ geo.rmat == pytest.approx(np.eye(3), abs=1e-12)
+    eq4 = geo.rmat * (geo.wheel_radius / geo.sphere_radius)
+    assert geo.to_sphere == pytest.approx(eq4, abs=1e-12)
+    assert geo.to_motor == pytest.approx(np.linalg.inv(eq4), abs=1e-12)
+
+
 def test_coplanar_rotors_are_refused_with_what_is_allowed():
     with pytest.raises(ValueError, match="coplanar.*allowed"):
         RotorGeometry(elevation_deg=(0.0, 0.0, 0.0))

@@ -93,3 +93,29 @@ def test_a_blob_with_a_four_vertex_contour_is_the_ant():
     assert det.fault is None
     assert (det.x_mm, det.y_mm) == pytest.approx((-0.03, 0.03), abs=1e-9)  # centre (319.5, 239.5) px
     assert det.orientation == pytest.approx(0.0, abs=1e-9) and det.area_mm2 == pytest.approx(133 * 19 * 0.06 ** 2)
+
+
+def _ant(rig, x_mm, y_mm, heading=0.0):
+    rig.ant_xy[:] = (x_mm / 1000, y_mm / 1000)
+    rig.ant_heading = heading
+    return rig.render()
+
+
+def test_a_blob_cut_by_the_frame_border_is_flagged_and_a_dark_rim_ignored(rig):
+    cal = rig.calibration
+    edge_x = (rig.width - cal.apex_px[0]) * cal.mm_per_px  # mm: the image's right edge
+    det = Tracker(cal).update(_ant(rig, edge_x - 1.0, 0.0))  # half the ant out of the frame
+    assert det.fault == "ant_at_edge" and math.isnan(det.x_mm)
+    frame = _ant(rig, 1.0, 0.5)
+    frame[:, :25] = 30  # a dark rim at the frame's left edge, of an ant's area
+    det = Tracker(cal).update(frame)
+    assert det.fault is None and (det.x_mm, det.y_mm) == pytest.approx((1.0, 0.5), abs=0.05)
+
+
+def test_a_one_pixel_crack_does_not_split_the_ant(rig):
+    cal = rig.calibration
+    frame = _ant(rig, 0.0, 0.0)
+    px, py = (int(round(v)) for v in cal.to_px(0.0, 0.0))
+    frame[py - 40:py + 40, px] = 250  # a 1 px bright line across its waist (a glint, a scratch on the lens)
+    det = Tracker(cal).update(frame)
+    assert det.fault is None and (det.x_mm, det.y_mm) == pytest.approx((0.0, 0.0), abs=0.05)

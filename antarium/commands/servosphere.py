@@ -22,20 +22,32 @@ HELP = "run the servosphere (free ant on a motion-compensating ball); --simulate
 SIMULATE_OPTIONS = {"speed": "--speed", "meander": "--meander", "pause_fraction": "--pauses", "slip": "--slip"}
 
 
+#: the options only --simulate uses
+SIMULATE_ONLY = ("--realtime", "--speed", "--meander", "--pauses", "--slip", "--seed")
+
+
+class _Given(argparse.Action):
+    """Store the value and note that the option was given (a default is not a choice the user made)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, True if self.nargs == 0 else values)
+        namespace.given = {*getattr(namespace, "given", ()), option_string}
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--simulate", action="store_true", help="the simulated rig (no hardware)")
     parser.add_argument("--config", default=None, help="rig config TOML whose [locomotion] is the servosphere's")
     parser.add_argument("--seconds", type=float, default=10.0, help="how long to run (s; default 10)")
-    parser.add_argument("--realtime", action="store_true", help="--simulate: pace on the wall clock")
-    parser.add_argument("--speed", type=float, default=0.05,
+    parser.add_argument("--realtime", action=_Given, nargs=0, default=False, help="--simulate: pace on the wall clock")
+    parser.add_argument("--speed", type=float, default=0.05, action=_Given,
                         help="--simulate: the ant's speed (m/s; default %(default)s)")
-    parser.add_argument("--meander", type=float, default=2.0,
+    parser.add_argument("--meander", type=float, default=2.0, action=_Given,
                         help="--simulate: s.d. of the ant's turn rate (rad/s, >= 0; default %(default)s)")
-    parser.add_argument("--pauses", type=float, default=0.0,
+    parser.add_argument("--pauses", type=float, default=0.0, action=_Given,
                         help="--simulate: share of 0.5 s spurts the ant stands still (0..1; default %(default)s)")
-    parser.add_argument("--slip", type=float, default=0.0,
+    parser.add_argument("--slip", type=float, default=0.0, action=_Given,
                         help="--simulate: wheel slip fraction (0..0.5; default %(default)s)")
-    parser.add_argument("--seed", type=int, default=0,
+    parser.add_argument("--seed", type=int, default=0, action=_Given,
                         help="--simulate: random seed of the ant's walk (an integer >= 0; default %(default)s)")
     parser.add_argument("--plot", default=None, metavar="FILE.png",
                         help="write the error distribution and paths to this PNG (folders made; an existing file is "
@@ -50,6 +62,14 @@ def run(args: argparse.Namespace) -> int:
     from antarium.locomotion import open_source
 
     require_seconds(args, "seconds")
+    if args.simulate and args.config is not None:
+        raise ValueError("--simulate and --config exclude each other; allowed: --simulate with --speed, --meander, "
+                         "--pauses, --slip, --seed, --realtime; or --config (a simulated rig there takes "
+                         "[locomotion] simulation = {speed, meander, pause_fraction, slip, seed})")
+    given = sorted(o for o in getattr(args, "given", ()) if o in SIMULATE_ONLY)
+    if given and not args.simulate:
+        raise ValueError(f"{given[0]} is a --simulate option; allowed without --simulate: --config, --seconds, "
+                         "--plot (with --config, a simulated rig takes [locomotion] simulation = {...})")
     if args.simulate:
         check_number("--seed", args.seed, 0, integer=True)
     if args.plot is not None:  # before the run, which a bad name would throw away
@@ -100,17 +120,23 @@ def run(args: argparse.Namespace) -> int:
     finally:
         src.stop()
     print(file=sys.stderr)
-    err = np.array([(r[2], r[3]) for r in rows], dtype=float)
+    err = np.array([(r[2], r[3]) for r in rows], dtype=float).reshape(-1, 2)
     dist = np.hypot(err[:, 0], err[:, 1])
     dist = dist[np.isfinite(dist)]
-    print(f"frames {len(rows)}, control loop {len(rows) / max(clock.now() - t0, 1e-9):.0f} Hz; error from the apex: "
-          f"median {np.median(dist):.2f} mm, p99 {np.percentile(dist, 99):.2f} mm; faults {src.status()['faults']}")
+    rate = f"frames {len(rows)}, control loop {len(rows) / max(clock.now() - t0, 1e-9):.0f} Hz"
+    if dist.size:
+        print(f"{rate}; error from the apex: median {np.median(dist):.2f} mm, p99 {np.percentile(dist, 99):.2f} mm; "
+              f"faults {src.status()['faults']}")
+    else:
+        print(f"{rate}; no ant tracked (no error statistics); faults {src.status()['faults']}")
     if src.rig is not None:
         walked = src.rig.walked
         gap = float(np.hypot(*(ball_path[-1] - src.rig.true_path)))
         print(f"walked {walked * 100:.1f} cm; path from the ball ends {gap * 1000:.1f} mm from the true one "
               f"({100 * gap / max(walked, 1e-9):.2f} % of the distance)")
-    if args.plot:
+    if args.plot and not dist.size:
+        print(f"no plot written to {args.plot}: no ant tracked")
+    elif args.plot:
         out = src.rig is not None
         from antarium.plots.servosphere import error_figure
 

@@ -1,5 +1,6 @@
 """The servosphere's controller: two PD controllers on the ant's offset from the apex give the ball's angular
-velocity (Goulard et al. 2021, Eq. 1, Fig. 2); Eq. 4 inverted gives the rotor speeds; the steppers' limits clip them.
+velocity (Goulard et al. 2021, Eq. 1, Fig. 2); the kinematics (omniwheel contact model) give the rotor speeds;
+the steppers' limits clip them.
 
 Units are ours: the error in mm, kp in (rad/s)/mm, kd in (rad/s)/(mm/s) (the paper's 1.25 and 0.005 act on pixels
 of its camera; on mm they give a loop gain kp * R_sphere = 75 /s, a 13 ms time constant, stable at 700 frames/s

@@ -1,12 +1,29 @@
-"""Servosphere kinematics: sphere angular velocity <-> rotor speeds (Goulard et al. 2021, Eqs. 2-6).
+"""Servosphere kinematics: sphere angular velocity <-> rotor speeds (Goulard et al. 2021, Eqs. 2-6, with the
+omniwheel contact model in place of Eq. 4).
 
 Rotor i turns its omniwheel about the unit axis a_i = (cos el_i cos az_i, cos el_i sin az_i, sin el_i) (dome
-frame, azimuth counter-clockwise from +x, elevation up from the horizontal). The paper's model (Eq. 4):
+frame, azimuth counter-clockwise from +x, elevation up from the horizontal); A (the paper's RMat, Eq. 3) has the
+a_i as columns (the paper's text swaps the names of azimuth and elevation and prints the second azimuth twice:
+0/120/240 deg is the rig). omega: the sphere's angular velocity (rad/s, dome axes); M: the wheels' (rad/s).
 
-    omega_sphere = RMat @ M * R_wheel / R_sphere,    M = RMat^-1 @ omega_sphere * R_sphere / R_wheel   (Eq. 6)
+Contact model. Wheel i (radius R_w, centre (R_s + R_w) n_i from the ball's centre, n_i a unit vector with
+a_i . n_i = 0) touches the ball (radius R_s) at R_s n_i. There its rim moves at M_i a_i x (-R_w n_i) =
+-R_w M_i t_i with t_i = a_i x n_i, the ball's surface at omega x (R_s n_i). The omniwheel's rollers let the ball
+slide freely along a_i, so only the component along t_i is imposed:
 
-with RMat's columns the a_i (Eq. 3; the paper's text swaps the names of azimuth and elevation and prints the
-second azimuth twice: 0/120/240 deg is the rig). omega in rad/s about the dome axes, M in rad/s of the wheels.
+    R_s (omega x n_i) . t_i = -R_w M_i,   and (omega x n_i) . (a_i x n_i) = omega . a_i  (as a_i . n_i = 0)
+
+i.e. R_s (omega . a_i) = -R_w M_i, whatever n_i is: each wheel sees only the ball's rotation about its own axis.
+Sign: the wheel and the ball counter-rotate like gears; a wheel speed here is counted positive in the sense that
+turns the ball positively about a_i (the paper's convention: one wheel alone turns the ball about +a_i), so
+
+    M = (R_s / R_w) A^T omega,        omega = (R_w / R_s) A^-T M        (A^-T = the transpose of Eq. 6's A^-1)
+
+The paper's Eq. 4, omega = A M R_w / R_s (the ball turning at the vector sum of the M_i a_i), is the same matrix
+only when A^-T = A, i.e. for mutually orthogonal rotor axes (elevation atan(1/sqrt 2) = 35.26 deg at azimuths
+120 deg apart). At the rig's 60 deg elevation a_i . a_j = 0.625: Eq. 4 would have the ball turn about a_1 when
+only wheel 1 turns, which asks the locked wheels 2 and 3 to slide along their drive directions; the contact model
+gives omega = (0.667, 0, 0.192) rad/s for M = (1, 0, 0) rad/s where Eq. 4 gives (0.25, 0, 0.433).
 """
 
 from __future__ import annotations
@@ -65,7 +82,7 @@ class RotorGeometry:
             value = getattr(self, name)
             if not 1e-4 <= value <= 1.0:
                 raise ValueError(f"rotor geometry {name} must be in [1e-4, 1] m, got {value!r}")
-        _ = self.to_motor  # refuses coplanar axes now, not in the loop
+        _ = self.to_sphere  # refuses coplanar axes now, not in the loop
 
     @cached_property
     def rmat(self) -> np.ndarray:
@@ -73,13 +90,14 @@ class RotorGeometry:
 
     @cached_property
     def to_sphere(self) -> np.ndarray:
-        """(3, 3): wheel speeds (rad/s) -> sphere angular velocity (rad/s), Eq. 4."""
-        return self.rmat * (self.wheel_radius / self.sphere_radius)
+        """(3, 3): wheel speeds (rad/s) -> sphere angular velocity (rad/s), the contact model (R_w/R_s) A^-T
+        (A^-1 by Eq. 6); equal to the paper's Eq. 4 for orthogonal rotor axes only."""
+        return inverse_eq6(self.rmat).T * (self.wheel_radius / self.sphere_radius)
 
     @cached_property
     def to_motor(self) -> np.ndarray:
-        """(3, 3): sphere angular velocity (rad/s) -> wheel speeds (rad/s), Eq. 4 inverted with Eq. 6."""
-        return inverse_eq6(self.rmat) * (self.sphere_radius / self.wheel_radius)
+        """(3, 3): sphere angular velocity (rad/s) -> wheel speeds (rad/s), the contact model (R_s/R_w) A^T."""
+        return self.rmat.T * (self.sphere_radius / self.wheel_radius)
 
     def motor_speeds(self, omega: np.ndarray) -> np.ndarray:
         """Wheel speeds (3,) rad/s that turn the sphere at `omega` (3,) rad/s."""

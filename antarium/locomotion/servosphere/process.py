@@ -61,6 +61,10 @@ class ServosphereProcess(BufferedSource):
                 kind, payload = self._conn.recv()
             except (EOFError, OSError):
                 break
+            if kind == "error":  # the child's loop stopped on a device error
+                with self._lock:
+                    self._status = {**self._status, "error": payload}
+                break
             if kind != "data":
                 break
             samples, rows, status = payload
@@ -128,14 +132,21 @@ def _child_main(conn, options: dict[str, Any], batch_s: float) -> None:
     last = time.monotonic()
     try:
         while not conn.poll():
-            src._run_step()
+            try:
+                src._run_step()
+            except Exception as exc:  # noqa: BLE001 - a device error (pyserial's are OSErrors): to the parent
+                src.fail(exc)
+                samples = [(s.t, s.seq, s.rotation, s.t_device, s.quality) for s in src.read()]
+                conn.send(("data", (samples, list(rows), src.status())))
+                conn.send(("error", src.error))
+                return
             now = time.monotonic()
             if now - last >= batch_s:
                 samples = [(s.t, s.seq, s.rotation, s.t_device, s.quality) for s in src.read()]
                 conn.send(("data", (samples, list(rows), src.status())))
                 rows.clear()
                 last = now
-    except (BrokenPipeError, EOFError, OSError):  # the parent went away
+    except (BrokenPipeError, EOFError, ConnectionResetError):  # the pipe's errors only: the parent went away
         pass
     finally:
         src.stop()

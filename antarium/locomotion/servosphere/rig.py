@@ -2,9 +2,11 @@
 serial line's latency, all on the injected clock (a `SimulatedClock` runs it faster than real time).
 
 Physics (sub-steps of `substep_s`): the firmware emulator ramps the steppers; the ball's angular velocity relaxes
-with time constant `ball_tau_s` toward what the wheels impose (Eq. 4) times (1 - `slip`); the ant walks on the
-ball's surface (speed, spurts of turning, or a waypoint path: `antarium.locomotion.scripted`'s walker) and is
-carried by it. Positions are on the ball's top in the dome frame (mm in the camera, metres in the walker).
+with time constant `ball_tau_s` toward what the wheels impose times (1 - `slip`): the omniwheel contact model
+(`kinematics`' docstring; each wheel drives the ball only along its own drive direction), solved here on its own,
+not the paper's Eq. 4; the ant walks on the ball's surface (speed, spurts of turning, or a waypoint path:
+`antarium.locomotion.scripted`'s walker) and is carried by it. Positions are on the ball's top in the dome frame
+(mm in the camera, metres in the walker).
 """
 
 from __future__ import annotations
@@ -117,6 +119,10 @@ class SimulatedRig:
         self.limits = limits or StepperLimits()
         self.frame_rate = float(frame_rate)
         self.slip, self.ball_tau_s, self.substep_s = float(slip), float(ball_tau_s), float(substep_s)
+        # the ball's contact physics, solved here rather than taken from the host's kinematics: omniwheel i
+        # imposes the ball's surface speed along its drive direction only, R_s (omega . a_i) = R_w M_i
+        g = self.geometry
+        self._wheels_to_ball = np.linalg.inv(g.rmat.T) * (g.wheel_radius / g.sphere_radius)
         self.t = self.clock.now()
         self.firmware = FirmwareEmulator(self.limits, t0=self.t)
         self.port = SimulatedPort(self, latency_s, drop_prob, garble_prob, seed + 1)
@@ -153,7 +159,7 @@ class SimulatedRig:
 
     def _physics(self, dt: float) -> None:
         wheel = self.firmware.rate * self.limits.rad_per_step
-        drive = (1.0 - self.slip) * self.geometry.sphere_omega(wheel)
+        drive = (1.0 - self.slip) * self._wheels_to_ball @ wheel
         previous = self.omega
         self.omega = drive + (previous - drive) * math.exp(-dt / self.ball_tau_s)
         mean_omega = 0.5 * (previous + self.omega)

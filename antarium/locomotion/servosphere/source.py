@@ -1,5 +1,6 @@
 """The `servosphere` locomotion source: the control loop (camera -> tracker -> PD -> rotors) and, as `BallSample`s,
-the ball rotation the firmware reports from its step counts (Eq. 4), so the dome follows the free ant's walk.
+the ball rotation the firmware reports from its step counts (the omniwheel contact model, `kinematics`), so the
+dome follows the free ant's walk.
 
 One `ServosphereLoop.step()` per camera frame. On a `SimulatedClock` the source runs the frames due in `read()`
 (faster than real time, reproducible); otherwise a thread of its own runs them, paced by the camera. Faults (bits
@@ -11,6 +12,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -24,18 +26,26 @@ from antarium.locomotion.servosphere.kinematics import RotorGeometry, StepperLim
 from antarium.locomotion.servosphere.tracker import Calibration, Tracker, calibrate
 
 #: host-side fault names; bit i of a log row's `faults` is FAULTS[i]
-FAULTS = ("no_ant", "two_blobs", "link_timeout", "link_garbled", "stall", "watchdog", "firmware_bad_message")
+FAULTS = ("no_ant", "two_blobs", "link_timeout", "link_garbled", "stall", "watchdog", "firmware_bad_message",
+          "firmware_reset", "ant_at_edge")
 _BIT = {name: 1 << i for i, name in enumerate(FAULTS)}
+#: a reply whose step counts moved more than max_rate * (its clock's advance + RESET_MARGIN_S) + 2 steps since the
+#: previous one, or whose clock went back, comes from a firmware that restarted (counters and clock from 0)
+RESET_MARGIN_S = 0.002
 _STALLS = p.FAULT_STALL_1 | p.FAULT_STALL_2 | p.FAULT_STALL_3
 #: the dome loop's tether -> the counter_rotate it needs (with counter_rotate the ball's yaw is the ant's turning)
 _COUNTER_ROTATE = {"free_yaw": False, "fixed": True}
+#: the ant's walk (which end is its head) is judged from its displacement over the last WALK_WINDOW_S, once at
+#: least WALK_MIN_S of it is known
+WALK_WINDOW_S, WALK_MIN_S = 0.08, 0.05
 
 
 class ServosphereLoop:
     """camera (`grab() -> (t, frame)`), link (`MotorLink`), tracker, controller; `step()` runs one frame and returns
     (new BallSamples, log row in `SERVOSPHERE_DTYPE` order). link_timeout_s: longest wait for a reply before the
     line counts as lost; stall_hold_s: how long the ball stays stopped after a stall before the loop retries.
-    The fault bits of replies to commands sent before the last ClearFaults are ignored: that cleared them."""
+    The fault bits of replies to commands sent before the last ClearFaults are ignored (that cleared them), until
+    the reply to the clear or to a later command arrives: from then on every reply's faults count."""
 
     def __init__(self, camera, link, tracker: Tracker, controller: Controller, link_timeout_s: float = 0.02,
                  stall_hold_s: float = 0.1) -> None:
@@ -47,11 +57,14 @@ class ServosphereLoop:
         self.fault_counts = dict.fromkeys(FAULTS, 0)
         self._t_prev: float | None = None
         self._xy_prev: tuple[float, float] | None = None
-        self._cam_mm_s: tuple[float, float] | None = None
+        self._walk: deque[tuple[float, float, float]] = deque()  # (t, walk x, walk y mm), the last WALK_WINDOW_S
+        self._walk_xy = (0.0, 0.0)  # the ant's walk over the ball's surface, integrated (mm, dome frame)
         self._last_reply_t: float | None = None
         self._link_errors = 0
         self._steps: np.ndarray | None = None
         self._t_dev: float | None = None
+        self._t_us: int | None = None  # the newest reply's raw firmware clock (us, wraps at 2^32)
+        self.max_rate = controller.config.limits.max_rate
         self._stall_since: float | None = None
         self._clear_seq: int | None = None  # seq of the last ClearFaults sent
         self._sample_seq = 0
@@ -62,8 +75,10 @@ class ServosphereLoop:
         dt = t - self._t_prev if self._t_prev is not None else 1.0 / self.camera.frame_rate
         self._t_prev = t
         det = self.tracker.update(image, self._walk_mm_s())
-        samples, fw_faults = self._replies(t)
+        samples, fw_faults, reset = self._replies(t)
         faults = _BIT[det.fault] if det.fault else 0
+        if reset:
+            faults |= _BIT["firmware_reset"]
         if self._last_reply_t is None:
             self._last_reply_t = t  # the first reply is due one round trip after the first command
         if t - self._last_reply_t > self.link_timeout_s:
@@ -73,9 +88,12 @@ class ServosphereLoop:
             self._link_errors = errors
             faults |= _BIT["link_garbled"]
         faults |= self._firmware_faults(fw_faults, t)
-        stop = faults & (_BIT["no_ant"] | _BIT["two_blobs"] | _BIT["link_timeout"] | _BIT["stall"])
+        stop = faults & (_BIT["no_ant"] | _BIT["two_blobs"] | _BIT["ant_at_edge"] | _BIT["link_timeout"]
+                         | _BIT["stall"])
         error = None if stop else (det.x_mm, det.y_mm)
-        rates = self.controller.update(error, det.heading, dt)
+        omega_before = self.controller.omega  # what was asked for over the frame that just ended
+        # the yaw is only counter-rotated on a heading the walk confirmed: a guess held at 0
+        rates = self.controller.update(error, det.heading if det.heading_confident else math.nan, dt)
         if self._stall_since is not None:
             self.link.stop()
             rates = np.zeros(3)  # what Stop sends: every target 0
@@ -90,37 +108,60 @@ class ServosphereLoop:
         steps = self._steps if self._steps is not None else np.zeros(3, np.int64)
         row = (t, self.frame, det.x_mm, det.y_mm, det.orientation, det.heading, *omega, *rates, *steps, faults)
         xy = None if det.fault else (det.x_mm, det.y_mm)
-        self._cam_mm_s = ((xy[0] - self._xy_prev[0]) / dt, (xy[1] - self._xy_prev[1]) / dt) \
-            if xy is not None and self._xy_prev is not None and dt > 0 else None
+        if xy is None:
+            self._walk.clear()  # a gap: the walk restarts with the next good frame
+        else:
+            if self._xy_prev is not None and self._walk:
+                # the ant's walk over the surface = its motion in the camera minus the apex surface's motion
+                # (omega_y R, -omega_x R) dt for the ball rotation asked for over this frame
+                r_mm = self.geometry.sphere_radius * 1000.0
+                self._walk_xy = (self._walk_xy[0] + xy[0] - self._xy_prev[0] - omega_before[1] * r_mm * dt,
+                                 self._walk_xy[1] + xy[1] - self._xy_prev[1] + omega_before[0] * r_mm * dt)
+            self._walk.append((t, *self._walk_xy))
+            while t - self._walk[0][0] > WALK_WINDOW_S:
+                self._walk.popleft()
         self._xy_prev = xy
         return samples, row
 
     def _walk_mm_s(self) -> tuple[float, float] | None:
-        """The ant's walk over the ball's surface (mm/s, dome frame): its velocity in the camera over the last
-        frame minus the apex surface's velocity (omega_y R, -omega_x R) for the ball rotation asked for."""
-        if self._cam_mm_s is None:
+        """The ant's mean walk over the ball's surface (mm/s, dome frame) over the last `WALK_WINDOW_S` (None
+        before `WALK_MIN_S` of it): one frame's velocity at 700 Hz is mostly tracking noise."""
+        if len(self._walk) < 2 or self._walk[-1][0] - self._walk[0][0] < WALK_MIN_S:
             return None
-        wx, wy, _ = self.controller.omega
-        r_mm = self.geometry.sphere_radius * 1000.0
-        return self._cam_mm_s[0] - wy * r_mm, self._cam_mm_s[1] + wx * r_mm
+        (t0, x0, y0), (t1, x1, y1) = self._walk[0], self._walk[-1]
+        return (x1 - x0) / (t1 - t0), (y1 - y0) / (t1 - t0)
 
-    def _replies(self, t: float) -> tuple[list[BallSample], int]:
+    def _replies(self, t: float) -> tuple[list[BallSample], int, bool]:
         samples = []
         faults = None
+        reset = False
         for status, steps in self.link.poll():
             self._last_reply_t = t
-            cleared = self._clear_seq is not None and (status.seq - self._clear_seq) % 65536 >= 32768
+            cleared = False
+            if self._clear_seq is not None:
+                if (status.seq - self._clear_seq) % 65536 >= 32768:
+                    cleared = True  # a reply to a command sent before the ClearFaults
+                else:
+                    self._clear_seq = None  # the clear's reply (or a later one) came: every later reply counts
             faults = 0 if cleared else status.faults
             t_dev = status.t_us * 1e-6
             if self._t_dev is not None:
-                t_dev = self._t_dev + ((status.t_us - round(self._t_dev * 1e6)) % 2 ** 32) * 1e-6
+                dt_us = (status.t_us - self._t_us) % 2 ** 32
+                jump = np.abs(steps - self._steps).max()
+                if dt_us >= 2 ** 31 or jump > self.max_rate * (dt_us * 1e-6 + RESET_MARGIN_S) + 2:
+                    # the firmware restarted (its clock went back, or the counts jumped further than the rotors
+                    # can turn): no rotation from this reply; the counts and the clock go on from it
+                    reset = True
+                    self._steps, self._t_us = steps, status.t_us
+                    continue
+                t_dev = self._t_dev + dt_us * 1e-6
             if self._steps is not None:
                 rotation = self.geometry.sphere_omega((steps - self._steps) * self.rad_per_step)
                 self._sample_seq += 1
                 samples.append(BallSample(t, self._sample_seq, tuple(float(v) for v in rotation), t_dev,
                                           0.0 if status.faults & _STALLS else 1.0))
-            self._steps, self._t_dev = steps, t_dev
-        return samples, faults if faults is not None else 0
+            self._steps, self._t_dev, self._t_us = steps, t_dev, status.t_us
+        return samples, faults if faults is not None else 0, reset
 
     def _firmware_faults(self, fw: int, t: float) -> int:
         """Fault bits from the firmware's; a stall stops the ball for `stall_hold_s` (the stall bit set on every
@@ -159,7 +200,7 @@ class ServosphereSource(BufferedSource):
     ant's turning)."""
 
     def __init__(self, camera: str = "simulated", link: str = "simulated", simulation: dict | None = None,
-                 port: str = "", baudrate: int = 1_000_000, camera_index: int | str = 0,
+                 port: str | None = None, baudrate: int | None = None, camera_index: int | str | None = None,
                  calibration: dict | None = None, kp: float = 1.25, kd: float = 0.005, counter_rotate: bool = False,
                  threshold: int = 120, area_mm2: tuple[float, float] = (5.0, 60.0), rotors: dict | None = None,
                  steppers: dict | None = None, clock: Clock | None = None, tether: str = "free_yaw",
@@ -181,6 +222,13 @@ class ServosphereSource(BufferedSource):
             if (camera, link) != ("simulated", "simulated"):
                 raise ValueError(f"servosphere camera {camera!r} with link {link!r}: the simulated rig needs both "
                                  "simulated; allowed: both 'simulated', or a real camera with a real link")
+            real_only = [name for name, value in (("calibration", calibration), ("port", port),
+                                                  ("baudrate", baudrate), ("camera_index", camera_index))
+                         if value is not None]
+            if real_only:
+                raise ValueError(f"servosphere option {real_only[0]} is for a real rig; the simulated rig calibrates "
+                                 "itself and has no port: allowed with it: simulation, kp, kd, counter_rotate, "
+                                 "threshold, area_mm2, rotors, steppers, tether")
             from antarium.locomotion.servosphere.rig import SimulatedRig
 
             self.rig = SimulatedRig(self.clock, geometry=geometry, limits=limits, **(simulation or {}))
@@ -188,8 +236,12 @@ class ServosphereSource(BufferedSource):
             motor = open_motor_link("simulated", rig=self.rig)
             cal = calibrate(self.rig.calibration_image())  # the calibration path a real rig takes
         else:
-            cam = open_camera(camera, index=camera_index, clock=self.clock)
-            motor = open_motor_link(link, url=port, baudrate=baudrate)
+            if simulation is not None:
+                raise ValueError("servosphere simulation options are for the simulated rig (camera and link "
+                                 f"'simulated'), not camera {camera!r} with link {link!r}; allowed with a real rig: "
+                                 "port, baudrate, camera_index, calibration")
+            cam = open_camera(camera, index=0 if camera_index is None else camera_index, clock=self.clock)
+            motor = open_motor_link(link, url=port or "", baudrate=1_000_000 if baudrate is None else baudrate)
             cal = _calibration(calibration)
         self.calibration = cal
         tracker = Tracker(cal, threshold=threshold, area_mm2=tuple(area_mm2))
@@ -203,6 +255,7 @@ class ServosphereSource(BufferedSource):
         self._catch_up = isinstance(self.clock, SimulatedClock)
         self._closed = False
         self.step_s = 0.0  # wall time spent in steps (s), for the status line and the benchmark
+        self.error: str | None = None  # what ended the loop (a device error), None while it runs
 
     def use_log(self, log) -> None:
         """The trial log that gets a `servosphere` row per camera frame (None: no log)."""
@@ -226,8 +279,21 @@ class ServosphereSource(BufferedSource):
         self._thread.start()
 
     def _run(self) -> None:
-        while not self._stop.is_set():
-            self._run_step()
+        try:
+            while not self._stop.is_set():
+                self._run_step()
+        except Exception as exc:  # noqa: BLE001 - a device error ends the loop; status() reports it
+            self.fail(exc)
+
+    def fail(self, exc: BaseException) -> None:
+        """The loop stopped on `exc` (a serial or camera error): record it for `status()` (connected false, the
+        error) and try to send Stop, so that the firmware ramps the rotors to 0 rather than waiting for its
+        watchdog."""
+        self.error = f"{type(exc).__name__}: {exc}"
+        try:
+            self.loop.link.stop()
+        except Exception:  # noqa: BLE001, S110 - the line is already broken; the watchdog stops the rotors
+            pass
 
     def stop(self) -> None:
         self._stop.set()
@@ -236,9 +302,12 @@ class ServosphereSource(BufferedSource):
             self._thread = None
         if not self._closed:  # the firmware ramps the rotors to 0; then the port and the camera are released
             self._closed = True
-            self.loop.link.stop()
-            self.loop.link.close()
-            self.loop.camera.close()
+            for release in (self.loop.link.stop, self.loop.link.close, self.loop.camera.close):
+                try:
+                    release()
+                except Exception:  # noqa: BLE001 - after a device error: release what can be released
+                    if self.error is None:
+                        raise
 
     def read(self) -> list[BallSample]:
         if self._catch_up:
@@ -249,7 +318,8 @@ class ServosphereSource(BufferedSource):
 
     def status(self) -> dict[str, Any]:
         loop = self.loop
-        return {"connected": True, "frames": loop.frame, "faults": dict(loop.fault_counts),
+        return {"connected": self.error is None, "error": self.error, "frames": loop.frame,
+                "faults": dict(loop.fault_counts),
                 "faults_now": [name for name, bit in _BIT.items() if loop.last_faults & bit],
                 "link": {"sent": loop.link.sent, "received": loop.link.received, "errors": loop.link.errors},
                 "tracker_faults": dict(loop.tracker.faults)}

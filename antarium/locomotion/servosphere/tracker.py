@@ -72,10 +72,17 @@ def calibrate(image: np.ndarray, disc_diameter_mm: float = 10.0, rotation_deg: f
     return Calibration((m["m10"] / area, m["m01"] / area), disc_diameter_mm / 2 / radius_px, rotation_deg)
 
 
+#: the binary image's closing (3x3), for a frame without one clean blob: mends the ant's outline across 1-2 px
+#: cracks before its contour is taken
+_CLOSE = cv2.getStructuringElement(cv2.MORPH_RECT, (3, 3))
+
+
 @dataclass(frozen=True, slots=True)
 class Detection:
     """One frame's result. x_mm, y_mm: ant from the apex (dome frame); orientation: body axis (rad, [-pi/2, pi/2]);
-    heading: resolved direction (rad, (-pi, pi]); area_mm2; fault: None, "no_ant" or "two_blobs"."""
+    heading: resolved direction (rad, (-pi, pi]); area_mm2; fault: None, "no_ant", "two_blobs" or "ant_at_edge"
+    (the only blob of the ant's size touches the frame's border: cut, not trusted);
+    heading_confident: the head end was confirmed by the ant's walk since it was last lost (else it is a guess)."""
 
     x_mm: float = math.nan
     y_mm: float = math.nan
@@ -83,11 +90,16 @@ class Detection:
     heading: float = math.nan
     area_mm2: float = math.nan
     fault: str | None = None
+    heading_confident: bool = False
 
 
 class Tracker:
     """Find the ant in uint8 (H, W) frames. threshold: grey level below which a pixel is ant (0..255);
-    area_mm2: (min, max) area of a blob that can be the ant; min_walk_mm_s: slowest walk that flips the heading."""
+    area_mm2: (min, max) area of a blob that can be the ant; min_walk_mm_s: slowest walk that decides the heading
+    (the walk given to `update` is meant to be a mean over ~50-100 ms, not one frame's: see `ServosphereLoop`).
+    Hysteresis: the heading flips only when the walk points more than 120 deg away from it, and is confirmed
+    (`heading_confident`) when it points within 60 deg; in between, and standing still, the previous choice stays.
+    A lost ant (no_ant, two_blobs) makes the heading unconfirmed until the walk confirms it again."""
 
     def __init__(self, calibration: Calibration, threshold: int = 120, area_mm2: tuple[float, float] = (5.0, 60.0),
                  min_walk_mm_s: float = 5.0) -> None:
@@ -102,21 +114,18 @@ class Tracker:
         self.min_walk_mm_s = float(min_walk_mm_s)
         self.last_px: tuple[float, float] | None = None
         self.heading: float | None = None
+        self.heading_confident = False
         self.faults: dict[str, int] = {}
 
     def update(self, frame: np.ndarray, walk_mm_s: tuple[float, float] | None = None) -> Detection:
         """Track one frame. walk_mm_s: the ant's walking velocity over the ball's surface (mm/s, dome frame) if
         known (the ball's motion added back), used to tell its head from its tail."""
         _, binary = cv2.threshold(frame, self.threshold, 255, cv2.THRESH_BINARY_INV)
-        contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-        lo, hi = self._area_px
-        blobs = []
-        for c in contours:  # any contour has moments; a degenerate one (point, line) has area 0
-            m = cv2.moments(c)
-            if lo <= m["m00"] <= hi:
-                blobs.append(m)
+        blobs, at_edge = self._candidates(binary)
+        if len(blobs) != 1:  # not one clean blob: mend 1-2 px cracks (noise, a thin glint) and look again
+            blobs, at_edge = self._candidates(cv2.morphologyEx(binary, cv2.MORPH_CLOSE, _CLOSE))
         if not blobs:
-            return self._fault("no_ant")
+            return self._fault("ant_at_edge" if at_edge else "no_ant")
         fault = None
         if len(blobs) > 1:  # the paper's choice (nearest the last position) is reported, never trusted
             fault = self._fault("two_blobs").fault
@@ -132,19 +141,42 @@ class Tracker:
         if fault is not None:
             return Detection(x, y, orientation, math.nan, area_mm2, fault)
         self.last_px = (px, py)
-        return Detection(x, y, orientation, self._resolve(orientation, walk_mm_s), area_mm2)
+        heading = self._resolve(orientation, walk_mm_s)
+        return Detection(x, y, orientation, heading, area_mm2, heading_confident=self.heading_confident)
+
+    def _candidates(self, binary: np.ndarray) -> tuple[list[dict], bool]:
+        """Moments of the blobs of the ant's size clear of the frame's border, and whether one touched it."""
+        contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        lo, hi = self._area_px
+        h, w = binary.shape
+        blobs = []
+        at_edge = False
+        for c in contours:  # any contour has moments; a degenerate one (point, line) has area 0
+            m = cv2.moments(c)
+            if lo <= m["m00"] <= hi:
+                x, y, bw, bh = cv2.boundingRect(c)
+                if x == 0 or y == 0 or x + bw == w or y + bh == h:
+                    at_edge = True  # cut by the frame (or a dark rim): its centroid and axis are not the ant's
+                    continue
+                blobs.append(m)
+        return blobs, at_edge
 
     def _fault(self, name: str) -> Detection:
         self.faults[name] = self.faults.get(name, 0) + 1
+        self.heading_confident = False
         return Detection(fault=name)
 
     def _resolve(self, orientation: float, walk_mm_s) -> float:
-        """Heading from the body axis: the end nearer the previous heading, flipped if the ant walks backwards."""
+        """Heading from the body axis: the end nearer the previous heading, flipped if the ant clearly walks
+        backwards (more than 120 deg off), confirmed if it clearly walks forwards (within 60 deg)."""
         heading = orientation
         if self.heading is not None and abs(math.remainder(heading - self.heading, math.tau)) > math.pi / 2:
             heading += math.pi
         if walk_mm_s is not None and math.hypot(*walk_mm_s) >= self.min_walk_mm_s:
-            if math.cos(heading - math.atan2(walk_mm_s[1], walk_mm_s[0])) < 0:
+            c = math.cos(heading - math.atan2(walk_mm_s[1], walk_mm_s[0]))
+            if c < -0.5:
                 heading += math.pi
+            if abs(c) > 0.5:
+                self.heading_confident = True
         self.heading = math.remainder(heading, math.tau)
         return self.heading
