@@ -102,10 +102,11 @@ def _loop(seconds: float) -> dict:
     n = len(rows)
     host_s = src.step_s - sim.seconds
     err = np.hypot([r[2] for r in rows[70:]], [r[3] for r in rows[70:]])
+    err = err[np.isfinite(err)]  # frames with the ant tracked, after the first 70 (the loop settling)
     rig = src.rig
     return {"steps": n, "simulated_s": seconds, "whole_step_hz": n / src.step_s, "host_step_hz": n / host_s,
-            "host_us_per_step": host_s / n * 1e6, "error_median_mm": float(np.nanmedian(err)),
-            "error_p99_mm": float(np.nanpercentile(err, 99)), "walked_m": rig.walked,
+            "host_us_per_step": host_s / n * 1e6, "error_median_mm": float(np.median(err)) if err.size else math.nan,
+            "error_p99_mm": float(np.percentile(err, 99)) if err.size else math.nan, "walked_m": rig.walked,
             "path_error_fraction": float(np.hypot(*(path - rig.true_path)) / rig.walked),
             "faulty_frames": int(sum(1 for r in rows if r[-1]))}
 
