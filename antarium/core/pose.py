@@ -11,7 +11,8 @@ class Pose:
     """Eye position (x, y, z) in metres in the world frame (+z up) and heading in radians.
 
     Heading is the azimuth of the ant's forward direction, 0 along +x, counter-clockwise seen from
-    above. Non-finite values are rejected with a ValueError naming the field.
+    above, kept in [-pi, pi] (a heading given outside is wrapped: 450 deg is 90 deg). Non-finite values are
+    rejected with a ValueError naming the field.
     """
 
     x: float = 0.0
@@ -24,6 +25,8 @@ class Pose:
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ValueError(f"pose {name} must be a finite number (metres or radians), got {value!r}")
+        if not -math.pi <= self.heading <= math.pi:
+            object.__setattr__(self, "heading", math.remainder(self.heading, math.tau))
 
     @classmethod
     def from_deg(cls, x: float, y: float, z: float = 0.01, heading_deg: float = 0.0) -> Pose:
