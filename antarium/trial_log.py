@@ -533,14 +533,35 @@ def log_path(folder: str | Path, rig: str, name: str, when: _dt.datetime | None 
     return path
 
 
+#: what HDF5 says of a file whose writer has not closed it (a running, crashed or killed server): read it as SWMR
+_OPEN_FOR_WRITE = "already open for write"
+
+
 def open_log(path: str | Path):
-    """Open a trial log read-only, also one left open by a crashed or killed server (SWMR read)."""
+    """Open a trial log read-only, also one left open by a running, crashed or killed server (SWMR read). A file
+    that is not an antarium trial log, or is cut short (a partial copy), raises LogError naming it (an SWMR read
+    skips HDF5's length check, so it is used only for a file whose writer has not closed it)."""
     import h5py
 
     try:
-        return h5py.File(path, "r")
-    except OSError:
-        return h5py.File(path, "r", libver="latest", swmr=True)
+        f = h5py.File(path, "r")
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        if _OPEN_FOR_WRITE not in str(exc):
+            raise LogError(f"{str(path)!r} cannot be read as a trial log: {_hdf5_reason(exc)}") from None
+        f = h5py.File(path, "r", libver="latest", swmr=True)
+    if f.attrs.get("format") != "antarium-trial-log":
+        f.close()
+        raise LogError(f"{str(path)!r} is an HDF5 file but not an antarium trial log (no format attribute "
+                       "'antarium-trial-log')")
+    return f
+
+
+def _hdf5_reason(exc: OSError) -> str:
+    """HDF5's error in a few words: "truncated file: eof = ...", "file signature not found", "No such file"."""
+    text = str(exc)
+    return text.split("(", 1)[1].rsplit(")", 1)[0] if "(" in text else text
 
 
 def read_table(path: str | Path, table: str) -> dict[str, np.ndarray]:
@@ -549,6 +570,8 @@ def read_table(path: str | Path, table: str) -> dict[str, np.ndarray]:
         if table not in f:
             raise ValueError(f"{str(path)!r} has no table {table!r}; tables: {', '.join(sorted(f))}")
         data = f[table][:]
+    if data.dtype.names is None:
+        raise LogError(f"{str(path)!r}: table {table!r} is not a table of named columns (not written by antarium)")
     columns = {}
     for name in data.dtype.names:
         col = data[name]

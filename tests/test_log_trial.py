@@ -343,3 +343,57 @@ def test_status_never_waits_for_a_batch_being_handed_over(tmp_path):
             asking.start()
             asking.join(10.0)
         assert answers == [before]  # answered at once, with what the writer had reported
+
+
+def test_a_log_being_written_reads_and_a_cut_or_foreign_file_is_refused_naming_it(tmp_path):
+    """The SWMR fallback is for a file whose writer has it open (read while a trial runs); a log cut short (a
+    partial copy) read back with zero-filled rows through it, and a foreign HDF5 file gave a TypeError."""
+    import h5py
+
+    path = tmp_path / "live.h5"
+    log = TrialLog(path, {}, "live", {}, flush_s=0.05)
+    try:
+        for frame in range(2000):
+            log.add_frame(frame_row(frame))
+        log.flush(wait=True)
+        assert np.array_equal(read_table(path, "frames")["frame"], np.arange(2000))  # open for write: SWMR read
+    finally:
+        log.close()
+    cut = tmp_path / "cut.h5"
+    cut.write_bytes(path.read_bytes()[:path.stat().st_size // 2])
+    with pytest.raises(LogError, match=r"cut.h5' cannot be read as a trial log: truncated file"):
+        read_table(cut, "frames")
+    foreign = tmp_path / "foreign.h5"
+    with h5py.File(foreign, "w") as f:
+        f["frames"] = np.arange(5)
+    with pytest.raises(LogError, match=r"foreign.h5' is an HDF5 file but not an antarium trial log"):
+        read_table(foreign, "frames")
+    text = tmp_path / "notes.h5"
+    text.write_text("not hdf5")
+    with pytest.raises(LogError, match=r"notes.h5' cannot be read as a trial log: file signature not found"):
+        open_log(text)
+
+
+def test_a_log_its_writer_holds_open_is_read_through_swmr(tmp_path):
+    """HDF5 refuses a plain read of a file open for SWMR writing ('already open for write'): that case, and
+    only that one, is read as SWMR."""
+    path = tmp_path / "held.h5"
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent("""
+        import sys, time, h5py, numpy as np
+        f = h5py.File(sys.argv[1], "w", libver="latest")
+        f.attrs["format"] = "antarium-trial-log"
+        f.create_dataset("frames", data=np.array([(7,), (8,), (9,)], [("frame", "<i8")]), maxshape=(None,))
+        f.swmr_mode = True
+        print("ready", flush=True)
+        time.sleep(60)
+    """), str(path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "ready"
+        with pytest.raises(OSError, match="already open for write"):
+            import h5py
+
+            h5py.File(path, "r")
+        assert list(read_table(path, "frames")["frame"]) == [7, 8, 9]
+    finally:
+        holder.kill()
+        holder.wait(10)

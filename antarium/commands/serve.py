@@ -73,12 +73,12 @@ def _remove_empty_logs(server, frames: int) -> None:
     """No frame ran (stopped during start-up): the trial logs opened for it hold nothing; remove them."""
     if frames:
         return
-    from antarium.trial_log import read_table
+    from antarium.trial_log import LogError, read_table
 
     for path in list(server.trial_paths):
         try:
             table = read_table(path, "frames")
-        except (OSError, ValueError, KeyError):
+        except (OSError, ValueError, KeyError, LogError):
             continue
         empty = not table or len(next(iter(table.values()))) == 0
         if empty:

@@ -40,13 +40,17 @@ def trial_start(path: str | Path) -> float | None:
 
 def load_samples(path: str | Path) -> np.ndarray:
     """The recorded samples as a structured array with fields t, seq, rx, ry, rz, t_device, quality."""
-    from antarium.trial_log import SAMPLE_DTYPE, open_log
+    from antarium.trial_log import SAMPLE_DTYPE, LogError, open_log
 
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"replay file {str(path)!r} does not exist")
     if path.suffix.lower() in (".h5", ".hdf5"):
-        with open_log(path) as f:
+        try:
+            f = open_log(path)
+        except LogError as exc:  # cut short, or not a trial log: a bad replay file like any other
+            raise ValueError(f"replay file: {exc}") from None
+        with f:
             if "locomotion" not in f:
                 raise ValueError(f"{str(path)!r} has no 'locomotion' table; is it an antarium trial log?")
             data = f["locomotion"][:].astype(SAMPLE_DTYPE)
