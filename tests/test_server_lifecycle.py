@@ -259,3 +259,34 @@ def test_an_emulator_killed_and_restarted_is_printed_with_its_exit_status_and_re
         server.stop()
         for pid in pids:
             _kill(pid)
+
+
+def test_a_trial_stop_while_the_server_stops_keeps_the_last_frame(tmp_path):
+    """A client's trial_stop arriving while the server stops (Ctrl-C, stop()) detached the log from its own thread
+    while the loop was still in its last frame: that frame and its samples were sent but never logged, uncounted."""
+    import threading
+    import time
+
+    config = resolve({"rig": {"name": "tlast"}, "bus": {"enabled": False},
+                      "log": {"dir": str(tmp_path), "flush_s": 0.05}, "loop": {"rate_hz": 100.0},
+                      "locomotion": {"source": "scripted", "rate_hz": 1000.0}})
+    server = Server(config, renderer_factory=None, link=False, echo=lambda *a: None).start_thread()
+    path = server.trial_start("last", {})["path"]
+    assert wait_for(lambda: server.loop.frame > 10, 10.0)
+    read, in_frame = server.source.read, threading.Event()
+
+    def slow_read():  # a frame that takes 50 ms: the stop and the trial_stop land inside it
+        in_frame.set()
+        time.sleep(0.05)
+        return read()
+
+    server.source.read = slow_read
+    assert in_frame.wait(5.0)
+    stopper = threading.Thread(target=server.stop)
+    stopper.start()
+    time.sleep(0.005)
+    reply = server.trial_stop()
+    stopper.join(30.0)
+    frames = read_table(path, "frames")["frame"]
+    assert reply["path"] == path and reply["rows_lost"] == 0 and reply["error"] is None
+    assert frames[-1] == server.loop.frame - 1  # the last frame the loop ran is in the log

@@ -16,6 +16,7 @@ import json
 import math
 import sys
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -425,6 +426,8 @@ class Server:
         self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path))
 
     def trial_stop(self) -> dict[str, Any]:
+        if self._stopping_elsewhere():  # detaching the log from here could lose the loop's last frame
+            return self._trial_closed_by_shutdown()
         with self._trial_lock:
             log = self.trial_log
             if log is None:
@@ -438,6 +441,25 @@ class Server:
             log.close()
             self.trial_log, self.trial_name = None, None
             return {"path": str(log.path), **log.status()}
+
+    def _stopping_elsewhere(self) -> bool:
+        """The server is stopping while its frame loop's thread, not this one, may still be in its last frame."""
+        t = self._loop_thread
+        return self._stopping.is_set() and t is not None and t is not threading.current_thread() and t.is_alive()
+
+    def _trial_closed_by_shutdown(self) -> dict[str, Any]:
+        """trial_stop while the server stops: its shutdown closes the trial after the loop's last frame; wait for
+        that (at most COMMAND_TIMEOUT_S) and reply as trial_stop does."""
+        log = self.trial_log
+        if log is None:
+            raise RuntimeError("trial_stop: no trial is running")
+        deadline = time.monotonic() + COMMAND_TIMEOUT_S
+        while self.trial_log is log and self._loop_thread.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.005)
+        if self.trial_log is log:
+            raise RuntimeError(f"trial_stop: the server is stopping and has not closed trial {self.trial_name!r} "
+                               f"within {COMMAND_TIMEOUT_S:g} s; it closes it when the last frame is done")
+        return {"path": str(log.path), **log.status()}
 
     def _detach_log(self) -> None:
         self.loop.event("trial_stopped", name=self.trial_name, path=str(self.trial_log.path))
