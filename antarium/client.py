@@ -12,7 +12,9 @@
         print(rig.pose())
 
 Every method waits for the server's reply; an error reply raises `RigError` carrying the server's message
-(the rig's state is then unchanged). Angles are in degrees here (the script's edge), metres for positions.
+(the rig's state is then unchanged). No reply in time raises `RigTimeout` (a RigError): the command may have run
+all the same (a slow scene load), so read `status()` before sending it again. Angles are in degrees here (the
+script's edge), metres for positions.
 """
 
 from __future__ import annotations
@@ -37,6 +39,10 @@ WAIT_MAX_S = 86_400.0
 
 class RigError(RuntimeError):
     """The server refused a command (its message says why), or no server answered."""
+
+
+class RigTimeout(RigError):
+    """No reply to a command within the Rig's timeout: the server may still have run it (check `status()`)."""
 
 
 def _plain(value: Any) -> Any:
@@ -81,7 +87,10 @@ class Rig:
                  log_dir: str | Path | None = None) -> None:
         from antarium.config import RigConfig, load_config, resolve
 
-        self.name = bus.check_rig_name(name)
+        try:
+            self.name = bus.check_rig_name(name)
+        except ValueError as exc:
+            raise RigError(str(exc)) from None
         if isinstance(config, RigConfig):
             cfg = config
         else:
@@ -107,6 +116,8 @@ class Rig:
 
     def connect(self) -> Rig:
         """Open the session and wait until the server's liveliness token is seen."""
+        if self._subs:  # connected already
+            return self
         if self._session is None:
             self._session = bus.open_session(self.bus_section, role="client")
         self._subs.append(self._session.declare_subscriber(bus.pose_key(self.name), self._on_pose_sample))
@@ -124,8 +135,10 @@ class Rig:
 
         if sample.kind == zenoh.SampleKind.PUT:
             self._alive.set()
-        else:
+        else:  # the server is gone: its last pose is no longer the rig's
             self._alive.clear()
+            with self._latest_lock:
+                self._latest = None
 
     def _on_pose_sample(self, sample) -> None:
         try:
@@ -136,6 +149,9 @@ class Rig:
             self._latest = update
 
     def close(self) -> None:
+        self._alive.clear()  # a later connect() waits for the server again
+        with self._latest_lock:
+            self._latest = None
         for sub in self._subs:
             with contextlib.suppress(Exception):
                 sub.undeclare()
@@ -170,9 +186,12 @@ class Rig:
             if reply.ok is not None:
                 body = json.loads(reply.ok.payload.to_bytes())
                 return body.get("result")
-            raise RigError(self._error_message(command, reply.err.payload.to_bytes()))
-        raise RigError(f"{command}: no reply from rig {self.name!r} within {self.timeout_s} s "
-                       "(server gone, or the command was refused by the bus's access control)")
+            raw = reply.err.payload.to_bytes()
+            error = RigTimeout if raw.decode(errors="replace").strip().lower() == "timeout" else RigError
+            raise error(self._error_message(command, raw))
+        raise RigTimeout(f"{command}: no reply from rig {self.name!r} within {self.timeout_s} s "
+                         "(server gone, or the command was refused by the bus's access control); it may have run: "
+                         "check status() before sending it again")
 
     def _error_message(self, command: str, raw: bytes) -> str:
         """The message of an error reply: the server's own (JSON {"error": ...}), or the bus's (zenoh's "Timeout"
@@ -186,7 +205,8 @@ class Rig:
         text = raw.decode(errors="replace").strip()
         if text.lower() == "timeout":
             return (f"no reply from rig {self.name!r} to {command} within {self.timeout_s:g} s (the server is busy "
-                    "or stuck; raise --timeout, or `timeout_s` of Rig, if it needs longer)")
+                    "or stuck; it may still have run it: check status() before sending it again; raise --timeout, "
+                    "or `timeout_s` of Rig, if it needs longer)")
         return f"{command}: the bus answered with an error instead of rig {self.name!r}: {text or 'no message'}"
 
     # -- commands --------------------------------------------------------------------------------------
@@ -267,7 +287,10 @@ class Rig:
 
     # -- streams ---------------------------------------------------------------------------------------
     def pose(self, timeout_s: float | None = None) -> Pose:
-        """The newest pose from the server's stream (waits for the first one up to `timeout_s`)."""
+        """The newest pose from the server's stream (waits for the first one up to `timeout_s`); RigError when the
+        rig is not connected."""
+        if self._session is None:
+            raise RigError("the rig is not connected; use `with Rig(...) as rig:` or `rig.connect()`")
         deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
         while True:
             with self._latest_lock:

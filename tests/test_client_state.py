@@ -1,0 +1,72 @@
+"""antarium.Rig's own state: a closed or orphaned Rig does not pretend to be connected, a timeout says the command
+may have run, a bad rig name is a RigError."""
+
+import pytest
+from conftest import wait_for
+
+import antarium
+from antarium import bus
+from antarium.client import RigError, RigTimeout
+from antarium.config import resolve
+from antarium.server import Server
+
+
+def _served(tmp_path, rig):
+    config = resolve({"rig": {"name": rig}, "bus": {"listen": [bus.free_tcp_endpoint()]},
+                      "log": {"dir": str(tmp_path)}, "locomotion": {"source": "scripted", "speed": 0.02}})
+    return config, Server(config, renderer_factory=None, link=False).start_thread()
+
+
+def test_a_closed_rig_has_no_pose_and_does_not_reconnect_to_a_stopped_server(tmp_path):
+    config, server = _served(tmp_path, "tclose")
+    rig = antarium.Rig("tclose", config=config, timeout_s=3.0).connect()
+    try:
+        assert wait_for(lambda: rig.latest() is not None, 5.0)
+        rig.close()
+        assert rig.latest() is None
+        with pytest.raises(RigError, match="not connected"):
+            rig.pose()
+    finally:
+        server.stop()
+    rig.timeout_s = 1.0
+    with pytest.raises(RigError, match="no antarium server for rig 'tclose' answered"):
+        rig.connect()  # it returned at once: the old liveliness was kept
+
+
+def test_a_rig_whose_server_stopped_forgets_its_last_pose(tmp_path):
+    config, server = _served(tmp_path, "tgone")
+    rig = antarium.Rig("tgone", config=config, timeout_s=3.0).connect()
+    try:
+        assert wait_for(lambda: rig.latest() is not None, 5.0)
+        server.stop()
+        assert wait_for(lambda: rig.latest() is None, 10.0)
+    finally:
+        rig.close()
+
+
+def test_a_reply_that_comes_too_late_is_a_timeout_that_may_have_run(tmp_path):
+    """The command ran (the pose moved) though the Rig gave up waiting: RigTimeout says so, unlike a refusal."""
+    import time
+
+    config, server = _served(tmp_path, "tlate")
+    run = server.command
+
+    def slow(name, params=None):  # a server busy for 0.5 s (a scene load) before it runs the command
+        time.sleep(0.5)
+        return run(name, params)
+
+    server.command = slow
+    rig = antarium.Rig("tlate", config=config, timeout_s=0.1).connect()
+    try:
+        with pytest.raises(RigTimeout, match="may still have run it: check status"):
+            rig.set_pose(7.0, 7.0)
+        rig.timeout_s = 5.0
+        assert wait_for(lambda: abs(rig.status()["pose"]["x"] - 7.0) < 0.1, 5.0)  # moved there (and walks on)
+    finally:
+        rig.close()
+        server.stop()
+
+
+def test_a_bad_rig_name_is_a_rig_error():
+    with pytest.raises(RigError, match="rig name"):
+        antarium.Rig("a/b")
