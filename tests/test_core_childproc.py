@@ -1,14 +1,15 @@
-"""Child processes end with their parent: the dome emulator is never left running (holding its UDP port and its
-real-time priority) after the process that started it was killed."""
+"""Child processes end with their parent: the dome emulator (holding its UDP port and its real-time priority) and
+the monitor (serving its page) are never left running after the process that started them was killed."""
 
 import os
 import signal
 import subprocess
 import sys
 
+import pytest
 from conftest import process_gone, wait_for
 
-PARENT = """
+EMULATOR_PARENT = """
 import time
 from antarium.server.emulator_process import EmulatorProcess
 emulator = EmulatorProcess()
@@ -16,24 +17,38 @@ emulator.start()
 print(emulator.pid, flush=True)
 time.sleep(600)
 """
+MONITOR_PARENT = """
+import time
+from antarium import bus
+from antarium.config import resolve
+from antarium.monitor.process import MonitorProcess
+config = resolve({"rig": {"name": "torphan"}, "bus": {"listen": [bus.free_tcp_endpoint()]},
+                  "monitor": {"enabled": True, "port": 0}})
+monitor = MonitorProcess(config)
+while "http://" not in monitor.output():  # serving its page
+    time.sleep(0.05)
+print(monitor.child.proc.pid, flush=True)
+time.sleep(600)
+"""
 
 
-def test_the_emulator_ends_when_its_parent_is_killed():
-    parent = subprocess.Popen([sys.executable, "-c", PARENT], stdout=subprocess.PIPE, text=True)
-    emulator = None
+@pytest.mark.parametrize("script", [EMULATOR_PARENT, MONITOR_PARENT], ids=["emulator", "monitor"])
+def test_a_child_ends_when_its_parent_is_killed(script):
+    parent = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    child = None
     try:
-        emulator = int(parent.stdout.readline())
-        assert not process_gone(emulator)
+        child = int(parent.stdout.readline())
+        assert not process_gone(child)
         parent.kill()  # SIGKILL: the parent cleans nothing up
         parent.wait(30)
-        assert wait_for(lambda: process_gone(emulator), 30.0, 0.05), "the emulator outlived its parent"
+        assert wait_for(lambda: process_gone(child), 30.0, 0.05), "the child outlived its parent"
     finally:
         if parent.poll() is None:
             parent.kill()
             parent.wait()
         parent.stdout.close()
-        if emulator is not None and not process_gone(emulator):
-            os.kill(emulator, signal.SIGKILL)
+        if child is not None and not process_gone(child):
+            os.kill(child, signal.SIGKILL)
 
 
 def test_a_child_ends_when_its_parent_closes_it():

@@ -35,7 +35,8 @@ class MonitorProcess:
             f.write(tomli_w.dumps(config.to_toml_dict()))
         self._path = f.name
         self._closed = threading.Event()
-        self.child = ChildProcess("antarium", ["monitor", "--config", self._path, "--rig", config.rig.name])
+        self.child = ChildProcess("antarium", ["monitor", "--config", self._path, "--rig", config.rig.name],
+                                  end_with_parent=True)  # never left serving the page after a killed server
 
     def output(self) -> str:
         """The end of what the monitor printed (its address, or why it stopped)."""
