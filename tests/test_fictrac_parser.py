@@ -64,8 +64,23 @@ def test_round_trip(frame, seq, values):
     assert parse_line(format_line(f, prefix=False)) == f
 
 
+# the same frame as FicTrac 2.0 wrote it to its log and TCP socket: 23 values, no prefix (its doc/data_header.txt)
+GOLDEN_V20 = ("42, 0.001, 0.02, -0.003, 0.0105, 0.0011, 0.021, -0.0031, 0.5, 0.6, 0.7, 1.5, 1.6, 1.7, "
+              "3.25, -1.5, 0.25, 0.125, 0.021, 4.5, -0.75, 1600000000123.5, 41\n")
+
+
+def test_a_fictrac_2_0_line_reads_with_fields_24_and_25_nan():
+    f = parse_line(GOLDEN_V20)
+    assert f[:23] == parse_line(GOLDEN)[:23]
+    assert math.isnan(f.dt_ms) and math.isnan(f.time_of_day_ms)
+    assert to_sample(f, t=1.0) == to_sample(parse_line(GOLDEN), t=1.0)
+    assert format_line(f, prefix=False) == GOLDEN_V20.strip()   # written back as 2.0 wrote it
+    assert parse_line(format_line(f))[:23] == f[:23]
+
+
 @pytest.mark.parametrize("line, match", [
-    ("", "25 comma-separated values, got 1"),
+    ("", "25 comma-separated values \\(23 from FicTrac 2.0\\), got 1"),
+    (GOLDEN_V20.strip() + ", 10.0", "got 24"),
     ("FT, 1, 2, 3", "got 3"),
     (GOLDEN.replace("0.5,", "abc,"), "field 9 \\(rot_cam_x\\) is not a number: 'abc'"),
     (GOLDEN.replace("0.5,", "nan,"), "field 9 .* not finite"),

@@ -9,7 +9,7 @@ from conftest import wait_for
 
 from antarium.core.clock import SimulatedClock
 from antarium.locomotion import open_source
-from antarium.locomotion.fictrac.protocol import FicTracFrame, format_line
+from antarium.locomotion.fictrac.protocol import FicTracFrame, format_line, to_sample
 
 
 def frame(i: int, t_ms: float = 0.0, dy: float = 0.01) -> FicTracFrame:
@@ -82,6 +82,31 @@ def test_tcp_client_reassembles_lines_and_reconnects():
     server.close()
     assert [s.seq for s in got] == [1, 2, 3, 4, 5] * 2
     assert status["malformed"] == 0 and status["resets"] == 1
+
+
+def test_tcp_client_reads_fictrac_2_0_lines():
+    """FicTrac 2.0's socket recorder (TCP) writes its 23-value log lines, no prefix: all read, none malformed."""
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+
+    def fictrac() -> None:
+        conn, _ = server.accept()
+        with conn:
+            conn.sendall("".join(", ".join(format_line(frame(i), prefix=False).split(", ")[:23]) + "\n"
+                                 for i in range(1, 6)).encode())
+
+    with open_source("fictrac", transport="tcp", port=server.getsockname()[1], retry_s=0.05) as src:
+        t = threading.Thread(target=fictrac)
+        t.start()
+        got = []
+        assert wait_for(lambda: len(got.extend(src.read()) or got) >= 5)
+        t.join()
+        status = src.status()
+    server.close()
+    assert [s.seq for s in got] == [1, 2, 3, 4, 5]
+    assert [s.rotation for s in got] == [to_sample(frame(i), 0.0).rotation for i in range(1, 6)]
+    assert status["malformed"] == 0
 
 
 def test_replay_is_paced_by_the_log_timestamps(tmp_path):

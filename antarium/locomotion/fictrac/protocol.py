@@ -1,8 +1,10 @@
 """FicTrac (v2.1) output lines: parser and conversion to our ball frame. Field table: `docs/fictrac.md`.
 
 A live line is "FT, " followed by 25 values joined by ", "; a `.dat` log line holds the same 25 values
-without the prefix. FicTrac's lab frame is +X forward, +Y right, +Z down; ours (the dome's) is +x forward,
-+y left, +z up: a half turn about x, so a lab-frame rotation vector (X, Y, Z) is (X, -Y, -Z) here.
+without the prefix. FicTrac 2.0 wrote the first 23 of them (its `doc/data_header.txt`; no delta timestamp and
+no time of day), to its log and its TCP socket alike: such a line reads with fields 24-25 NaN.
+FicTrac's lab frame is +X forward, +Y right, +Z down; ours (the dome's) is +x forward, +y left, +z up: a half turn
+about x, so a lab-frame rotation vector (X, Y, Z) is (X, -Y, -Z) here.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from antarium.locomotion import BallSample
 
 PREFIX = "FT"
 N_FIELDS = 25
+N_FIELDS_V20 = 23  # FicTrac 2.0's lines: fields 1..23
 
 
 class FicTracParseError(ValueError):
@@ -63,8 +66,9 @@ def parse_line(line: str | bytes) -> FicTracFrame:
     parts = line.strip().split(",")
     if parts and parts[0].strip() == PREFIX:
         parts = parts[1:]
-    if len(parts) != N_FIELDS:
-        raise FicTracParseError(f"FicTrac line must hold {N_FIELDS} comma-separated values, got {len(parts)}")
+    if len(parts) not in (N_FIELDS, N_FIELDS_V20):
+        raise FicTracParseError(f"FicTrac line must hold {N_FIELDS} comma-separated values "
+                                f"({N_FIELDS_V20} from FicTrac 2.0), got {len(parts)}")
     try:
         values = [float(p) for p in parts]
     except ValueError:
@@ -80,6 +84,7 @@ def parse_line(line: str | bytes) -> FicTracFrame:
             raise FicTracParseError(f"FicTrac field {i + 1} ({FicTracFrame._fields[i]}) must be an integer, "
                                     f"got {values[i]}")
         values[i] = int(values[i])
+    values += [math.nan] * (N_FIELDS - len(values))
     return FicTracFrame(*values)
 
 
@@ -92,8 +97,10 @@ def _is_float(text: str) -> bool:
 
 
 def format_line(frame: FicTracFrame, prefix: bool = True) -> str:
-    """The line FicTrac writes for `frame` (live with prefix, `.dat` without); inverse of `parse_line`."""
-    body = ", ".join(repr(v) if isinstance(v, float) else str(v) for v in frame)
+    """The line FicTrac writes for `frame` (live with prefix, `.dat` without); inverse of `parse_line`: a frame
+    whose fields 24-25 are NaN is written as FicTrac 2.0 wrote it, with 23 values."""
+    values = frame[:N_FIELDS_V20] if all(math.isnan(v) for v in frame[N_FIELDS_V20:]) else frame
+    body = ", ".join(repr(v) if isinstance(v, float) else str(v) for v in values)
     return f"{PREFIX}, {body}" if prefix else body
 
 
