@@ -61,3 +61,37 @@ def test_a_child_ends_when_its_parent_closes_it():
         assert child.wait(30.0)
     finally:
         child.kill()
+
+
+def _emulator_children(pid: int) -> list[int]:
+    """The `antarium emulate` children of process `pid` (Linux /proc)."""
+    found = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as fh:
+            for child in map(int, fh.read().split()):
+                try:
+                    with open(f"/proc/{child}/cmdline", "rb") as cmd:
+                        if b"emulate" in cmd.read().split(b"\0"):
+                            found.append(child)
+                except FileNotFoundError:
+                    pass
+    return found
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="finds the child through Linux /proc")
+def test_bench_protocols_emulator_ends_when_the_bench_is_killed():
+    bench = subprocess.Popen([sys.executable, "-m", "antarium", "bench", "protocol", "--seconds", "0.05",
+                              "--frames", "100000"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    children = []
+    try:
+        assert wait_for(lambda: children.extend(_emulator_children(bench.pid)) or children, 120.0, 0.05)
+        bench.kill()
+        bench.wait(30)
+        assert wait_for(lambda: all(process_gone(c) for c in children), 30.0, 0.05), "the emulator outlived the bench"
+    finally:
+        if bench.poll() is None:
+            bench.kill()
+            bench.wait()
+        for c in children:
+            if not process_gone(c):
+                os.kill(c, signal.SIGKILL)

@@ -10,16 +10,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
-import socket
-import subprocess
-import sys
 import time
 
 import numpy as np
 
 GOAL_ENCODE_FPS = 5000.0
 GOAL_DECODE_FPS = 380.0
+START_TIMEOUT_S = 30.0  # the loopback run waits this long for `antarium emulate` to answer
 
 
 def _frames(n: int, seed: int = 0) -> list[np.ndarray]:
@@ -73,12 +70,6 @@ def measure_decode(frames, seconds: float, line: str) -> float:
     return rate
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def achieved_rate(starts: list[float]) -> float:
     """Frames per second from the times (s) the frames began to be sent: n frames span n - 1 periods between the
     first one's start and the last one's (NaN for fewer than two)."""
@@ -90,20 +81,19 @@ def measure_loopback(frames, n_frames: int, rate_hz: float) -> dict:
     """Send `n_frames` at `rate_hz` to `antarium emulate` in a child process; count what it latched."""
     from antarium.core.clock import MonotonicClock
     from antarium.firmware_proto.link import open_link
+    from antarium.server.emulator_process import EmulatorProcess
 
-    port = _free_port()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "antarium", "emulate", "--port", str(port), "--seconds", str(n_frames / rate_hz + 30)],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
+    emulator = EmulatorProcess(extra_args=["--seconds", str(n_frames / rate_hz + 30)])
+    emulator.start()   # ends with this process even if it is killed
     try:
-        line = proc.stdout.readline()
-        if "listening" not in line:
-            raise RuntimeError(f"antarium emulate did not start: {line!r}")
         clock = MonotonicClock()
         send_s, starts = [], []
-        with open_link("udp", port=port) as link:
-            link.hello(wait_s=2.0)
+        with open_link("udp", port=emulator.port) as link:
+            deadline = clock.now() + START_TIMEOUT_S
+            while link.hello(wait_s=0.2) is None:
+                if not emulator.running or clock.now() > deadline:
+                    raise RuntimeError(f"antarium emulate did not answer within {START_TIMEOUT_S:.0f} s: "
+                                       f"{emulator.output()[-500:]!r}")
             t0 = clock.now()
             late = 0
             for k in range(n_frames):
@@ -117,11 +107,7 @@ def measure_loopback(frames, n_frames: int, rate_hz: float) -> dict:
                 send_s.append(time.perf_counter() - a)
             t = link.telemetry(wait_s=3.0)
     finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        emulator.stop(timeout_s=10.0)
     c = t.get("counters", {})
     latched = c.get("frames_latched", 0)
     return {
