@@ -17,8 +17,8 @@ from antarium.geometry.constants import LEDS_PER_PANEL, N_ACTUATORS, N_PANELS, N
 from .config import check_percent, encode_brightness, encode_dot_correction
 from .control import encode_hello, encode_latch, encode_status_request
 from .errors import ProtocolError
-from .header import PROTOCOL_VERSION, SEQ_MODULO
-from .polariser import angles_to_codes, encode_polarisers
+from .header import ADDR_ALL, PROTOCOL_VERSION, SEQ_MODULO, split_td
+from .polariser import OP_POLARISER, angles_to_codes, encode_polarisers
 from .replies import (
     OP_ACTUATORS,
     OP_COUNTERS,
@@ -28,6 +28,7 @@ from .replies import (
     STATUS_OPCODES,
     Reply,
     decode_reply,
+    dome_shortfall,
     foreign_version,
 )
 from .video import VIDEO_PAYLOAD_SIZE, encode_frame, video_info
@@ -55,6 +56,7 @@ HELLO_RETRY_S = 0.5
 #: 364 = 1 degree) did not get that update: it is sent again, at most once every POLARISER_RECHECK_S seconds
 POLARISER_TOLERANCE_CODES = 364
 POLARISER_RECHECK_S = 1.0
+_POLARISERS = (OP_POLARISER, ADDR_ALL)  # the key of the whole-dome polariser update in `Link._held`
 
 
 class IncompatibleDistributor(RuntimeError):
@@ -68,11 +70,15 @@ class Link(ABC):
     arrives (a
     distributor that boots after the host still gets one), and again after an outage of `OUTAGE_S`.
 
-    The distributor may not hold the polariser angles last sent when it answers for the first time since the link
-    opened or since an outage (it may have booted or rebooted since, its panels at angle 0, or the update was lost
-    in the outage), or when an ACTUATORS reply asked for after the update shows an actuator at rest elsewhere (the
-    update or the panel's serial frame was lost, or the distributor restarted between two polls): the link then
-    sends those angles again, with the next `telemetry` or `hello`.
+    The state the panels must hold, and lose when the distributor boots (they power up at angle 0, dot correction
+    and brightness 100 %), is one table, `_held`: the last POLARISER, DOT_CORRECTION and BRIGHTNESS message to
+    each address (`_send_held`). The distributor may not hold them when it answers for the first time since the
+    link opened or since an outage (it may have booted or rebooted since, or a message was lost in the outage),
+    when a COUNTERS reply shows no more status requests than the one before (it restarted between two polls; the
+    link then says HELLO again too), or when a message did not go out (the transport failed): the link then sends
+    them again, with the next `telemetry` or `hello`. The polariser angles are also sent again when an ACTUATORS
+    reply asked for after the update shows an actuator at rest elsewhere (the update or the panel's serial frame
+    was lost).
     """
 
     #: `telemetry(wait_s=0)` sends a new STATUS_REQUEST at most this often (seconds); a request with wait_s > 0
@@ -84,24 +90,26 @@ class Link(ABC):
         self._seq = 0
         self._frame_buf = np.empty((N_PANELS, VIDEO_PAYLOAD_SIZE), np.uint8)
         self._panel_td = np.arange(N_PANELS, dtype=np.uint8)  # VIDEO class 0, panel k
-        self._last_polariser_codes: np.ndarray | None = None  # codes of the last POLARISER update that went out
-        self._last_polariser_datagram: bytes | None = None
-        self._polarisers_unsure = False  # the distributor may have lost them: sent again (see the class doc)
+        self._held: dict[tuple[int, int], bytes] = {}  # (opcode, address) -> the last message that set it
+        self._unsure: set[tuple[int, int]] = set()  # held state the distributor may have lost: sent again
+        self._last_polariser_codes: np.ndarray | None = None  # (55, 9) codes of the last POLARISER update
         self._polarisers_checkable = False  # an ACTUATORS reply asked for after the last update has arrived
         self._polariser_tag = 0  # the request tag when the last update went out
         self._polarisers_rechecked_t: float | None = None
         self._answering = False  # a reply arrived since the link opened and since the last outage
+        self._status_requests: int | None = None  # the distributor's count in the last COUNTERS since then
         self._tag = 0
         self._status: dict = {}
         self._last_reply_t: float | None = None
         self._last_request_t: float | None = None
         self.counters = {"frames_sent": 0, "datagrams_sent": 0, "datagrams_failed": 0,
-                         "replies_received": 0, "replies_rejected": 0}
+                         "replies_received": 0, "replies_rejected": 0, "state_resent": 0}
         self.closed = False
         self.last_timings: dict[str, float] = {}
         self.hello_pending = True           # no VERSION since the link opened or since the last outage
         self._last_hello_t: float | None = None
         self.incompatible: str | None = None
+        self.mismatch: str | None = None  # what the distributor's VERSION reports that the dome cannot use
 
     # ---- back-end seam ----
     @abstractmethod
@@ -177,29 +185,48 @@ class Link(ABC):
         if a.shape != (N_PANELS, N_ACTUATORS):
             raise ValueError(f"polariser angles must have shape ({N_PANELS}, {N_ACTUATORS}), got {a.shape}")
         codes = angles_to_codes(a)
-        if (not force and not self._polarisers_unsure and self._last_polariser_codes is not None
+        if (not force and _POLARISERS not in self._unsure and self._last_polariser_codes is not None
                 and np.array_equal(codes, self._last_polariser_codes)):
             return False
-        datagram = encode_polarisers(a)
-        ok = self.send(datagram)
-        if ok:  # a failed send is retried by the next call, even with the same angles
-            self._last_polariser_codes, self._last_polariser_datagram = codes, datagram
-            self._polarisers_went_out()
+        ok = self._send_held(encode_polarisers(a))  # one that failed is sent again (class doc), same angles or not
+        self._last_polariser_codes = codes
         return ok
 
-    def _polarisers_went_out(self) -> None:
-        self._polarisers_unsure = self._polarisers_checkable = False
-        self._polariser_tag = self._tag
+    def _send_held(self, datagram: bytes) -> bool:
+        """Send a message that sets state the panels must hold (POLARISER, DOT_CORRECTION, BRIGHTNESS) and keep it
+        in `_held` as the latest for its opcode and address; one that did not go out stays marked to be sent
+        again (see the class doc). Returns whether it went out."""
+        ok = self.send(datagram)
+        key = (datagram[2], split_td(datagram[0])[1])
+        self._held[key] = datagram
+        if not ok:
+            self._unsure.add(key)
+            return False
+        self._unsure.discard(key)
+        if key == _POLARISERS:  # replies to requests sent before it show the angles before it
+            self._polarisers_checkable = False
+            self._polariser_tag = self._tag
+        return True
 
     def _resend_held(self) -> None:
-        """Send the last polariser update again when the distributor may have lost it (see the class doc)."""
-        if self._polarisers_unsure and self._last_polariser_datagram is not None and not self.incompatible:
-            if self.send(self._last_polariser_datagram):
-                self._polarisers_went_out()
+        """Send the held messages the distributor may have lost again, in the order they were first set (see the
+        class doc); nothing to a distributor of another protocol version."""
+        if self.incompatible:
+            return
+        for key in [k for k in self._held if k in self._unsure]:
+            if self._send_held(self._held[key]):
+                self.counters["state_resent"] += 1
+
+    def _distributor_may_have_rebooted(self) -> None:
+        """Everything held is sent again with the next `telemetry` or `hello`, and VERSION asked for again."""
+        self._unsure.update(self._held)
+        self.hello_pending = True
 
     def send_config(self, dot_correction=None, brightness: int | None = None) -> None:
         """Send driver settings: `dot_correction` percent 0..100 per LED — a scalar, (55, 740) (LED k = 2*local
-        + led) or (20350, 2) in frame layout — and/or global `brightness` percent 0..100. Raises ValueError."""
+        + led) or (20350, 2) in frame layout — and/or global `brightness` percent 0..100. Raises ValueError
+        (nothing sent). The link keeps them and sends them again to a distributor that may have lost them (class
+        doc)."""
         if dot_correction is not None:
             dot = np.asarray(dot_correction)
             if dot.ndim == 0:
@@ -216,7 +243,7 @@ class Link(ABC):
         if brightness is not None:
             datagrams.append(encode_brightness(int(brightness)))
         for d in datagrams:
-            self.send(d)
+            self._send_held(d)
 
     def hello(self, wait_s: float = 0.0) -> dict | None:
         """Ask for the distributor's VERSION reply; returns it if the answer to this HELLO (its tag) arrives
@@ -235,9 +262,11 @@ class Link(ABC):
         `wait_s` seconds (0: only what has already arrived; never blocks). Keys: "link" (this side's counters),
         "connected" (an answer ever arrived) and, once the distributor has answered: "age_s" (since the last
         reply), "counters", "temperature_c", "current_a", "faults", "fault_total", "polariser_codes",
-        "polariser_angles", "holding", "version" (protocol, firmware, panels, capabilities and their names) once
-        HELLO was answered, "hello" ("waiting" until then and after an outage, else "answered") and "incompatible"
-        (the reason) when the distributor's protocol version is not ours.
+        "polariser_angles", "holding", "version" (protocol, firmware, panels, capabilities and their names; from a
+        distributor of another protocol version only "protocol_version") once HELLO was answered, "hello"
+        ("waiting" until then and after an outage, else "answered"), "incompatible" (the reason) when the
+        distributor's protocol version is not ours, and "mismatch" (one line: what it reports and what the dome
+        requires) when its VERSION reports other than 55 panels of 370 pixels or lacks a required capability.
         """
         now = time.monotonic()
         if wait_s > 0 or self._last_request_t is None or now - self._last_request_t >= self.status_interval_s:
@@ -257,6 +286,8 @@ class Link(ABC):
                "hello": "waiting" if self.hello_pending else "answered"}
         if self.incompatible:
             out["incompatible"] = self.incompatible
+        if self.mismatch:
+            out["mismatch"] = self.mismatch
         if self._last_reply_t is not None:
             out["age_s"] = time.monotonic() - self._last_reply_t
         return out
@@ -281,7 +312,9 @@ class Link(ABC):
             self.counters["replies_received"] += 1
             self._last_reply_t = time.monotonic()
             if not self._answering:  # the first answer since the link opened or since an outage
-                self._answering = self._polarisers_unsure = True
+                self._answering = True
+                self._status_requests = None
+                self._unsure.update(self._held)
             self._absorb(reply.opcode, reply.fields)
             if reply.opcode == OP_ACTUATORS:
                 self._check_polarisers(reply.tag, reply.fields)
@@ -292,7 +325,7 @@ class Link(ABC):
 
     def _check_polarisers(self, tag: int, f: dict) -> None:
         """Mark the last polariser update for sending again when an actuator at rest is not at its angle."""
-        if self._last_polariser_codes is None or self._polarisers_unsure:
+        if self._last_polariser_codes is None or _POLARISERS in self._unsure:
             return
         if not self._polarisers_checkable:  # replies to requests sent before the update show the angles before it
             if not 0 < (tag - self._polariser_tag) % 256 < 128:
@@ -305,23 +338,29 @@ class Link(ABC):
         now = time.monotonic()
         if self._polarisers_rechecked_t is None or now - self._polarisers_rechecked_t >= POLARISER_RECHECK_S:
             self._polarisers_rechecked_t = now
-            self._polarisers_unsure = True
+            self._unsure.add(_POLARISERS)
 
     def _absorb(self, opcode: int, f: dict) -> None:
         s = self._status
         if opcode == OP_VERSION:
             self.hello_pending = False
             v = f["protocol_version"]
+            s["version"] = f  # of another protocol version: {"protocol_version": v}, all its header says
             if "firmware_major" in f:  # decoded whole: this side's header version
-                s["version"] = f
                 firmware = f" {f['firmware_major']}.{f['firmware_minor']}"
-            else:  # a reply of another protocol version: only its version is known
-                s.pop("version", None)
+                self.mismatch = dome_shortfall(f)
+            else:
                 firmware = ""
+                self.mismatch = None  # nothing more is read from it: `incompatible` says why
             self.incompatible = None if v == PROTOCOL_VERSION else (
                 f"the distributor speaks protocol version {v}; this host speaks {PROTOCOL_VERSION}: no frames are "
                 f"sent (update the host or the distributor's firmware{firmware})")
         elif opcode == OP_COUNTERS:
+            # every COUNTERS reply answers a newer request, which it counts: a count that did not grow started
+            # again from 0 (a stale or duplicated reply would only send the held state once more)
+            if self._status_requests is not None and f["status_requests"] <= self._status_requests:
+                self._distributor_may_have_rebooted()
+            self._status_requests = f["status_requests"]
             s["counters"] = f
         elif opcode == OP_TEMPERATURES:
             s["temperature_c"], s["current_a"] = f["temperature_c"], f["current_a"]

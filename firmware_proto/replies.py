@@ -44,6 +44,11 @@ CAPABILITIES = {
     "temperature": CAP_TEMPERATURE,
     "immediate": CAP_IMMEDIATE,
 }
+#: the capabilities the dome needs of a distributor (`dome_shortfall`): the server sends polariser angles every
+#: frame; dot correction and brightness are its LED settings (`Link.send_config`); `antarium check` and the
+#: telemetry report LED faults and panel temperatures, which read as "no faults" and 0 degC without them. Only
+#: IMMEDIATE (single-panel tools, section 3 of docs/protocol.md) is optional.
+REQUIRED_CAPABILITIES = ("polarisers", "dot_correction", "brightness", "fault_detection", "temperature")
 
 VERSION_BODY = FieldTable(
     "VERSION",
@@ -153,6 +158,23 @@ def foreign_version(buf) -> int | None:
     if len(head) < CONTROL_HEADER_SIZE or head[0] != (CLASS_REPLY << 6 | ADDR_ALL) or head[2] != OP_VERSION:
         return None
     return None if head[1] == PROTOCOL_VERSION else head[1]
+
+
+def dome_shortfall(version: dict) -> str | None:
+    """One line naming what a VERSION reply of this protocol version (`decode_reply`'s fields) reports that the
+    dome cannot work with, and what it requires: a panel count other than 55, pixels per panel other than 370,
+    a capability of `REQUIRED_CAPABILITIES` missing. None when it reports what the dome needs."""
+    wrong = []
+    if version["n_panels"] != N_PANELS:
+        wrong.append(f"{version['n_panels']} panels, {N_PANELS} required (check the panel cables and power)")
+    if version["pixels_per_panel"] != PIXELS_PER_PANEL:
+        wrong.append(f"{version['pixels_per_panel']} pixels per panel, {PIXELS_PER_PANEL} required (wrong panel "
+                     "firmware)")
+    missing = [n for n in REQUIRED_CAPABILITIES if not version["capabilities"] & CAPABILITIES[n]]
+    if missing:
+        wrong.append(f"capability 0x{version['capabilities']:04x}, without {', '.join(missing)}; required: "
+                     f"{', '.join(REQUIRED_CAPABILITIES)} (update the distributor's firmware)")
+    return "the distributor reports " + "; ".join(wrong) if wrong else None
 
 
 def decode_reply(buf) -> Reply:

@@ -1,10 +1,14 @@
 """`antarium check`: the first-run checklist against the emulator process, the virtual dome, and a port where
 nothing answers; each check one PASS/FAIL/SKIP line, exit status 1 on any failure (issue #20, point 4)."""
 
+import contextlib
 import io
+import socket
+import threading
 from pathlib import Path
 
 import pytest
+from conftest import wait_for
 
 from antarium.cli import main
 from antarium.config import load_config
@@ -54,38 +58,80 @@ def test_nothing_answering_fails_with_what_to_do(tmp_path, capsys):
     assert "3 failed: distributor, panels, panel mapping" in out
 
 
-def test_a_distributor_of_another_protocol_version_is_named_not_called_silent(tmp_path, capsys):
-    """A board answering VERSION in protocol version 2 (header VERSION byte 2) is what the check names."""
-    import socket
-    import threading
-
+@contextlib.contextmanager
+def _board(version, emulator=None):
+    """A distributor on a loopback UDP port (yields the port) that answers HELLO with the bytes `version(tag)`
+    and every other datagram as `emulator` (a `firmware_proto.emulator.Emulator`) would, or not at all."""
     board = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     board.bind(("127.0.0.1", 0))
     board.settimeout(0.1)
     done = threading.Event()
 
-    def answer():  # HELLO (TD 0x7F: control to all, opcode 0x06) -> VERSION of protocol 2
+    def answer():
         while not done.is_set():
             try:
                 data, peer = board.recvfrom(2048)
             except TimeoutError:
                 continue
-            if len(data) >= 4 and data[2] == 0x06:
-                board.sendto(bytes([0xBF, 0x02, 0x81, data[3], 2, 2, 0, 55, 1, 0x72, 0, 0x3F]), peer)
+            if len(data) >= 4 and data[2] == 0x06:  # HELLO (TD 0x7F: control to all, opcode 0x06)
+                board.sendto(version(data[3]), peer)
+            elif emulator is not None:
+                for reply in emulator.handle_datagram(data):
+                    board.sendto(reply, peer)
 
     thread = threading.Thread(target=answer, daemon=True)
     thread.start()
     try:
-        rig = _rig(tmp_path, f'host = "127.0.0.1"\nport = {board.getsockname()[1]}\nspawn_emulator = false')
-        assert main(["check", "--config", rig, "--auto", "--timeout-s", "1", "--min-free-gb", "0.01"]) == 1
+        yield board.getsockname()[1]
     finally:
         done.set()
         thread.join()
         board.close()
+
+
+def _version_without_dot_correction(tag: int) -> bytes:
+    from antarium.firmware_proto.replies import OP_VERSION, VERSION_BODY, _reply
+
+    return _reply(OP_VERSION, tag, VERSION_BODY.pack(protocol_version=1, firmware_major=1, firmware_minor=0,
+                                                     n_panels=55, pixels_per_panel=370, capabilities=0x3F & ~0x02))
+
+
+def test_a_distributor_of_another_protocol_version_is_named_not_called_silent(tmp_path, capsys):
+    """A board answering VERSION in protocol version 2 (header VERSION byte 2) is what the check names."""
+    with _board(lambda tag: bytes([0xBF, 0x02, 0x81, tag, 2, 2, 0, 55, 1, 0x72, 0, 0x3F])) as port:
+        rig = _rig(tmp_path, f'host = "127.0.0.1"\nport = {port}\nspawn_emulator = false')
+        assert main(["check", "--config", rig, "--auto", "--timeout-s", "1", "--min-free-gb", "0.01"]) == 1
     out = capsys.readouterr().out
     assert _lines(out)["distributor"] == "FAIL"
     assert "answers but the distributor speaks protocol version 2; this host speaks 1" in out, out
     assert "no answer from" not in out
+
+
+def test_a_distributor_without_a_capability_the_dome_needs_fails_the_panel_check(tmp_path, capsys):
+    """The real emulator on UDP, but its VERSION without dot correction: `antarium check` names the capability
+    (it checked only the panel count and pixels per panel until 2026-11-27)."""
+    from antarium.firmware_proto.emulator import Emulator
+
+    with _board(_version_without_dot_correction, Emulator()) as port:
+        rig = _rig(tmp_path, f'host = "127.0.0.1"\nport = {port}\nspawn_emulator = false')
+        assert main(["check", "--config", rig, "--auto", "--timeout-s", "2", "--min-free-gb", "0.01"]) == 1
+    out = capsys.readouterr().out
+    assert _lines(out)["distributor"] == "PASS" and _lines(out)["panels"] == "FAIL", out
+    assert "without dot_correction" in out, out
+
+
+def test_a_served_rig_whose_distributor_lacks_a_capability_raises_an_alarm(tmp_path):
+    """`status()` of a running server names what the distributor's VERSION lacks among its alarms."""
+    from antarium.config import resolve
+    from antarium.firmware_proto.emulator import Emulator
+    from antarium.server import Server
+
+    with _board(_version_without_dot_correction, Emulator()) as port:
+        config = resolve({"link": {"host": "127.0.0.1", "port": port, "spawn_emulator": False},
+                          "loop": {"realtime_priority": 0}, "log": {"dir": str(tmp_path)},
+                          "bus": {"enabled": False}})
+        with Server(config) as server:
+            assert wait_for(lambda: any("without dot_correction" in a for a in server.status()["alarms"]), 10.0)
 
 
 def test_the_operator_confirms_each_panel(tmp_path, monkeypatch, capsys):
@@ -153,3 +199,4 @@ def test_only_yes_or_enter_confirms_a_panel(tmp_path, monkeypatch, capsys, answe
     assert f"{verdict} panel mapping: " in out
     if answers.split("\n")[0] not in ("", "y", "yes", "n", "no"):
         assert "is not an answer" in out and out.count("panel 0 (pentagon") == 2  # asked twice
+

@@ -123,15 +123,10 @@ def check_distributor(report: Report, link, where: str, timeout_s: float) -> dic
 def check_panels(report: Report, telemetry: dict) -> bool:
     """Panel count, pixels per panel, protocol and firmware versions, faults, from the distributor's telemetry."""
     from antarium.firmware_proto.header import PROTOCOL_VERSION
-    from antarium.geometry.constants import N_PANELS, PIXELS_PER_PANEL
 
     v = telemetry["version"]
     firmware = f"firmware {v['firmware_major']}.{v['firmware_minor']}, protocol {v['protocol_version']}"
-    wrong = []
-    if v["n_panels"] != N_PANELS:
-        wrong.append(f"{v['n_panels']} panels reported, {N_PANELS} expected: check the panel cables and power")
-    if v["pixels_per_panel"] != PIXELS_PER_PANEL:
-        wrong.append(f"{v['pixels_per_panel']} pixels per panel, {PIXELS_PER_PANEL} expected: wrong panel firmware")
+    wrong = [telemetry["mismatch"]] if telemetry.get("mismatch") else []  # panels, pixels, capabilities
     if v["protocol_version"] != PROTOCOL_VERSION:
         wrong.append(f"protocol {v['protocol_version']}, this software speaks {PROTOCOL_VERSION}: update one")
     faults = int(telemetry.get("fault_total") or 0)

@@ -55,6 +55,8 @@ def rig_status(server: Server) -> dict[str, Any]:
             out["locomotion"] = {"connected": False, "error": _describe(exc)}
     if loop is not None and server.link is not None:
         out["telemetry"] = loop.telemetry  # polled by the loop's thread (the link is not shared)
+        if out["telemetry"].get("mismatch"):  # panels missing, wrong panel firmware, a capability lacking
+            alarms.append(out["telemetry"]["mismatch"])
     if server.emulator is not None:
         out["emulator_running"] = server.emulator.running
         if not out["emulator_running"]:
