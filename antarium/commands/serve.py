@@ -69,24 +69,6 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise ValueError(f"--status-every must be a number of seconds >= 0 (0: no status lines), got {every:g}")
 
 
-def _remove_empty_logs(server, frames: int) -> None:
-    """No frame ran (stopped during start-up): the trial logs opened for it hold nothing; remove them."""
-    if frames:
-        return
-    from antarium.trial_log import LogError, read_table
-
-    for path in list(server.trial_paths):
-        try:
-            table = read_table(path, "frames")
-        except (OSError, ValueError, KeyError, LogError):
-            continue
-        empty = not table or len(next(iter(table.values()))) == 0
-        if empty:
-            path.unlink(missing_ok=True)
-            server.trial_paths.remove(path)
-            print(f"antarium serve: no frame ran: removed the empty trial log {path}", flush=True)
-
-
 def run(args: argparse.Namespace) -> int:
     import signal
     import sys
@@ -106,19 +88,18 @@ def run(args: argparse.Namespace) -> int:
         return 0
     server = Server(config, record=args.record)
     stopping = threading.Event()
-    starting = [True]  # True until the first frame is about to run: a signal then interrupts the start-up
 
     def stop(signum, frame):
         first = not stopping.is_set()
         stopping.set()
         if not first:
             return  # stopping already; a second Ctrl-C does not interrupt the shutdown
-        interrupt = starting[0] and not server._ready.is_set()  # not yet ready, and not failing either
+        interrupt = server.cancel_start()  # still starting: what it waits for (a device, the renderer) is interrupted
         print(f"antarium serve: {signal.Signals(signum).name}: "
               + ("stopping the start-up" if interrupt else "stopping after this frame"), file=sys.stderr, flush=True)
-        server.stop()
         if interrupt:
             raise KeyboardInterrupt
+        server.stop()
 
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
@@ -130,18 +111,14 @@ def run(args: argparse.Namespace) -> int:
         threading.Thread(target=_announce_link, args=(server,), daemon=True).start()
         threading.Thread(target=_print_status, args=(server, args.status_every, stopping), daemon=True).start()
         frames = server.run(seconds=args.seconds)
-    except KeyboardInterrupt:
-        starting[0] = False
-        if server._start_error is None:  # not yet running, or built but before the loop: nothing shut down yet
-            server._shutdown()
+    except KeyboardInterrupt:  # the start-up interrupted (`cancel_start`): no frame ran
+        server.close()  # what run() had not closed (it closes all it can itself)
         frames = 0
     finally:
-        starting[0] = False
         stopping.set()  # no status line (and no alarm) once the loop ended
     stats = server.final_stats or {"late_frames": 0, "skipped_frames": 0, "link_outages": 0}
     print(f"antarium serve: {frames} frames, {stats['late_frames']} late, {stats['skipped_frames']} skipped, "
           f"{stats['link_outages']} link outages", flush=True)
-    _remove_empty_logs(server, frames)
     for path in server.trial_paths:
         print(f"antarium serve: trial log {path}", flush=True)
     return 0

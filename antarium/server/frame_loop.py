@@ -50,9 +50,11 @@ STATS_WINDOW = 2048
 #: ask the locomotion source whether it is connected every this many frames
 LOCOMOTION_CHECK_EVERY = 10
 #: ask the distributor for telemetry this often (s); the link is down when the newest reply is older than
-#: LINK_TIMEOUT_S, or when datagrams failed (peer refused: the distributor or emulator is gone)
+#: LINK_TIMEOUT_S, or when datagrams failed (peer refused: the distributor or emulator is gone; send buffer full) at
+#: every poll for LINK_FAILING_S: a failure that does not last (one full send buffer) is only counted
 TELEMETRY_EVERY_S = 0.1
 LINK_TIMEOUT_S = 0.5
+LINK_FAILING_S = 0.5
 #: the link is down from the start until the distributor answers; one that has not answered this long after the
 #: first frame (or by the end of a shorter run) counts as an outage
 LINK_STARTUP_S = 5.0
@@ -98,6 +100,10 @@ class FrameRecord:
 POSE_FIELDS = {f.name for f in fields(Pose)}
 #: FRAME_DTYPE's fields read from a FrameRecord: the log's layout is the one table, the row follows it
 _LOG_ROW = attrgetter(*(f"pose.{name}" if name in POSE_FIELDS else name for name in FRAME_DTYPE.names))
+
+
+class LoopClosed(RuntimeError):
+    """A call handed to a frame loop that will run no more frames (`FrameLoop.refuse_calls`): it was not run."""
 
 
 def _check_gain(name: str, value: Any) -> float:
@@ -167,6 +173,7 @@ class FrameLoop:
         self._frame_buf = None
         self._pending: queue.SimpleQueue = queue.SimpleQueue()
         self._idle: queue.SimpleQueue = queue.SimpleQueue()
+        self._refusal: str | None = None  # why calls are refused (`refuse_calls`); None: they are taken
         self._stop = threading.Event()
         self._loop_thread: threading.Thread | None = None
         # per recent frame: t_start, latency, render, sample, convert, encode, send, pacing error (s)
@@ -186,6 +193,8 @@ class FrameLoop:
         self._next_telemetry_t = -math.inf
         self._last_poll_t: float | None = None
         self._failed_datagrams = 0
+        self._failing_since: float | None = None  # the first poll of the polls in a row that saw failed datagrams
+        self.transient_link_failures = 0  # polls that saw failed datagrams without an outage
         self._t_first: float | None = None
         self._polariser_heading: float | None = None
         #: the dome link's bit budget at 100 Mbit/s (None where the frames alone exceed it: nothing to share)
@@ -205,18 +214,41 @@ class FrameLoop:
             self.on_event(t, kind, data)
 
     def call_soon(self, fn: Callable, *args: Any, **kwargs: Any) -> concurrent.futures.Future:
-        """Run `fn(*args, **kwargs)` in the loop's thread before the next frame; thread-safe."""
+        """Run `fn(*args, **kwargs)` in the loop's thread before the next frame; thread-safe. After `refuse_calls`,
+        the future fails at once with `LoopClosed`."""
         future: concurrent.futures.Future = concurrent.futures.Future()
         self._pending.put((future, fn, args, kwargs))
+        if self._refusal is not None:
+            self._refuse_queued()
         return future
 
     def when_idle(self, fn: Callable, *args: Any, **kwargs: Any) -> concurrent.futures.Future:
         """Run `fn(*args, **kwargs)` in the loop's thread after a frame that leaves IDLE_MARGIN_S before the next
         slot, one such call per frame; thread-safe. For housekeeping (status, CPU placement) that would
-        otherwise take the GIL from the frame in another thread."""
+        otherwise take the GIL from the frame in another thread. After `refuse_calls`, the future fails at once with
+        `LoopClosed`."""
         future: concurrent.futures.Future = concurrent.futures.Future()
         self._idle.put((future, fn, args, kwargs))
+        if self._refusal is not None:
+            self._refuse_queued()
         return future
+
+    def refuse_calls(self, reason: str) -> None:
+        """The loop will run no more frames (its owner shuts down): every call queued and not run, and every later
+        `call_soon` or `when_idle`, fails at once with `LoopClosed(reason)` instead of waiting for a frame that
+        never comes. Thread-safe: a call queued while this runs is failed by this or by its own `call_soon`."""
+        self._refusal = reason
+        self._refuse_queued()
+
+    def _refuse_queued(self) -> None:
+        for calls in (self._pending, self._idle):
+            while True:
+                try:
+                    future = calls.get_nowait()[0]
+                except queue.Empty:
+                    break
+                if future.set_running_or_notify_cancel():
+                    future.set_exception(LoopClosed(self._refusal))
 
     def _run_pending(self, calls: queue.SimpleQueue | None = None, limit: int | None = None) -> None:
         calls = self._pending if calls is None else calls
@@ -376,7 +408,8 @@ class FrameLoop:
         """Poll the distributor's telemetry every TELEMETRY_EVERY_S; report outages and recoveries.
 
         The newest reply can only answer the previous poll, so the link is down when that reply is older than
-        LINK_TIMEOUT_S plus the time since the previous poll (a slow loop polls less often), or datagrams failed.
+        LINK_TIMEOUT_S plus the time since the previous poll (a slow loop polls less often), or datagrams failed
+        at every poll for LINK_FAILING_S (a shorter run of failures is counted in `transient_link_failures`).
         """
         if self.link is None or now < self._next_telemetry_t:
             return
@@ -392,9 +425,17 @@ class FrameLoop:
                 self._report_unanswered(now)
             return
         fresh = age <= LINK_TIMEOUT_S + since_poll
-        ok = fresh and new_failures == 0
-        if new_failures:
-            self.last_link_error = f"{new_failures} datagrams failed (peer refused or buffer full)"
+        if not new_failures:
+            self._failing_since = None
+        elif self._failing_since is None:
+            self._failing_since = now
+        failing = self._failing_since is not None and now - self._failing_since >= LINK_FAILING_S
+        if new_failures and not failing and self.link_ok:
+            self.transient_link_failures += 1
+        ok = fresh and not failing
+        if failing:
+            self.last_link_error = (f"datagrams failed for {now - self._failing_since:.2f} s (peer refused or "
+                                    "send buffer full)")
         elif not fresh:
             self.last_link_error = f"no telemetry from the distributor for {age:.2f} s"
         if ok != self.link_ok:

@@ -27,7 +27,7 @@ from antarium import bus
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.server.commands import COMMANDS, CommandError, parse_command
 from antarium.server.emulator_process import EmulatorProcess
-from antarium.server.frame_loop import FrameLoop, FrameRecord
+from antarium.server.frame_loop import FrameLoop, FrameRecord, LoopClosed
 from antarium.server.placement import LoopPlacement
 from antarium.server.status import loop_state, rig_status
 
@@ -123,6 +123,11 @@ class Server:
         self._leds_pub = self.monitor = None  # antarium.monitor: LED stream publisher, monitor process
         self._ready = threading.Event()
         self._stopping = threading.Event()
+        #: held while the start-up turns into running (`_ready`), is cancelled, or the shutdown begins (re-entrant: a
+        #: signal handler may run `cancel_start` in the thread that holds it)
+        self._start_lock = threading.RLock()
+        self._shut_down = False  # `_shutdown` has begun: it runs once
+        self._command_log_lock = threading.Lock()  # orders the commands table's rows by their time
         self._thread: threading.Thread | None = None
         self._status_thread: threading.Thread | None = None
         self._start_error: BaseException | None = None
@@ -246,6 +251,8 @@ class Server:
 
                 try:
                     self.loop.when_idle(once).result(1.0)
+                except LoopClosed:  # the server shuts down
+                    return
                 except TimeoutError:
                     if self._stopping.is_set():  # the loop ended: nothing to place or publish any more
                         return
@@ -298,6 +305,8 @@ class Server:
         if command.prepare is not None:
             try:
                 checked["prepared"] = self.placement.beside_loop(command.prepare, self, checked)
+            except LoopClosed:
+                raise RuntimeError(f"{name}: the server is stopping; the command was not run") from None
             except (CommandError, ValueError, RuntimeError, OSError) as exc:
                 self._log_command(name, params, {"error": str(exc)}, False)
                 raise
@@ -307,6 +316,9 @@ class Server:
         future = self.loop.call_soon(self._apply, name, checked, params)
         try:
             return future.result(COMMAND_TIMEOUT_S)
+        except LoopClosed:  # queued after the loop's last frame (a timed run ending): never waits for one
+            _release(checked.get("prepared"))
+            raise RuntimeError(f"{name}: the server is stopping; the command was not run") from None
         except TimeoutError:
             if future.cancel():
                 _release(checked.get("prepared"))
@@ -325,8 +337,11 @@ class Server:
         return result
 
     def _log_command(self, name, request, reply, ok) -> None:
-        if self.trial_log is not None:
-            self.trial_log.add_command(self.clock.now(), name, request, reply, ok)
+        """A row in the running trial's commands table. Commands come from several threads: the time is read under
+        the lock that appends the rows, so that the table's `t` never steps back."""
+        with self._command_log_lock:
+            if self.trial_log is not None:
+                self.trial_log.add_command(self.clock.now(), name, request, reply, ok)
 
     def state(self) -> dict[str, Any]:
         """What a command replies: pose, scene rotation, loop mode, gains, scene and trial."""
@@ -355,6 +370,9 @@ class Server:
                 pass
         except TimeoutError:  # the loop is held up or stopped: `load_scene` uploads what is left
             pass
+        except LoopClosed:  # the server shuts down: the scene is never shown
+            prepared.release()
+            raise
         except Exception as exc:  # the GL driver refused the upload: nothing of the scene is kept
             prepared.release()
             raise self._scene_failed(scene, exc) from None
@@ -383,10 +401,14 @@ class Server:
         return RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); {kept}")
 
     def trial_start(self, name: str, metadata: dict, folder: str = "") -> dict[str, Any]:
-        """Open the trial log `<folder or [log] dir>/<rig>_<time>_<name>.h5`; reply {"path": its absolute path}."""
+        """Open the trial log `<folder or [log] dir>/<rig>_<time>_<name>.h5` and have the frame loop write into it;
+        reply {"path": its absolute path}. A trial that cannot start (the loop does not take its log within
+        COMMAND_TIMEOUT_S, the server is stopping) leaves no file and no trial: the reply and the state agree."""
         from antarium.trial_log import LogError, TrialLog, check_log_dir, log_path
 
         with self._trial_lock:
+            if self._shut_down:
+                raise RuntimeError("trial_start: the server is stopping; no trial was started")
             if self.trial_log is not None:
                 raise RuntimeError(f"trial_start: trial {self.trial_name!r} is running; stop it first")
             try:
@@ -402,16 +424,20 @@ class Server:
                 raise RuntimeError(f"trial_start: {exc}") from None
             if self.scene_name is not None:
                 log.add_scene(self.clock.now(), self.scene_name, self._scene_digest)
-            self.trial_log, self.trial_name = log, name
+            if self.loop is None:  # not started: the loop is built with this log
+                self.trial_log, self.trial_name = log, name
+            else:
+                try:
+                    self._in_loop("trial_start", "no trial was started", self._attach_log, log, name, metadata)
+                except BaseException as exc:  # nothing of the trial is kept: no file, the state as it was
+                    log.close()
+                    path.unlink(missing_ok=True)
+                    if isinstance(exc, LoopClosed):
+                        raise RuntimeError("trial_start: the server is stopping; no trial was started") from None
+                    raise
             self.trial_paths.append(path)
             self._last_log_error = None
-            if self.loop is not None:
-                if self._loop_running():
-                    self.loop.call_soon(self._attach_log, log, name, metadata).result(COMMAND_TIMEOUT_S)
-                else:
-                    self._attach_log(log, name, metadata)
-            log.add_command(self.clock.now(), "trial_start", {"name": name, "metadata": metadata},
-                            {"path": str(path)}, True)
+            self._log_command("trial_start", {"name": name, "metadata": metadata}, {"path": str(path)}, True)
             return {"path": str(path)}
 
     def _loop_running(self) -> bool:
@@ -419,28 +445,69 @@ class Server:
         return (self._ready.is_set() and not self._stopping.is_set() and self._start_error is None
                 and threading.current_thread() is not self._loop_thread)
 
+    def _in_loop(self, what: str, kept: str, fn: Callable, *args: Any) -> None:
+        """`fn(*args)` in the frame loop's thread (here when no frames run in another thread). RuntimeError "`what`:
+        ...; `kept`" when the loop has not run it within COMMAND_TIMEOUT_S (it then never does); LoopClosed when
+        the loop has run its last frame."""
+        if not self._loop_running():
+            fn(*args)
+            return
+        future = self.loop.call_soon(fn, *args)
+        try:
+            future.result(COMMAND_TIMEOUT_S)
+        except TimeoutError:
+            if future.cancel():
+                raise RuntimeError(f"{what}: the frame loop did not take it within {COMMAND_TIMEOUT_S:g} s (held up); "
+                                   f"{kept}") from None
+            future.result()  # the loop has just begun it: a moment
+
     def _attach_log(self, log, name: str, metadata: dict) -> None:
+        """The loop writes into `log` from its next frame, and the trial runs (loop's thread)."""
         self.loop.log = log
         if hasattr(self.source, "use_log"):  # a source with a table of its own (servosphere)
-            self.source.use_log(log)
+            try:
+                self.source.use_log(log)
+            except BaseException:
+                self.loop.log = None
+                raise
+        self.trial_log, self.trial_name = log, name
         self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path))
 
     def trial_stop(self) -> dict[str, Any]:
         if self._stopping_elsewhere():  # detaching the log from here could lose the loop's last frame
             return self._trial_closed_by_shutdown()
         with self._trial_lock:
-            log = self.trial_log
-            if log is None:
+            if self.trial_log is None:
                 raise RuntimeError("trial_stop: no trial is running")
-            if self.loop is not None:
-                if self._loop_running():
-                    self.loop.call_soon(self._detach_log).result(COMMAND_TIMEOUT_S)
-                else:
-                    self._detach_log()
-            log.add_command(self.clock.now(), "trial_stop", {}, {"path": str(log.path)}, True)
-            log.close()
-            self.trial_log, self.trial_name = None, None
-            return {"path": str(log.path), **log.status()}
+            return self._close_trial()
+
+    def _close_trial(self) -> dict[str, Any]:
+        """End the running trial (holding `_trial_lock`): the loop stops writing into its log, which is closed."""
+        log = self.trial_log
+        if self.loop is not None:
+            try:
+                self._in_loop("trial_stop", f"trial {self.trial_name!r} goes on", self._detach_log)
+            except LoopClosed:  # the loop has run its last frame: nothing writes into the log any more
+                self._detach_log()
+        self._log_command("trial_stop", {}, {"path": str(log.path)}, True)
+        log.close()
+        self.trial_log, self.trial_name = None, None
+        return {"path": str(log.path), **log.status()}
+
+    def _end_trial(self) -> None:
+        """The shutdown's end of the running trial, if any: after a trial_start in flight has ended (none starts
+        once the shutdown has begun)."""
+        with self._trial_lock:
+            if self.trial_log is not None:
+                self._close_trial()
+
+    def _remove_frameless_logs(self) -> None:
+        """No frame ran (a start-up that failed or was stopped): the trial logs opened for it hold none and are
+        removed, so that none is taken for a recording."""
+        for path in self.trial_paths:
+            path.unlink(missing_ok=True)
+            self.echo(f"antarium serve: no frame ran: removed the empty trial log {path}")
+        self.trial_paths = []
 
     def _stopping_elsewhere(self) -> bool:
         """The server is stopping while its frame loop's thread, not this one, may still be in its last frame."""
@@ -470,7 +537,10 @@ class Server:
     # -- running ---------------------------------------------------------------------------------------
     def run(self, until: float | None = None, frames: int | None = None, seconds: float | None = None) -> int:
         """Build the renderer here, start the bus and run frames until `stop()`, the clock reads `until`,
-        `frames` frames ran, or `seconds` passed since the first frame."""
+        `frames` frames ran, or `seconds` passed since the first frame. Returns the number of frames run; whatever
+        ends it (a start-up that failed or was cancelled, see `cancel_start`), everything is closed when it returns
+        or raises."""
+        self._loop_thread = threading.current_thread()
         try:
             loop_cfg = self.config.loop
             self.placement.before_building()
@@ -491,23 +561,24 @@ class Server:
                 self.source.start()
             if (self.record or self.config.log.record) and self.trial_log is None:
                 self.trial_start(self.record or "recording", {})
+            # Everything long-lived exists now (renderer, scene, link, bus): move it out of the garbage collector's
+            # way, so that a collection during the experiment scans only what frames allocate — a full collection
+            # over these object graphs would stall a frame for milliseconds.
+            _freeze_gc()
+            self._gc_frozen = True
+            self._status_thread = threading.Thread(target=self._status_loop, name="status", daemon=True)
+            self._status_thread.start()
+            self.placement.before_frames()
+            with self._start_lock:  # from here on `cancel_start` leaves the stopping to `stop()`
+                self._ready.set()
+                cancelled = self._stopping.is_set()
         except BaseException as exc:
             self._start_error = exc
             self._ready.set()
             self._shutdown()
             raise
-        # Everything long-lived exists now (renderer, scene, link, bus): move it out of the garbage collector's
-        # way, so that a collection during the experiment scans only what frames allocate — a full collection
-        # over these object graphs would stall a frame for milliseconds.
-        _freeze_gc()
-        self._gc_frozen = True
-        self._status_thread = threading.Thread(target=self._status_loop, name="status", daemon=True)
-        self._status_thread.start()
-        self._loop_thread = threading.current_thread()
-        self.placement.before_frames()
-        self._ready.set()
         self.loop.event("server_started", rig=self.rig_name)
-        if self._stopping.is_set():  # stopped (a signal) while starting
+        if cancelled:  # stopped while starting (`cancel_start`, `stop()`): no frame runs
             self.loop.stop()
         if seconds is not None:
             end = self.clock.now() + seconds
@@ -533,6 +604,27 @@ class Server:
             self._publish_status()  # the last status, with the alarm (the status thread ends now)
         except Exception:  # noqa: BLE001 - said on stderr already
             pass
+
+    def cancel_start(self) -> bool:
+        """Stop a start-up in progress before its first frame (thread-safe; also in a signal handler in the thread
+        that runs `run()`). True when the server was starting (not yet running frames, not failed, not stopped):
+        `run()` then runs no frame and closes what it had built, at the latest when it would have begun running
+        frames; a signal handler may interrupt it sooner by raising KeyboardInterrupt (`close()` then closes what
+        was open). False otherwise: a running server is stopped with `stop()`."""
+        with self._start_lock:
+            if self._ready.is_set() or self._shut_down:
+                return False
+            self._stopping.set()
+            return True
+
+    def close(self) -> None:
+        """Stop the server and close everything it opened; safe twice, and after `run()`, which closes it all itself
+        when it returns or raises. For a start-up interrupted where `run()` could not close what it had opened
+        (a KeyboardInterrupt from a signal handler after `cancel_start`, arriving before `run()` or between its
+        steps). A server that runs in another thread is only stopped (`stop()`), its own thread closes it."""
+        self.stop()
+        if self._loop_thread in (None, threading.current_thread()):
+            self._shutdown()
 
     def wait_ready(self, timeout_s: float | None = None) -> bool:
         """Block until the first frame is about to run (or starting failed); False on timeout."""
@@ -580,13 +672,20 @@ class Server:
 
     def _shutdown(self) -> None:
         """Close everything, each step on its own: one that fails (a device gone) is printed and the others still
-        run; the emulator is always stopped and the loop's placement always undone."""
+        run; the emulator is always stopped and the loop's placement always undone. Runs once: later calls return
+        at once. The loop's calls queued meanwhile (a command that came after its last frame) fail at once."""
+        with self._start_lock:
+            if self._shut_down:
+                return
+            self._shut_down = True
         self._stopping.set()
         step = self._shutdown_step
         if self.loop is not None:
+            self.loop.refuse_calls("the server is stopping")
             step("keeping the final statistics", self._keep_final_stats)
-        if self.trial_log is not None:
-            step("closing the trial log", self.trial_stop)
+        step("closing the trial log", self._end_trial)
+        if (self.loop is None or self.loop.frame == 0) and self.loop_error is None:
+            step("removing the trial logs of a start-up that ran no frame", self._remove_frameless_logs)
         for part in (self.monitor, self._leds_pub):
             if part is not None:
                 step(f"closing {type(part).__name__}", part.close)
