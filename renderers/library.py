@@ -24,11 +24,11 @@ MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl")
 
 
 def _deg(params: dict, key: str, default=None, suffix: str = "_deg"):
-    """Pop `key` + suffix (degrees, or degrees per second) from params, in radians (default when absent)."""
-    value = params.pop(key + suffix, None)
-    if value is None:
+    """Pop `key` + suffix (degrees, or degrees per second) from params, in radians (default when absent; a value
+    that is not a finite number, null included, raises ValueError naming it)."""
+    if key + suffix not in params:
         return default
-    return math.radians(check_number(key + suffix, value))
+    return math.radians(check_number(key + suffix, params.pop(key + suffix)))
 
 
 def _path(params: dict, key: str) -> str:

@@ -3,15 +3,22 @@ with levels of detail. Per frame each of the six views draws, with one multi-dra
 whose bounding spheres meet its frustum, each at the coarsest level whose error stays under a fraction of a
 texel at the chunk's distance.
 
+Vertices are stored relative to an origin near the content (`MeshArrays.origin`, float64), and only the eye's
+offset from it enters the view matrices: float32 world coordinates far from (0, 0, 0) (georeferenced worlds,
+tens of kilometres and more) would lose the millimetres the near plane (1 mm) and the depth test need.
+
 Levels of detail are made by vertex clustering: level k >= 1 merges the vertices of a chunk that fall in the
 same cube of side LOD_CELLS[k-1] (metres) into their mean (position and colour) and drops the triangles that
-collapse. A chunk at distance D uses the coarsest level whose cell is below `lod_angle * D`, so no vertex moves
-by more than about that angle as seen from the eye (default: half the largest texel). Textured meshes keep
-level 0 only.
+collapse. A merged vertex moves by at most the cube's diagonal, sqrt(3) cells; a chunk at distance D (to its
+bounding sphere) uses the coarsest level whose cell is below `lod_angle * D / LOD_REACH`, so that no vertex moves
+by more than half of `lod_angle` as seen from the eye (`Renderer`'s default `lod_angle`: one texel at a face's
+centre). Merging folds some triangles of a closed mesh over: its levels above 0 are drawn double-sided (each
+triangle in both windings), only level 0 has its back faces culled. Textured meshes keep level 0 only.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -24,6 +31,8 @@ CHUNK_MIN_TRIANGLES = 256
 MAX_TEXTURE_ARRAY_SIDE = 1024
 #: Cluster cells (m) of the levels of detail 1, 2, ...
 LOD_CELLS = (0.005, 0.01, 0.02, 0.04, 0.08, 0.16, 0.32)
+#: lod_angle * D / LOD_REACH bounds the cell at distance D: a vertex moves at most sqrt(3) cells, half lod_angle * D
+LOD_REACH = 2.0 * math.sqrt(3.0)
 _FLOATS_PER_VERTEX = 9  # position 3, colour 3, uv 2, texture layer 1
 
 
@@ -39,6 +48,13 @@ def _chunk_order(mesh, chunk_size: float) -> tuple[np.ndarray, np.ndarray]:
     order = np.argsort(key, kind="stable")
     _, chunk = np.unique(key[order], return_inverse=True)
     return order, chunk
+
+
+def both_windings(faces: np.ndarray, tri_chunk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(2F, 3) faces, each followed by itself wound the other way, and their (2F,) chunks (still sorted): a level
+    of detail of a closed mesh drawn as double-sided under back-face culling (merging vertices folds some of its
+    triangles over, and culling them would open holes to the sky through the object)."""
+    return np.stack([faces, faces[:, ::-1]], axis=1).reshape(-1, 3), np.repeat(tri_chunk, 2)
 
 
 def cluster_vertices(vertices, colours, faces, tri_chunk, cell: float):
@@ -77,8 +93,10 @@ class MeshArrays:
     """The CPU half of `MeshBuffers`: interleaved vertices, indices, per-chunk draw ranges and bounding spheres
     of a scene's objects. Needs no GL context: built in any thread, uploaded by `MeshBuffers` in the GL one.
 
-    vertices (V, 9) float32 [position (world, m), colour, uv, texture layer]; indices (I,) uint32; first, count
-    (n_chunks, levels) uint32 index ranges per level of detail; centre (n_chunks, 3), radius (n_chunks,) m;
+    vertices (V, 9) float32 [position (world, m, relative to `origin`), colour, uv, texture layer]; indices (I,)
+    uint32; first, count (n_chunks, levels) uint32 index ranges per level of detail; origin (3,) float64 world
+    position (m) of the vertices' (0, 0, 0): the middle of the objects' bounding boxes; centre (n_chunks, 3)
+    float64 (world), radius (n_chunks,) m;
     texels: the texture array's layers (`texture_layers`), None when no object has a texture.
     """
 
@@ -86,8 +104,10 @@ class MeshArrays:
         self.n_chunks = 0
         self.ranges = {}  # name -> vertex start, object-space vertices, colours, uv, layer, order, chunks
         self.texels = None
+        self.origin = np.zeros(3)
         if not objects:
             return
+        self.origin = content_origin(objects)
         self.texels = texture_layers([o.mesh.texture for o in objects.values() if o.mesh.texture is not None])
         n_levels = 1 + len(LOD_CELLS)
         vert_blocks, idx_blocks = [], []
@@ -111,7 +131,7 @@ class MeshArrays:
                         levels.append(levels[-1])
                         continue
                     v, c, f, tc = lod
-                    levels.append((f + base, tc))
+                    levels.append((f + base, tc) if mesh.double_sided else both_windings(f + base, tc))
                     verts.append(v)
                     cols.append(c)
                     base += len(v)
@@ -135,7 +155,7 @@ class MeshArrays:
             count.append(n_obj)
             sided.append(np.full(n_chunks, not mesh.double_sided))
             self.ranges[name] = (v0, local, colours, uv, tex_layer, order, tri_chunk, c0, c0 + n_chunks)
-            vert_blocks.append(interleave(obj, local, colours, uv, tex_layer))
+            vert_blocks.append(interleave(obj, local, colours, uv, tex_layer, self.origin))
             v0 += len(local)
             c0 += n_chunks
         self.vertices = np.concatenate(vert_blocks)
@@ -152,13 +172,13 @@ class MeshArrays:
     def bounds(self, name: str, obj) -> None:
         """Bounding spheres (world coordinates) of an object's chunks, from its full-detail triangles."""
         *_, order, tri_chunk, c0, c1 = self.ranges[name]
-        tri = obj.world_vertices()[obj.mesh.faces[order]]
+        tri = relative_to(obj, self.origin).world_vertices()[obj.mesh.faces[order]]
         n = c1 - c0
         lo = np.full((n, 3), np.inf)
         hi = np.full((n, 3), -np.inf)
         np.minimum.at(lo, tri_chunk, tri.min(axis=1))
         np.maximum.at(hi, tri_chunk, tri.max(axis=1))
-        self.centre[c0:c1] = (lo + hi) / 2
+        self.centre[c0:c1] = (lo + hi) / 2 + self.origin
         self.radius[c0:c1] = np.linalg.norm(hi - lo, axis=1) / 2
 
     def near_chunks(self, eye: np.ndarray, radius: float) -> np.ndarray:
@@ -166,10 +186,29 @@ class MeshArrays:
         return np.linalg.norm(self.centre - eye, axis=1) - self.radius < radius
 
 
-def interleave(obj, local, colours, uv, tex_layer: float) -> np.ndarray:
-    """(V, 9) float32 vertex block of an object: world positions, colours, uv, texture layer."""
+def content_origin(objects: dict) -> np.ndarray:
+    """(3,) float64 (m): the middle of the objects' world bounding boxes (from their object-space boxes' corners)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for obj in objects.values():
+        v = obj.mesh.vertices
+        box = np.stack([v.min(axis=0), v.max(axis=0)], axis=1).astype(np.float64)  # (3 axes, min max)
+        corners = np.stack(np.meshgrid(*box, indexing="ij"), axis=-1).reshape(8, 3)
+        world = relative_to(obj, obj.position).to_world(corners) + np.asarray(obj.position, dtype=np.float64)
+        lo, hi = np.minimum(lo, world.min(axis=0)), np.maximum(hi, world.max(axis=0))
+    return (lo + hi) / 2
+
+
+def relative_to(obj, origin: np.ndarray):
+    """The object placed relative to `origin` (3,) m: its `to_world` gives float32 coordinates near 0 for
+    content near the origin, however far both lie from (0, 0, 0) (computed in float64 before rounding)."""
+    return dataclasses.replace(obj, position=tuple(np.asarray(obj.position, dtype=np.float64) - origin))
+
+
+def interleave(obj, local, colours, uv, tex_layer: float, origin: np.ndarray) -> np.ndarray:
+    """(V, 9) float32 vertex block of an object: positions (world, relative to `origin` (3,) m), colours, uv,
+    texture layer."""
     v = np.empty((len(local), _FLOATS_PER_VERTEX), dtype=np.float32)
-    v[:, 0:3] = obj.to_world(local)
+    v[:, 0:3] = relative_to(obj, origin).to_world(local)
     v[:, 3:6] = colours
     v[:, 6:8] = uv
     v[:, 8] = tex_layer
@@ -177,17 +216,19 @@ def interleave(obj, local, colours, uv, tex_layer: float) -> np.ndarray:
 
 
 def texture_layers(textures: list[np.ndarray]) -> np.ndarray | None:
-    """(L, side, side, 3) float16 layers of the mesh texture array, from textures (H, W, 3) of linear G, B, UV
-    (each resized to the largest side among them, at most MAX_TEXTURE_ARRAY_SIDE texels, its rows bottom up as GL
-    reads them); None for no texture."""
+    """(L, side, side, C) float16 layers of the mesh texture array, from textures (H, W, 3) of linear G, B, UV or
+    (H, W, 4) with a cut-out mask; C = 4 when some texture has a mask (1 for those without: drawn everywhere),
+    else 3 (GL samples alpha 1). Each is resized to the largest side among them, at most MAX_TEXTURE_ARRAY_SIDE
+    texels, its rows bottom up as GL reads them; None for no texture."""
     if not textures:
         return None
     import cv2
 
     side = min(MAX_TEXTURE_ARRAY_SIDE, max(max(t.shape[:2]) for t in textures))
-    out = np.empty((len(textures), side, side, 3), dtype=np.float16)
+    out = np.ones((len(textures), side, side, max(t.shape[2] for t in textures)), dtype=np.float16)
     for layer, t in zip(out, textures, strict=True):
-        layer[:] = cv2.resize(np.asarray(t, dtype=np.float32), (side, side), interpolation=cv2.INTER_AREA)[::-1]
+        t = np.asarray(t, dtype=np.float32)
+        layer[..., :t.shape[2]] = cv2.resize(t, (side, side), interpolation=cv2.INTER_AREA)[::-1]
     return out
 
 
@@ -246,8 +287,8 @@ class StagedUpload:
         """The texture array, its layers still to write (one white texel when there is no texture)."""
         if self._texels is None:
             return self.ctx.texture_array((1, 1, 1), 3, np.ones(3, dtype=np.float16).tobytes(), dtype="f2")
-        n_layers, side = self._texels.shape[:2]
-        return self.ctx.texture_array((side, side, n_layers), 3, dtype="f2")
+        n_layers, side, _, components = self._texels.shape
+        return self.ctx.texture_array((side, side, n_layers), components, dtype="f2")
 
     def _write_rows(self, nbytes: int) -> None:
         """About `nbytes` of texture rows, within one layer."""
@@ -281,7 +322,8 @@ class StagedUpload:
 class MeshBuffers:
     """All objects of a scene on the GPU. Per frame, `draw` culls chunks per face and renders them.
 
-    lod_angle: radians; a chunk at distance D uses level-of-detail cells up to lod_angle * D (0: no LOD).
+    lod_angle: radians; a chunk at distance D uses level-of-detail cells up to lod_angle * D / LOD_REACH (0: no
+    LOD), its vertices moving by up to half of lod_angle.
     arrays: the objects' `MeshArrays`, made beforehand in another thread (default: made here); only the GL
     uploads then run here, or only what is left of them when `upload` (a `StagedUpload` of those arrays) is given.
     gpu_cull: cull and choose levels in a compute pass (`gpu_cull.GpuCulling`, GL 4.3) instead of numpy here,
@@ -303,6 +345,8 @@ class MeshBuffers:
         a = MeshArrays(objects, chunk_size) if arrays is None else arrays
         self._arrays = a
         self._ranges, self._centre, self._radius = a.ranges, a.centre, a.radius
+        self._shift = np.eye(4)  # the vertices' coordinates -> world, in float64 before the product is rounded
+        self._shift[:3, 3] = a.origin
         if upload is None:
             upload = StagedUpload(ctx, a)
         self._vbo, self._ibo, self._textures = upload.finish()
@@ -320,14 +364,14 @@ class MeshBuffers:
             from .gpu_cull import GpuCulling
 
             self._culling = GpuCulling(ctx, self._first, self._count, self._single_sided, self.lod_angle,
-                                       LOD_CELLS[0])
+                                       LOD_REACH * LOD_CELLS[0])
             self._resources.append(self._culling)
             self._chunks_changed = True  # bounds or shown chunks to upload before the next frame
 
     def update_object(self, name: str, obj) -> None:
         """Re-upload a moved object's vertices (all levels) and recompute its chunks' bounds."""
         v0, local, colours, uv, tex_layer, *_ = self._ranges[name]
-        block = interleave(obj, local, colours, uv, tex_layer)
+        block = interleave(obj, local, colours, uv, tex_layer, self._arrays.origin)
         self._vbo.write(block.tobytes(), offset=v0 * _FLOATS_PER_VERTEX * 4)
         self._arrays.bounds(name, obj)
         self._chunks_changed = True
@@ -367,7 +411,7 @@ class MeshBuffers:
         dist = np.maximum(np.linalg.norm(self._centre[ids] - eye, axis=1) - self._radius[ids], 1e-6)
         if self.lod_angle <= 0:
             return np.zeros(len(dist), dtype=np.int64)
-        allowed = self.lod_angle * dist / LOD_CELLS[0]
+        allowed = self.lod_angle * dist / (LOD_REACH * LOD_CELLS[0])
         return np.clip(np.floor(np.log2(np.maximum(allowed, 1e-9))) + 1, 0, len(LOD_CELLS)).astype(np.int64)
 
     def near_chunks(self, eye: np.ndarray, radius: float) -> np.ndarray:
@@ -432,7 +476,7 @@ class MeshBuffers:
             if face[0][1] + face[1][1] == 0:
                 continue
             fbo.viewport = (0, k * n, n, n)
-            self.prog["view_proj"].write((proj @ views[k]).T.astype("f4").tobytes())
+            self.prog["view_proj"].write((proj @ views[k] @ self._shift).T.astype("f4").tobytes())
             for single_sided, (first, count) in enumerate(face):
                 if count:
                     self.ctx.cull_face = "back"

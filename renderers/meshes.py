@@ -1,15 +1,20 @@
 """Mesh worlds from files through trimesh (OBJ, PLY, GLB/GLTF, STL): metres, +z up.
 
 Each geometry node becomes a named `SceneObject`: its position is the node's translation, its vertices the
-rest of the node transform. Textures, vertex colours (OBJ, PLY) and OBJ's MTL Kd (of a material without a
-texture) are sRGB; glTF's base colour factor and vertex colours (COLOR_0) are linear, as its specification says
-(glTF 2.0, sections 3.9.2 and 3.7.2.1), its base colour texture sRGB. All map to G, B, UV by `channels`; meshes
-without colour are mid-grey.
+rest of the node transform (vertices far from the node's origin, as in georeferenced files, are recentred: their
+middle moves into the position, see `recentring`). Textures, vertex colours (OBJ, PLY) and OBJ's MTL Kd (of a
+material without a texture) are sRGB (float textures linear); glTF's base colour factor and vertex colours
+(COLOR_0) are linear, as its specification says (glTF 2.0, sections 3.9.2 and 3.7.2.1), its base colour texture
+sRGB. All map to G, B, UV by `channels`; meshes
+without colour are mid-grey. A glTF material's alphaMode MASK cuts its texture out where the texture's alpha
+(times the factor's) is below alphaCutoff; BLEND is drawn as MASK at 0.5 (`alpha_cutoff`); OBJ textures' alpha,
+and alpha without a texture, are ignored.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 
@@ -19,16 +24,60 @@ from .scene import MAX_TEXTURE_SIDE, MeshData, SceneObject
 
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl")
 DEFAULT_GREY = 0.5
+#: Vertices whose middle lies farther than this (m) from their node's origin are stored relative to that middle.
+RECENTRE_BEYOND_M = 1000.0
 #: glTF is +y up (its specification): (X, Y, Z) glTF -> (X, -Z, Y) world. Other formats are taken as +z up.
 GLTF_TO_WORLD = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
 
 
-def texture_rgb(image) -> np.ndarray:
-    """(H, W, 3) sRGB in [0, 1] of a PIL image, 16-bit greyscale (modes I;16*, I) at its full depth."""
-    if image.mode.startswith("I"):
-        grey = np.asarray(image, dtype=np.float64) / 65535.0
+def recentring(local: np.ndarray) -> np.ndarray:
+    """(3,) float64 shift (m) from a node's origin to the middle of its (V, 3) float64 vertices, when that lies
+    beyond RECENTRE_BEYOND_M (georeferenced files: coordinates of kilometres, whose millimetres float32 vertices
+    would lose), else zeros. The shift moves into the object's position, which stays float64."""
+    middle = (local.min(axis=0) + local.max(axis=0)) / 2
+    return middle if np.abs(middle).max() > RECENTRE_BEYOND_M else np.zeros(3)
+
+
+def texture_linear(image) -> np.ndarray:
+    """(H, W, 3) linear RGB in [0, 1] of a PIL image. 8-bit, 16-bit greyscale (I;16*) and 32-bit integer (I, at
+    its file's bit depth, 32 unless a TIFF states fewer) images are sRGB-encoded and decoded; float images (F) are
+    linear and must lie in [0, 1]. Raises ValueError for values outside that range."""
+    if image.mode == "F":
+        grey = np.asarray(image, dtype=np.float64)
+        if not (np.all(np.isfinite(grey)) and grey.min() >= 0.0 and grey.max() <= 1.0):
+            raise ValueError(f"float texture values must be linear radiances in [0, 1], got {np.nanmin(grey):g} "
+                             f"to {np.nanmax(grey):g}")
         return np.repeat(grey[..., None], 3, axis=2)
-    return np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
+    if image.mode.startswith("I"):
+        bits = 16 if image.mode.startswith("I;16") else _tiff_bits(image)
+        grey = np.asarray(image, dtype=np.float64)
+        if grey.min() < 0:
+            raise ValueError(f"integer texture values must be >= 0, got {grey.min():g}")
+        return np.repeat(srgb_to_linear(grey / (2.0**bits - 1))[..., None], 3, axis=2)
+    return srgb_to_linear(np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0)
+
+
+def _tiff_bits(image) -> int:
+    """Bits per sample of a 32-bit integer (mode I) PIL image: its TIFF's BitsPerSample (tag 258), else 32."""
+    stated = getattr(image, "tag_v2", {}).get(258, (32,))
+    return int(stated[0] if isinstance(stated, tuple) else stated)
+
+
+def _unit(factor) -> np.ndarray:
+    """A colour factor as float64 in [0, 1] (trimesh gives glTF's as uint8 0..255, MTL's as floats)."""
+    f = np.asarray(factor)
+    return f.astype(np.float64) / (255.0 if f.dtype.kind in "iu" else 1.0)
+
+
+def alpha_cutoff(material) -> float | None:
+    """The texture alpha below which a glTF material is not drawn: its alphaCutoff (0.5 by default) for alphaMode
+    MASK; 0.5 for BLEND (drawn as a cut-out: the dome's meshes are not sorted back to front for blending); None
+    for OPAQUE (alpha ignored)."""
+    mode = str(getattr(material, "alphaMode", None) or "OPAQUE").upper()
+    if mode == "MASK":
+        cutoff = getattr(material, "alphaCutoff", None)
+        return 0.5 if cutoff is None else float(cutoff)
+    return 0.5 if mode == "BLEND" else None
 
 
 def _colours_and_texture(geom, name: str, mtl_kd: dict, gltf: bool):
@@ -48,22 +97,66 @@ def _colours_and_texture(geom, name: str, mtl_kd: dict, gltf: bool):
         factor = getattr(material, "baseColorFactor", None)
         if not textured:
             factor = mtl_kd.get(getattr(material, "name", None), factor)
-        base = np.ones(3) if factor is None else np.asarray(factor, dtype=np.float64)[:3] / (
-            255.0 if np.asarray(factor).dtype.kind in "iu" else 1.0)
+        base = np.ones(3) if factor is None else _unit(factor)[:3]
         base = base if gltf else srgb_to_linear(base)
         if not textured:
             return np.repeat(rgb_to_gbu(base)[None, :], n, axis=0), None, None
-        img = texture_rgb(image)
+        try:
+            img = texture_linear(image)
+        except ValueError as exc:
+            raise ValueError(f"texture of object {name!r}: {exc}") from exc
         if max(img.shape[:2]) > MAX_TEXTURE_SIDE:
             raise ValueError(f"texture of object {name!r} is {img.shape[1]}x{img.shape[0]} pixels; the largest "
                              f"side allowed is {MAX_TEXTURE_SIDE}")
         # the factor goes into the texture in linear RGB: the shader multiplies texture and vertex colour (white)
-        texture = rgb_to_gbu(srgb_to_linear(img) * base)
+        texture = rgb_to_gbu(img * base)
+        cutoff = alpha_cutoff(material) if gltf else None
+        if cutoff is not None:
+            alpha = np.asarray(image.convert("RGBA"), dtype=np.float64)[..., 3] / 255.0
+            alpha *= 1.0 if factor is None or np.size(factor) < 4 else _unit(factor)[3]
+            texture = np.concatenate([texture, (alpha >= cutoff)[..., None].astype(np.float32)], axis=2)
         return np.ones((n, 3), np.float32), np.asarray(visual.uv, dtype=np.float32), texture
     if kind == "vertex" or kind == "face":
         rgb = np.asarray(visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
         return rgb_to_gbu(rgb if gltf else srgb_to_linear(rgb)), None, None
     return np.full((n, 3), DEFAULT_GREY, dtype=np.float32), None, None
+
+
+def _gltf_json(path: Path) -> dict:
+    """The JSON document of a .gltf file or of a .glb file's first chunk; ValueError naming the file if unreadable."""
+    import json
+    import struct
+
+    data = path.read_bytes()
+    try:
+        if path.suffix.lower() == ".glb":
+            length, kind = struct.unpack_from("<I4s", data, 12)
+            if kind != b"JSON":
+                raise ValueError("the first chunk is not JSON")
+            data = data[20:20 + length]
+        return json.loads(data)
+    except (ValueError, struct.error) as exc:
+        raise ValueError(f"cannot read glTF file {path}: {exc}") from exc
+
+
+def check_gltf_textures(path: Path) -> None:
+    """ValueError naming the file and the material whose base colour texture does not lead to an image: a texture
+    or image index out of range, or an image file that is missing (trimesh drew such a material untextured)."""
+    doc = _gltf_json(path)
+    textures, images = doc.get("textures", []), doc.get("images", [])
+    for m, material in enumerate(doc.get("materials", [])):
+        ref = material.get("pbrMetallicRoughness", {}).get("baseColorTexture")
+        if ref is None:
+            continue
+        name = material.get("name", f"#{m}")
+        index = ref.get("index")
+        source = textures[index].get("source") if isinstance(index, int) and 0 <= index < len(textures) else None
+        image = images[source] if isinstance(source, int) and 0 <= source < len(images) else None
+        uri = unquote(image.get("uri", "")) if image is not None else ""
+        if image is None or (uri and not uri.startswith("data:") and not (path.parent / uri).is_file()):
+            what = f"image {uri!r} not found" if image is not None else f"texture {index!r} leads to no image"
+            raise ValueError(f"{path}: material {name!r}: its base colour texture cannot be read ({what}); allowed: "
+                             f"a texture index into textures whose source indexes images, the image file present")
 
 
 def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
@@ -86,6 +179,8 @@ def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
         raise ValueError(f"cannot read mesh file {path}: {type(exc).__name__}: {exc}") from exc
     objects: dict[str, SceneObject] = {}
     gltf = path.suffix.lower() in (".glb", ".gltf")
+    if gltf:
+        check_gltf_textures(path)
     for node in loaded.graph.nodes_geometry:
         transform, geom_name = loaded.graph[node]
         geom = loaded.geometry[geom_name]
@@ -101,11 +196,12 @@ def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
             if gltf:
                 t = GLTF_TO_WORLD @ t
             local = np.asarray(geom.vertices, dtype=np.float64) @ t[:3, :3].T
-            mesh = MeshData(local.astype(np.float32), np.asarray(geom.faces), colours, uv, texture)
+            shift = recentring(local)
+            mesh = MeshData((local - shift).astype(np.float32), np.asarray(geom.faces), colours, uv, texture)
             mesh.validate(name)
         except ValueError as exc:
             raise ValueError(f"{path}: {exc}") from exc
-        objects[name] = SceneObject(mesh, position=tuple(t[:3, 3]))
+        objects[name] = SceneObject(mesh, position=tuple(t[:3, 3] + shift))
     if not objects:
         raise ValueError(f"mesh file {path} contains no triangles (empty or not a triangle mesh)")
     return objects

@@ -3,8 +3,10 @@
 Image convention: the centre column looks along azimuth 0 (+x), azimuth grows to the left (counter-
 clockwise seen from above), the top row is the zenith. 8- and 16-bit images are sRGB-encoded and decoded at
 full precision; float images (EXR, float TIFF) are linear radiance and keep their range (scaled by
-`exposure`, clipped at the LEDs' maximum). An alpha channel makes pixels transparent (the sky shows through);
-an optional single-channel `uv` image is the explicit UV layer, otherwise UV = uv_ratio * blue.
+`exposure`, clipped at the LEDs' maximum). Grey images (and grey + alpha) are spread to RGB(A). An alpha channel
+makes pixels transparent (the sky shows through); an optional single-channel `uv` image is the explicit UV
+layer, otherwise UV = uv_ratio * blue. The UV layer follows the image's rule by its own type: 8- or 16-bit
+sRGB-decoded, float linear times `exposure`.
 """
 
 from __future__ import annotations
@@ -79,6 +81,16 @@ def read_image(path: str | Path) -> tuple[np.ndarray, bool]:
     return img, is_float
 
 
+def _as_rgba(img: np.ndarray, source) -> np.ndarray:
+    """(H, W, 3 or 4) RGB(A) of an (H, W, C) image: grey (C = 1) and grey + alpha (C = 2) spread to RGB(A)."""
+    channels = img.shape[2]
+    if channels in (1, 2):
+        return np.concatenate([np.repeat(img[:, :, :1], 3, axis=2), img[:, :, 1:]], axis=2)
+    if channels not in (3, 4):
+        raise ValueError(f"panorama {source} must be grey, grey + alpha, RGB or RGBA, got {channels} channels")
+    return img
+
+
 def equirect_lookup(image: np.ndarray, d: np.ndarray) -> np.ndarray:
     """Bilinear lookup of an (H, W, C) equirectangular image at (N, 3) unit directions -> (N, C) float32."""
     import cv2
@@ -105,7 +117,8 @@ ASPECT_TOLERANCE = 0.01  # of the width: how far from 2:1 an equirectangular ima
 
 @dataclass
 class Panorama:
-    """Far-field panorama layer from an equirectangular image file or an (H, W, 3|4) array (sRGB in [0, 1])."""
+    """Far-field panorama layer from an equirectangular image file or an (H, W[, 1 to 4]) array (sRGB in [0, 1]);
+    `uv`: an image file or (H, W[, C]) array (its first channel) of the explicit UV layer, read by the same rule."""
 
     source: object
     uv: object = None
@@ -124,10 +137,11 @@ class Panorama:
             img, is_float = read_image(self.source)
         else:
             img, is_float = np.asarray(self.source, dtype=np.float64), False
-            if img.ndim != 3 or img.shape[2] not in (3, 4) or not np.all(np.isfinite(img)):
-                raise ValueError(f"panorama array must be finite (H, W, 3 or 4), got shape {img.shape}")
-        if img.shape[2] not in (3, 4):
-            raise ValueError(f"panorama {self.source} must be RGB or RGBA, got {img.shape[2]} channel(s)")
+            if img.ndim == 2:
+                img = img[:, :, None]
+            if img.ndim != 3 or not 1 <= img.shape[2] <= 4 or not np.all(np.isfinite(img)):
+                raise ValueError(f"panorama array must be finite (H, W) or (H, W, 1 to 4), got shape {img.shape}")
+        img = _as_rgba(img, self.source)
         h, w = img.shape[:2]
         if w < 8 or h < 4:
             raise ValueError(f"panorama {self.source} is too small ({w}x{h} pixels)")
@@ -135,14 +149,17 @@ class Panorama:
             name = self.source if isinstance(self.source, (str, Path)) else "array"
             raise ValueError(f"panorama {name} is {w}x{h} pixels: an equirectangular image spans 360 x 180 degrees, "
                              f"so its width must be twice its height (within {ASPECT_TOLERANCE:.0%})")
-        rgb = img[:, :, :3] * self.exposure if is_float else srgb_to_linear(img[:, :, :3])
+        rgb = self._linear(img[:, :, :3], is_float)
         uv = None
         if self.uv is not None:
-            uv_img = read_image(self.uv)[0] if isinstance(self.uv, (str, Path)) else np.asarray(self.uv, float)
+            if isinstance(self.uv, (str, Path)):
+                uv_img, uv_float = read_image(self.uv)
+            else:
+                uv_img, uv_float = np.asarray(self.uv, dtype=np.float64), False
             if uv_img.shape[:2] != (h, w):
                 raise ValueError(f"UV layer {self.uv} is {uv_img.shape[1]}x{uv_img.shape[0]}, "
                                  f"the panorama {w}x{h}: they must match")
-            uv = uv_img.reshape(h, w, -1)[:, :, 0]
+            uv = self._linear(uv_img.reshape(h, w, -1)[:, :, 0], uv_float)
         gbu = rgb_to_gbu(rgb, uv, self.uv_ratio)
         alpha = img[:, :, 3:4] if img.shape[2] == 4 else np.ones((h, w, 1))
         if not (alpha.min() >= 0.0 and alpha.max() <= 1.0):
@@ -155,6 +172,11 @@ class Panorama:
 
             gbua = cv2.resize(gbua, (self.max_width, max(2, self.max_width * h // w)), interpolation=cv2.INTER_AREA)
         self._gbua = gbua
+
+    def _linear(self, values: np.ndarray, is_float: bool) -> np.ndarray:
+        """Linear radiance of image values (the colour image's and the UV layer's alike): float images are
+        linear and scaled by `exposure`, integer images and arrays sRGB-encoded in [0, 1]."""
+        return values * self.exposure if is_float else srgb_to_linear(values)
 
     @property
     def gbua(self) -> np.ndarray:

@@ -102,8 +102,9 @@ class Renderer:
     dome: `antarium.geometry.Dome` (default: `load_dome()`); face_size: cube face side in texels (default
     from the LED pitch); footprint_deg: FWHM of each LED's acceptance; brightness: global drive scale
     in [0, 1]; near, far: clip planes (m); far_face_size: side of the far-field cube texture; chunk_size:
-    cell (m) of the culling grid of large meshes; lod_texels: level-of-detail error bound in texels (0: full
-    detail always); clock: an `antarium.core.clock` clock for drifting stimuli when `render` gets no time;
+    cell (m) of the culling grid of large meshes; lod_texels: level-of-detail bound in texels, twice the most a
+    merged vertex moves (0: full detail always); clock: an `antarium.core.clock` clock for drifting stimuli
+    when `render` gets no time;
     fast_far_field: take static far fields from a footprint-integrated table (`farfield`) instead of drawing
     them into the cube map every frame; far_layer: "off", "sync" or "async": draw only the meshes within
     `near_radius` (m) every frame, the rest from a layer rendered from a recent eye position while its

@@ -15,6 +15,9 @@ from .channels import CHANNELS
 
 #: Largest texture side accepted on a mesh (larger textures are refused with a clear error).
 MAX_TEXTURE_SIDE = 8192
+#: Largest vertex coordinate and object position accepted (m): beyond the Earth's size is a unit or file error
+#: (mesh files with coordinates of kilometres are recentred on load, `meshes.recentring`).
+MAX_COORDINATE_M = 1e7
 #: Largest channel gain and contrast accepted (beyond them a frame is all saturated or all dark anyway).
 MAX_GAIN = 1000.0
 
@@ -24,7 +27,9 @@ class MeshData:
     """A triangle mesh in object coordinates (metres, +z up) with linear G, B, UV vertex radiances.
 
     vertices (V, 3) float32; faces (F, 3) uint32; colours (V, 3) float32 in [0, 1];
-    uv (V, 2) float32 texture coordinates and texture (H, W, 3) float32 linear G, B, UV, or both None;
+    uv (V, 2) float32 texture coordinates and texture (H, W, 3) float32 linear G, B, UV in [0, 1] (or (H, W, 4):
+    the fourth channel a cut-out mask, 1 drawn, 0 not: fragments where it samples below 0.5 are discarded), or
+    both None; vertices within MAX_COORDINATE_M of (0, 0, 0);
     double_sided: False for closed surfaces wound counter-clockwise seen from outside (their back faces
     are culled, which saves rasterising them).
     """
@@ -46,6 +51,9 @@ class MeshData:
             raise ValueError(f"mesh {name!r}: has no triangles (faces shape {f.shape})")
         if not np.all(np.isfinite(v)):
             raise ValueError(f"mesh {name!r}: vertices contain NaN or infinite values")
+        if np.abs(v).max() > MAX_COORDINATE_M:
+            raise ValueError(f"mesh {name!r}: vertex coordinates reach {np.abs(v).max():.3g} m; allowed: within "
+                             f"{MAX_COORDINATE_M:g} m of the object's origin")
         if f.dtype.kind not in "iu" or f.min() < 0 or f.max() >= len(v):
             raise ValueError(f"mesh {name!r}: face indices must be integers in 0..{len(v) - 1}")
         corners = v[f].astype(np.float64)
@@ -58,8 +66,11 @@ class MeshData:
             raise ValueError(f"mesh {name!r}: texture coordinates and texture go together")
         if self.texture is not None:
             t = np.asarray(self.texture, dtype=np.float32)
-            if t.ndim != 3 or t.shape[2] != 3 or min(t.shape[:2]) < 1:
-                raise ValueError(f"mesh {name!r}: texture must be (H, W, 3), got {t.shape}")
+            if t.ndim != 3 or t.shape[2] not in (3, 4) or min(t.shape[:2]) < 1:
+                raise ValueError(f"mesh {name!r}: texture must be (H, W, 3) or (H, W, 4), got {t.shape}")
+            if not (np.all(np.isfinite(t)) and t.min() >= 0.0 and t.max() <= 1.0):
+                raise ValueError(f"mesh {name!r}: texture values must be in [0, 1], got {np.nanmin(t):g} to "
+                                 f"{np.nanmax(t):g}")
             if max(t.shape[:2]) > MAX_TEXTURE_SIDE:
                 raise ValueError(f"mesh {name!r}: texture of {t.shape[1]}x{t.shape[0]} pixels is larger than "
                                  f"{MAX_TEXTURE_SIDE} pixels on a side")
@@ -86,8 +97,9 @@ class SceneObject:
 
     def __post_init__(self):
         p = np.asarray(self.position, dtype=np.float64)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise ValueError(f"object position must be 3 finite numbers (m), got {self.position!r}")
+        if p.shape != (3,) or not np.all(np.isfinite(p)) or np.abs(p).max() > MAX_COORDINATE_M:
+            raise ValueError(f"object position must be 3 finite numbers (m) within {MAX_COORDINATE_M:g} m of "
+                             f"(0, 0, 0), got {self.position!r}")
         if not np.isfinite(self.yaw):
             raise ValueError(f"object yaw must be finite, got {self.yaw!r}")
         if not (np.isfinite(self.scale) and self.scale > 0):
@@ -108,7 +120,8 @@ class SceneObject:
 
 @dataclass
 class Scene:
-    """A world: `far` layers at infinity (first opaque, later ones composited over it by their alpha) and
+    """A world: `far` layers at infinity (each composited over the ones before it by its alpha, the first over
+    black) and
     named `objects`. Edits: `rotation` of the whole scene about the vertical through `pivot` (x, y) m;
     `channel_gain` (G, B, UV); `swap_green_blue`; `lowpass_deg` (angular low-pass cut-off period, degrees)
     and `contrast` (scaling of deviations from the frame's mean, per channel).
@@ -170,8 +183,8 @@ class Scene:
 
         When the far field only rotates (`yaw_rate`), this is its state at t = 0; the renderer rotates it.
         """
-        out = self.far[0].evaluate(d, t)[:, :4].copy()
-        for layer in self.far[1:]:
+        out = np.zeros((len(d), 4), dtype=np.float32)  # black under the first layer (a transparent one: bars alone)
+        for layer in self.far:
             v = layer.evaluate(d, t)
             a = v[:, 4:5]
             out = out * (1.0 - a) + v[:, :4] * a

@@ -44,7 +44,8 @@ void main() {
 """
 
 # Meshes carry no polarisation. The fourth channel is 0 (polarised UV) when the far field is drawn into the
-# atlas behind them, or 1 (coverage) when the far field is added per LED from its table.
+# atlas behind them, or 1 (coverage) when the far field is added per LED from its table. A texture's fourth
+# channel is its cut-out mask (`meshbuffers.texture_layers`): where it samples below 0.5, nothing is drawn.
 MESH_FS = """
 #version 330
 uniform sampler2DArray textures;
@@ -56,7 +57,11 @@ out vec4 frag;
 void main() {
     vec3 c = v_col;
     if (v_layer >= 0.0) {
-        c *= texture(textures, vec3(v_uv, v_layer)).rgb;
+        vec4 t = texture(textures, vec3(v_uv, v_layer));
+        if (t.a < 0.5) {
+            discard;
+        }
+        c *= t.rgb;
     }
     frag = vec4(c, coverage);
 }

@@ -4,6 +4,9 @@ Every layer has `evaluate(d, t) -> (N, 5) float32 [G, B, UV, polarised UV, alpha
 directions at time t (s). Azimuth is measured from +x counter-clockwise, elevation from the horizon.
 `yaw_rate` (rad/s) is non-zero when the layer's motion is a rotation about the vertical (drawn for free by
 rotating the view); `time_varying` is True when the layer must be re-evaluated every frame.
+
+Every colour must be showable (`channels.check_showable`: green + blue <= 1 on a GB pixel), and patterns that
+vary with azimuth must meet themselves at azimuth +-180 deg (`check_no_seam`): both are refused, not shown wrong.
 """
 
 from __future__ import annotations
@@ -13,7 +16,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .channels import parse_colour
+from antarium.core.numbers import check_number
+
+from .channels import check_showable, parse_colour
+
+#: phase mismatch (cycles) allowed where a pattern meets itself at azimuth +-180 deg (1e-3 cycle: invisible)
+SEAM_TOLERANCE = 1e-3
+#: |sin(orientation)| below which a grating is a drum (varies with azimuth only): sin(pi) is 1.2e-16, not 0
+DRUM_TOLERANCE = 1e-9
 
 
 def azimuth_elevation(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -26,6 +36,17 @@ def _rgba(colour: np.ndarray, n: int, alpha: float | np.ndarray = 1.0) -> np.nda
     out[:, :3] = colour
     out[:, 4] = alpha
     return out
+
+
+def check_no_seam(cycles: float, what: str, valid: str, nearest) -> None:
+    """Refuse a pattern with `cycles` (float) repeats in one turn of azimuth unless that is a whole number: else its
+    two ends disagree at azimuth +-180 deg, a seam (a drum turning carries it round as a moving edge).
+    what: the pattern and its parameters; valid: the rule for seamless values; nearest(n) -> the value giving n."""
+    if abs(cycles - round(cycles)) <= SEAM_TOLERANCE:
+        return
+    options = sorted({f"{nearest(n):.8g}" for n in (math.floor(cycles), math.ceil(cycles)) if n >= 1}, key=float)
+    raise ValueError(f"{what} has a seam at azimuth +-180 deg ({cycles:.4g} repeats around the dome, not a whole "
+                     f"number); {valid}: nearest {' or '.join(options)} deg")
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:
@@ -73,7 +94,8 @@ class Horizon(_Static):
     def __post_init__(self):
         self.sky = parse_colour(self.sky, "horizon sky colour")
         self.ground = parse_colour(self.ground, "horizon ground colour")
-        if not (np.isfinite(self.elevation) and abs(self.elevation) < np.pi / 2):
+        self.elevation = check_number("horizon elevation (rad)", self.elevation)
+        if not abs(self.elevation) < np.pi / 2:
             raise ValueError(f"horizon elevation must be within (-90, 90) degrees, got {self.elevation!r} rad")
 
     def evaluate(self, d, t=0.0):
@@ -92,9 +114,8 @@ class Bar:
     top: float = np.pi / 2
 
     def __post_init__(self):
-        vals = (self.azimuth, self.width, self.bottom, self.top)
-        if not all(np.isfinite(v) for v in vals):
-            raise ValueError(f"bar azimuth, width, bottom and top must be finite, got {vals!r}")
+        for name in ("azimuth", "width", "bottom", "top"):
+            setattr(self, name, check_number(f"bar {name} (rad)", getattr(self, name)))
         if not 0 < self.width <= 2 * np.pi:
             raise ValueError(f"bar width must be in (0, 360] degrees, got {np.degrees(self.width)!r}")
         if not -np.pi / 2 <= self.bottom < self.top <= np.pi / 2:
@@ -111,11 +132,12 @@ class Bar:
 
 @dataclass
 class Bars(_Static):
-    """One or several bars of `colour` on `background` (None: transparent, an overlay on other layers)."""
+    """One or several bars of `colour` on `background` (None: transparent, an overlay on the layers under it; the
+    first layer of a scene lies on black)."""
 
     bars: list = field(default_factory=lambda: [Bar()])
     colour: object = 0.0
-    background: object = 1.0
+    background: object = 0.5
 
     def __post_init__(self):
         if not self.bars:
@@ -142,7 +164,11 @@ class Grating:
 
     Phase varies along the direction `orientation` (rad) in the azimuth-elevation plane: 0 gives vertical
     stripes varying with azimuth (a drum; drifting = rotating about the vertical, free), pi/2 horizontal
-    stripes. Radiance = mean * (1 + contrast * wave) * colour, wave in [-1, 1].
+    stripes. Radiance = mean * (1 + contrast * wave) * colour, wave in [-1, 1]; its peak must be showable
+    (green + blue <= 1: the default grey colour 0.5 at mean 0.5 and contrast 1 peaks at G = B = UV = 0.5).
+    Wherever it varies with azimuth (orientation not +-pi/2) it must repeat a whole number of times around the
+    dome, |cos(orientation)| * 2 pi / period, or it would have a seam at azimuth +-pi: a drum's period divides
+    2 pi; an oblique grating's period is |cos(orientation)| * 2 pi / n (n = 1, 2, ...), so only such periods.
     """
 
     period: float = np.radians(20.0)
@@ -150,29 +176,35 @@ class Grating:
     waveform: str = "sine"
     contrast: float = 1.0
     mean: float = 0.5
-    colour: object = 1.0
+    colour: object = 0.5
     speed: float = 0.0
     phase: float = 0.0
 
     def __post_init__(self):
         if self.waveform not in ("sine", "square"):
             raise ValueError(f"grating waveform must be 'sine' or 'square', got {self.waveform!r}")
-        for name in ("period", "orientation", "contrast", "mean", "speed", "phase"):
-            if not np.isfinite(getattr(self, name)):
-                raise ValueError(f"grating {name} must be finite, got {getattr(self, name)!r}")
+        for name in ("period", "orientation", "speed", "phase"):
+            setattr(self, name, check_number(f"grating {name} (rad)", getattr(self, name)))
+        self.contrast = check_number("grating contrast", self.contrast, 0.0, 1.0)
+        self.mean = check_number("grating mean", self.mean, 0.0)
         if not 0 < self.period <= 2 * np.pi:
             raise ValueError(f"grating period must be in (0, 360] degrees, got {np.degrees(self.period)!r}")
-        if not (0 <= self.contrast <= 1 and self.mean >= 0 and self.mean * (1 + self.contrast) <= 1):
-            raise ValueError(f"grating contrast must be in [0, 1] and mean*(1+contrast) <= 1, got "
-                             f"contrast={self.contrast!r}, mean={self.mean!r}")
-        self.colour = parse_colour(self.colour, "grating colour")
+        self.colour = parse_colour(self.colour, "grating colour", showable=False)
+        peak = self.mean * (1.0 + self.contrast)
+        check_showable(peak * self.colour, f"grating peak, mean {self.mean:g} * (1 + contrast {self.contrast:g}) "
+                                           "* colour,")
+        across = abs(math.cos(self.orientation))
+        check_no_seam(across * 2 * np.pi / self.period,
+                      f"grating period {math.degrees(self.period):g} deg at orientation "
+                      f"{math.degrees(self.orientation):g} deg",
+                      "seamless periods are |cos(orientation)| * 360 / n deg", lambda n: across * 360.0 / n)
 
     def supersample(self, step):
         return _samples_per(step, self.period / 2)
 
     @property
     def _is_drum(self) -> bool:
-        return float(np.sin(self.orientation)) == 0.0
+        return abs(math.sin(self.orientation)) < DRUM_TOLERANCE
 
     @property
     def yaw_rate(self) -> float:
@@ -200,15 +232,19 @@ class Grating:
 
 @dataclass
 class Checkerboard(_Static):
-    """Squares of `size` (rad) in azimuth and elevation, alternating between `colour_a` and `colour_b`."""
+    """Squares of `size` (rad) in azimuth and elevation, alternating between `colour_a` and `colour_b`; an even
+    number of squares must fit around the dome (size = pi / n), or the ones at azimuth +-pi would not alternate."""
 
     size: float = np.radians(15.0)
     colour_a: object = 0.0
-    colour_b: object = 1.0
+    colour_b: object = 0.5
 
     def __post_init__(self):
-        if not (np.isfinite(self.size) and 0 < self.size <= np.pi):
-            raise ValueError(f"checkerboard square size must be in (0, 180] degrees, got {self.size!r} rad")
+        self.size = check_number("checkerboard square size (rad)", self.size)
+        if not 0 < self.size <= np.pi:
+            raise ValueError(f"checkerboard square size must be in (0, 180] degrees, got {math.degrees(self.size)!r}")
+        check_no_seam(np.pi / self.size, f"checkerboard of {math.degrees(self.size):g} deg squares",
+                      "seamless sizes are 180 / n deg (an even number of squares around)", lambda n: 180.0 / n)
         self.colour_a = parse_colour(self.colour_a, "checkerboard colour_a")
         self.colour_b = parse_colour(self.colour_b, "checkerboard colour_b")
 

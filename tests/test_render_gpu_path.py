@@ -65,11 +65,12 @@ def both(pair, method: str, *args, **kwargs) -> None:
 
 SCENES = {
     "uniform": lambda tmp: {"scene": "uniform", "colour": [0.4, 0.2, 0.3]},
-    "bars": lambda tmp: {"scene": "bars", "azimuth_deg": 30, "width_deg": 10, "colour": [1, 0.5, 0.2]},
-    "drifting grating": lambda tmp: {"scene": "grating", "period_deg": 20, "speed_deg_s": 30, "colour": [1, 0.3, 0.6]},
+    "bars": lambda tmp: {"scene": "bars", "azimuth_deg": 30, "width_deg": 10, "colour": [0.6, 0.3, 0.2]},
+    "drifting grating": lambda tmp: {"scene": "grating", "period_deg": 20, "speed_deg_s": 30,
+                                     "colour": [0.7, 0.3, 0.6]},
     "sky (polarised)": lambda tmp: {"scene": "sky"},
     "panorama": lambda tmp: {"scene": "panorama", "path": _stripes(tmp)},
-    "mesh over the far-field table": lambda tmp: with_box({"scene": "horizon", "sky": 0.6, "ground": 0.2}),
+    "mesh over the far-field table": lambda tmp: with_box({"scene": "horizon", "sky": 0.45, "ground": 0.2}),
     "mesh over a drifting far field": lambda tmp: with_box({"scene": "grating", "period_deg": 30, "speed_deg_s": 40}),
     "habitat": lambda tmp: "habitat",
 }
@@ -105,7 +106,7 @@ def test_the_far_field_table_looked_up_on_the_gpu_matches_the_cpu_at_every_headi
     columns: headings on both sides of 0 and of a turn, and between grid columns, with and without meshes."""
     headings = [-7.0, -1e-9, 0.0, 1e-4, math.radians(0.125), math.pi, 2 * math.pi - 1e-6, 12.5, 1e4]
     poses = [Pose(0.1, 0.2, 0.05, h) for h in headings]
-    for spec in ({"scene": "sky"}, with_box({"scene": "horizon", "sky": 0.6, "ground": 0.2})):
+    for spec in ({"scene": "sky"}, with_box({"scene": "horizon", "sky": 0.45, "ground": 0.2})):
         for r in pair:
             r.set_scene(spec if isinstance(spec, dict) else _copy(spec))
         assert_same(pair, poses=poses, what=f"in {spec if isinstance(spec, dict) else 'horizon + box'}")
