@@ -22,11 +22,11 @@ def figures(monkeypatch):
     kept = []
     real = style.save
 
-    def keep(fig, path, dpi=110):
+    def keep(fig, path, dpi=110, **kw):
         kept.append((fig, [t.get_text() for ax in fig.axes for t in ax.texts],
                      [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()],
                      style.problems(fig)))
-        return real(fig, path, dpi)
+        return real(fig, path, dpi, **kw)
 
     monkeypatch.setattr(style, "save", keep)
     return kept
@@ -92,13 +92,13 @@ def test_azimuth_ticks_are_rounded_not_truncated():
         ["120°", "60°", "-30°", "180°", "-179°"]
 
 
-def test_the_traces_run_against_time_and_the_paths_mark_the_release(tmp_path, figures):
+def test_the_traces_run_per_decision_and_the_paths_mark_the_release(tmp_path, figures):
     _all_pictures(tmp_path)
     paths_fig, _, paths_legend, _ = figures[3]
     assert "followed: release point" in paths_legend
     assert "lateral error 1 cm" in paths_fig.axes[0].get_title()
     traces_fig = figures[4][0]
-    assert traces_fig.axes[-1].get_xlabel().startswith("time since release (s")
+    assert traces_fig.axes[-1].get_xlabel().startswith("decision since release (count")
     assert {ax.get_ylabel() for ax in traces_fig.axes} == {"λ (1: 0 familiar .. 1 novel)", "signal (1)"}
     assert "motivation (constant 1)" in figures[4][2]
 

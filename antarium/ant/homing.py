@@ -237,7 +237,8 @@ def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 150
                     "n_inbound": n_inbound, "scene": str(scene)})
         title = f"CX path integration, {compass} compass ({len(outcomes)} routes of {n_outbound} steps)"
         summary["paths_png"] = str(plot_trips(out / f"pi_homing_{compass}_paths.png", trips, title))
-        summary["distance_png"] = str(plot_distance(out / f"pi_homing_{compass}_distance.png", trips, title))
+        summary["distance_png"] = str(plot_distance(out / f"pi_homing_{compass}_distance.png", trips, title,
+                                                    model.params.step))
     return summary
 
 
@@ -434,5 +435,6 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
         pictures = {name: (out, trip) for name, trip in trips.items()}
         result["png"] = str(plot_trips(path / f"displacement_{compass}.png", pictures,
                                        f"displaced {lateral} m left of the feeder: PI vs visual memory",
-                                       {"fictive nest (where PI points)": tuple(result["fictive_nest_xy_m"])}))
+                                       {"fictive nest (where PI points)": tuple(result["fictive_nest_xy_m"])},
+                                       {f"displaced, k = {k}": (float(start[0]), float(start[1])) for k in ks}))
     return result

@@ -186,9 +186,11 @@ def _read(path: Path, data):
 
 
 def mbon_bytes(model) -> dict[str, int]:
-    """Bytes of memory per MBON (bit-packed), or of the stored views for perfect memory ({'views': bytes})."""
+    """Bytes of the learned memory as a model file stores it (`save_model`, before compression), for every kind
+    alike: per MBON its bit-packed synapses, the CX's CPU4 (float64), or perfect memory's views in float16
+    ({'views': bytes}; a running model holds them in float32, in a store with room to grow: more than this)."""
     if isinstance(model, PerfectMemoryModel):
-        return {"views": int(model.views.astype(np.float16).nbytes)}
+        return {"views": int(model.views.size * np.dtype(np.float16).itemsize)}
     sizes = {name: int(mbon.packed().nbytes) for name, mbon in getattr(model, "mbons", {}).items()}
     if hasattr(model, "cx"):
         sizes["cpu4"] = int(model.cx.memory().nbytes)

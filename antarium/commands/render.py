@@ -32,6 +32,8 @@ def parse_scene_spec(scene: str, settings: list[str]) -> dict:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from antarium.plots.dome_map import MIN_WIDTH_PX
+
     parser.add_argument("scene", help="scene name (habitat, grating, bars, ...), mesh/panorama file, or JSON table")
     parser.add_argument("--set", dest="settings", action="append", metavar="KEY=VALUE",
                         help="scene parameter, e.g. --set period_deg=20 (repeatable; values are JSON)")
@@ -50,7 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="cube face side in texels (default: the renderer's; allowed: from the smallest that "
                              "samples every LED's footprint, 55 at the dome's 1.5 degree pitch, to 2048)")
     parser.add_argument("--width", type=int, default=1200,
-                        help="picture width in pixels, at least 64 (default %(default)s)")
+                        help=f"picture width in pixels, at least {MIN_WIDTH_PX}: narrower maps have illegible text "
+                             "(default %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,14 +63,15 @@ def run(args: argparse.Namespace) -> int:
     from antarium.core.numbers import check_number
     from antarium.core.pose import Pose
     from antarium.geometry import load_dome
-    from antarium.plots.dome_map import atlas_image, dome_picture, save_png
+    from antarium.plots.dome_map import MIN_WIDTH_PX, atlas_image, dome_picture, save_png
     from antarium.renderers.library import build_scene
     from antarium.renderers.renderer import MAX_FACE_SIZE, Renderer, smallest_face_size
 
     x, y, z = (check_number(f"--pos {axis} (metres)", v) for axis, v in zip("XYZ", args.pos, strict=True))
     pose = Pose.from_deg(x, y, z, heading_deg=check_number("--heading (degrees)", args.heading))
-    if args.width < 64:
-        raise ValueError(f"--width must be at least 64 pixels, got {args.width}")
+    if args.width < MIN_WIDTH_PX:
+        raise ValueError(f"--width must be at least {MIN_WIDTH_PX} pixels (narrower maps have illegible text), "
+                         f"got {args.width}")
     if z < 0:
         raise ValueError(f"--pos Z is the eye's height above the ground (z = 0) in metres and must be >= 0, "
                          f"got {z:g}")

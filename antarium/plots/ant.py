@@ -57,14 +57,20 @@ def plot_paths(path: str | Path, route: Route, tracks: dict[str, Track], title: 
         if len(xy) == 0:
             continue
         colour = f"C{i % 10}" if i % 10 != 3 else "C9"
-        # Break the line where the ant was put back on the route (Ardin's protocol).
-        cuts = [0, *[k + 1 for k in track.put_back], len(xy)]
+        # Ardin's protocol: at decision k the ant, too far from the route, was picked up at xy[k] and put back on
+        # the nearest route point; the line breaks there and goes on from the put-back point.
+        picked = np.asarray(track.put_back, int)
+        put = route.at(route.project(xy[picked])[0])[0] if picked.size else np.zeros((0, 2))
+        cuts = [0, *(picked + 1), len(xy)]
         for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:], strict=True)):
-            ax.plot(*xy[a:b].T, color=colour, lw=1.2, label=label if j == 0 else None)
+            part = xy[a:b] if j == 0 else np.vstack([put[j - 1], xy[a:b]])
+            ax.plot(*part.T, color=colour, lw=1.2, label=label if j == 0 else None)
         ax.plot(*xy[0], "^", color=colour, ms=8, mec="k", label=f"{label}: release point")
-        if track.put_back:
-            bad = xy[np.asarray(track.put_back)]
-            ax.plot(*bad.T, "x", color=colour, ms=6, label=f"{label}: put back on the route")
+        if picked.size:
+            ax.plot(*xy[picked].T, "x", color=colour, ms=7, mew=1.5, ls="none",
+                    label=f"{label}: picked up (off the route)")
+            ax.plot(*put.T, "o", mfc="w", mec=colour, ms=6, mew=1.5, ls="none",
+                    label=f"{label}: put back on the route")
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal")
@@ -73,31 +79,38 @@ def plot_paths(path: str | Path, route: Route, tracks: dict[str, Track], title: 
     return style.save(fig, path)
 
 
+#: the trace panels, top to bottom: name -> (trace keys, y-axis label); a signed difference gets its own axis
+_TRACE_PANELS = {"familiarity": (tuple(k for k in _TRACE_KEYS if k.startswith("lambda") and k != "lambda_diff"),
+                                 "λ (1: 0 familiar .. 1 novel)"),
+                 "left - right": (("lambda_diff",), "λ left − λ right (1: > 0, the left more novel)"),
+                 "other": (tuple(k for k in _TRACE_KEYS if not k.startswith("lambda")), "signal (1)")}
+
+
 def plot_traces(path: str | Path, track: Track, title: str = "") -> Path:
-    """The model's signals against time (s, the rig's clock): familiarities (λ, 0 familiar .. 1 novel) above,
-    the other signals below, each on its own axis; put-backs marked; writes a PNG."""
-    t = np.asarray(track.t, np.float64)
-    t = t - t[0] if t.size else t
-    groups = {"familiarity": [k for k in _TRACE_KEYS if k.startswith("lambda")],
-              "other": [k for k in _TRACE_KEYS if not k.startswith("lambda")]}
-    shown = {g: [k for k in keys if np.isfinite(track.trace(k)).any()] for g, keys in groups.items()}
+    """The model's signals against the decision since release (0, 1, ...): familiarities (λ, 0 familiar .. 1
+    novel) above, their signed left - right difference on its own axis around a zero line, the other signals
+    below, each panel shown when it has a finite value; put-backs marked; writes a PNG. (The decision, not the
+    rig's clock: the emulated rig runs one frame per decision, whatever the model's decision takes.)"""
+    n = len(track.traces)
+    shown = {g: [k for k in keys if np.isfinite(track.trace(k)).any()] for g, (keys, _) in _TRACE_PANELS.items()}
     shown = {g: keys for g, keys in shown.items() if keys}
     fig, axes = style.figure((9.0, 2.4 + 2.2 * max(1, len(shown))), nrows=max(1, len(shown)), sharex=True,
                              squeeze=False)
-    ylabels = {"familiarity": "λ (1: 0 familiar .. 1 novel)", "other": "signal (1)"}
     for ax, (group, keys) in zip(axes[:, 0], shown.items(), strict=False):
         for key in keys:
             values = track.trace(key)
             flat = np.nanmax(values) == np.nanmin(values)
-            ax.plot(t[:len(values)], values, lw=1,
+            ax.plot(np.arange(len(values)), values, lw=1,
                     label=key.replace("_", " ") + (f" (constant {np.nanmax(values):g})" if flat else ""))
+        if group == "left - right":
+            ax.axhline(0.0, color="k", lw=0.6)
         for k in track.put_back:
-            ax.axvline(t[k], color="0.6", lw=0.8, ls="--")
-        style.label(ax, f"{title}: {group}" if title else group, "", ylabels[group])
+            ax.axvline(k, color="0.6", lw=0.8, ls="--")
+        style.label(ax, f"{title}: {group}" if title else group, "", _TRACE_PANELS[group][1])
         style.legend(ax, "right")
-    axes[-1, 0].set_xlabel(f"time since release (s; {len(t)} decisions"
+    axes[-1, 0].set_xlabel(f"decision since release (count; {n} decisions"
                            + (", dashed: put back on the route)" if track.put_back else ")"))
     for ax in axes[:-1, 0]:
-        ax.set_xlabel("time since release (s)")
+        ax.set_xlabel("decision since release (count)")
         ax.xaxis.label.set_visible(False)
     return style.save(fig, path)

@@ -30,36 +30,6 @@ def frame_colours(frame: np.ndarray, is_uv: np.ndarray) -> np.ndarray:
     return rgb
 
 
-def mollweide_directions(width: int) -> tuple[np.ndarray, np.ndarray]:
-    """(H*W, 3) unit directions of a Mollweide raster (H = W/2) and the (H*W,) mask of pixels on the map."""
-    h = width // 2
-    x = ((np.arange(width) + 0.5) / width * 2 - 1) * 2 * np.sqrt(2)
-    y = (1 - (np.arange(h) + 0.5) / h * 2) * np.sqrt(2)
-    gx, gy = np.meshgrid(x, y)
-    theta = np.arcsin(np.clip(gy / np.sqrt(2), -1, 1))
-    lat = np.arcsin(np.clip((2 * theta + np.sin(2 * theta)) / np.pi, -1, 1))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lon = np.pi * gx / (2 * np.sqrt(2) * np.cos(theta))
-    inside = np.abs(lon) <= np.pi
-    az = -lon  # seen from inside: azimuth grows to the left
-    d = np.stack([np.cos(lat) * np.cos(az), np.cos(lat) * np.sin(az), np.sin(lat)], axis=-1).reshape(-1, 3)
-    return np.nan_to_num(d), inside.ravel()
-
-
-def led_map(frame: np.ndarray, dome, width: int = 1200, dot_deg: float = 0.9) -> np.ndarray:
-    """(W/2, W, 3) uint8 sRGB Mollweide map of an LED frame; every LED a dot of radius `dot_deg`."""
-    from scipy.spatial import cKDTree
-
-    d, inside = mollweide_directions(width)
-    dist, idx = cKDTree(dome.directions).query(d, distance_upper_bound=2 * np.sin(np.radians(dot_deg) / 2))
-    hit = inside & np.isfinite(dist)
-    colours = frame_colours(frame, np.asarray(dome.is_uv))
-    img = np.zeros((len(d), 3))
-    img[inside] = 0.015  # the map's outline, so the dome's edge stays visible
-    img[hit] = colours[idx[hit]]
-    return _to_srgb8(img).reshape(width // 2, width, 3)
-
-
 def atlas_image(cube: np.ndarray) -> np.ndarray:
     """(6N, N, 3) uint8 sRGB image of a (6, N, N, 4) atlas [G, B, UV, pol UV], faces top to bottom in
     `cubemap.FACES` order, each face upright."""
@@ -90,25 +60,39 @@ def save_png(image: np.ndarray, path: str | Path) -> Path:
     return path
 
 
+#: narrowest dome map (pixels) whose text stays legible
+MIN_WIDTH_PX = 400
+#: pixels per inch the dome map's text is drawn for (its point sizes legible at this scale)
+_PX_PER_INCH = 100.0
+
+
 def dome_picture(frame: np.ndarray, dome, path: str | Path, title: str, width_px: int = 1400) -> Path:
-    """Write a PNG `width_px` wide: the LEDs of `frame` (20350, 2) uint16 on a Mollweide map seen from inside,
-    one dot per LED in its display colour, with azimuth/elevation axes, the front marked and a colour key."""
+    """Write a PNG exactly `width_px` wide (at least MIN_WIDTH_PX; ValueError below): the LEDs of `frame`
+    (20350, 2) uint16 on a Mollweide map seen from inside, one dot per LED in its display colour, with
+    azimuth/elevation axes, the front marked and a colour key. The figure is drawn at the size that puts about
+    100 pixels in an inch, so that the text keeps a legible size in pixels at every width."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     from antarium.plots import style
 
-    fig = style.pyplot().figure(figsize=(12.0, 7.2))
+    if int(width_px) != width_px or width_px < MIN_WIDTH_PX:
+        raise ValueError(f"dome map width must be a whole number of pixels >= {MIN_WIDTH_PX} (narrower pictures "
+                         f"have illegible text), got {width_px}")
+    inches = float(np.clip(width_px / _PX_PER_INCH, MIN_WIDTH_PX / _PX_PER_INCH, 12.0))
+    fig = style.pyplot().figure(figsize=(inches, 0.6 * inches))
     ax = fig.add_subplot(projection="mollweide")
     rgb = _to_srgb8(frame_colours(frame, np.asarray(dome.is_uv))) / 255.0
     gb, uv = dome.gb_index, dome.uv_index
-    ax.scatter(-dome.azimuth[gb], dome.elevation[gb], s=7, c=rgb[gb], marker="h", linewidths=0)
-    ax.scatter(-dome.azimuth[uv], dome.elevation[uv], s=14, c=rgb[uv], edgecolors="0.45", linewidths=0.5)
+    dot = (inches / 12.0) ** 2  # marker areas (points^2) shrink with the map
+    ax.scatter(-dome.azimuth[gb], dome.elevation[gb], s=7 * dot, c=rgb[gb], marker="h", linewidths=0)
+    ax.scatter(-dome.azimuth[uv], dome.elevation[uv], s=14 * dot, c=rgb[uv], edgecolors="0.45", linewidths=0.5)
     style.dome_axes(ax, float(np.degrees(dome.elevation.min())))
+    ax.xaxis.label.set_wrap(True)  # within the figure's width: the text keeps its size in a narrow picture
     key = [Patch(color=(0, 1, 0), label="green LED drive"), Patch(color=(0, 0, 1), label="blue LED drive"),
            Patch(color=(0.8, 0, 1), label="UV pixel (grey ring): plain + polarised UV drive"),
            Patch(color="black", label="black: LED off, or seam between panels (no LEDs)"),
            Line2D([], [], marker="^", mfc="none", mec="red", mew=1.5, ls="none", label="front (azimuth 0°, +x)")]
-    style.legend(ax, "below", handles=key)
-    ax.set_title(title)
-    return style.save(fig, path, dpi=max(20, round(width_px / 12.0)))
+    style.legend(ax, "below", handles=key, ncol=3 if inches >= 9.0 else 1)
+    ax.set_title(title, wrap=True)
+    return style.save(fig, path, width_px=int(width_px))

@@ -2,71 +2,104 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from antarium.plots import style
 
-def plot_metric_vs_parameter(df, metric: str, param: str, path: str | Path, ci: Callable) -> Path:
-    """Mean of `metric` (with the interval `ci(values) -> (lo, hi)`) against parameter `param` (a `param.*`
-    column of the results table `df`), one line per model and protocol."""
-    import matplotlib
+#: the unit of a results column, by the end of its name (the project names quantities `*_m`, `*_deg`, `*_s`)
+_UNITS = {"_m": "m", "_cm": "cm", "_deg": "°", "_s": "s", "_ms": "ms"}
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
+def _axis_label(column: str) -> str:
+    """`column` as an axis label with its unit in parentheses: "lateral median (m)" for lateral_median_m,
+    "errors (count)" for errors, "(as set)" for a model parameter whose unit its name does not say."""
+    name = column.removeprefix("param.")
+    for suffix, unit in _UNITS.items():
+        if name.endswith(suffix):
+            return f"{name.removesuffix(suffix).replace('_', ' ')} ({unit})"
+    if column == "errors":
+        return "errors (count)"
+    return f"{name.replace('_', ' ')} ({'as set' if column.startswith('param.') else '1'})"
+
+
+def plot_metric_vs_parameter(df, metric: str, param: str, path: str | Path, ci: Callable,
+                             conditions: Sequence[str]) -> Path:
+    """Mean of `metric` (with the interval `ci(values) -> (lo, hi)`, NaN when it has none) against parameter
+    `param` (a `param.*` column of the results table `df`): one line per combination of the other condition
+    columns (`conditions` and every other `param.*` column), so that no condition is pooled with another. A
+    point of one run (or without an interval) is a hollow marker without a bar; PNG."""
     done = df[(df.status == "done") & df[param].notna()]
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for (model, protocol), g in done.groupby(["model", "protocol"]):
+    keys = [c for c in dict.fromkeys([*conditions, *(c for c in df.columns if c.startswith("param."))])
+            if c != param and c in done.columns]
+    varied = [c for c in keys if done[c].nunique(dropna=False) > 1]  # what tells the lines apart
+    fig, ax = style.figure((7.0, 4.2))
+    hollow = False
+    for i, (key, g) in enumerate(done.groupby(keys, dropna=False, sort=True) if keys else [((), done)]):
+        row = dict(zip(keys, key if isinstance(key, tuple) else (key,), strict=True))
+        name = ", ".join(f"{c.removeprefix('param.')} = {row[c]}" for c in varied) \
+            or f"{row.get('model', '')} ({row.get('protocol', '')})"
+        colour = f"C{i % 10}"
         xs = sorted(g[param].unique())
-        means = [g.loc[g[param] == x, metric].astype(float).mean() for x in xs]
-        cis = [ci(g.loc[g[param] == x, metric].astype(float)) for x in xs]
-        lo = [m - c[0] if np.isfinite(c[0]) else 0 for m, c in zip(means, cis, strict=True)]
-        hi = [c[1] - m if np.isfinite(c[1]) else 0 for m, c in zip(means, cis, strict=True)]
-        ax.errorbar(xs, means, yerr=[lo, hi], marker="o", capsize=3, label=f"{model} ({protocol})")
-    ax.set_xlabel(param.removeprefix("param."))
-    ax.set_ylabel(metric)
-    ax.set_title(f"{metric} vs {param.removeprefix('param.')} (mean, 95 % bootstrap CI)")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+        values = [g.loc[g[param] == x, metric].astype(float).to_numpy() for x in xs]
+        values = [v[np.isfinite(v)] for v in values]
+        means = np.array([v.mean() if v.size else np.nan for v in values])
+        cis = np.array([ci(v) for v in values], dtype=float).reshape(-1, 2)
+        bar = np.isfinite(cis).all(axis=1) & np.array([v.size >= 2 for v in values])
+        ax.plot(xs, means, "-", color=colour, lw=1.2, label=name)
+        xs = np.asarray(xs)
+        if bar.any():
+            ax.errorbar(xs[bar], means[bar], yerr=[means[bar] - cis[bar, 0], cis[bar, 1] - means[bar]], fmt="o",
+                        color=colour, capsize=3)
+        if (~bar).any():
+            ax.plot(xs[~bar], means[~bar], "o", mfc="white", mec=colour, mew=1.5, ms=7)
+            hollow = True
+    if hollow:  # one key entry, after the lines'
+        ax.plot([], [], "o", mfc="white", mec="0.3", mew=1.5, ms=7, ls="none", label="hollow: n = 1 run (no interval)")
+    title = f"{metric} vs {param.removeprefix('param.')}: mean over runs, 95 % bootstrap interval"
+    style.label(ax, title, _axis_label(param), _axis_label(metric))
+    style.legend(ax, "right")
+    return style.save(fig, path)
+
+
+def _halves(done, n: int) -> tuple[list, list]:
+    """(best, worst) rows of `done` (sorted best first): disjoint, each at most `n`, every run in at most one."""
+    rows = [r for _, r in done.iterrows()]
+    best = rows[:min(n, (len(rows) + 1) // 2)]
+    worst = rows[len(best):][::-1][:n]
+    return best, worst
 
 
 def plot_worst_and_best(df, routes: dict, path: str | Path, metric: str = "lateral_median_m", n: int = 3) -> Path:
-    """Paths of the `n` worst and `n` best done runs by `metric`, each over its route (routes: (route_set,
-    route) -> RouteInput)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """Paths of the `n` best (top row) and `n` worst (bottom row) done runs by `metric`, each over its route
+    (routes: (route_set, route) -> RouteInput). With fewer than 2n runs the best half and the worst half are
+    shown, each run once; PNG."""
     done = df[df.status == "done"].sort_values(metric)
-    picks = [("best", r) for _, r in done.head(n).iterrows()] + [("worst", r) for _, r in done.tail(n).iloc[::-1]
-                                                                 .iterrows()]
-    fig, axes = plt.subplots(2, n, figsize=(4 * n, 8), squeeze=False)
+    best, worst = _halves(done, n)
+    cols = max(1, len(best))  # the best half is never the smaller
+    fig, axes = style.figure((4 * cols + 0.5, 8.6), nrows=2, ncols=cols, squeeze=False)
     for ax in axes.ravel():
         ax.set_visible(False)
-    for i, (label, r) in enumerate(picks[: 2 * n]):
-        ax = axes[0 if label == "best" else 1, i % n]
-        ax.set_visible(True)
-        ri = routes.get((r.route_set, r.route))
-        if ri is not None:
-            ax.plot(*ri.route.points.T, "k-", lw=2, label="route (learned)")
-        ax.plot(r.track_x, r.track_y, "-", color="tab:red" if label == "worst" else "tab:green", lw=1,
-                label="followed")
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        params = ", ".join(f"{k.removeprefix('param.')}={r[k]}" for k in r.index
-                           if k.startswith("param.") and r[k] == r[k])
-        ax.set_title(f"{label}: {r.model} on {r.route} {params}\n{metric} = {r[metric]:.3g}, errors {r.errors}, "
-                     f"seed {r.seed}", fontsize=8)
-        ax.legend(fontsize=7)
-    fig.suptitle(f"best and worst runs by {metric}")
+    for row, (label, picks) in enumerate((("best", best), ("worst", worst))):
+        for i, r in enumerate(picks):
+            ax = axes[row, i]
+            ax.set_visible(True)
+            ri = routes.get((r.route_set, r.route))
+            if ri is not None:
+                ax.plot(*ri.route.points.T, "k-", lw=2, label="route (learned)")
+            ax.plot(r.track_x, r.track_y, "-", color="tab:red" if label == "worst" else "tab:green", lw=1,
+                    label=f"followed ({label})")
+            ax.set_aspect("equal", "datalim")
+            params = ", ".join(f"{k.removeprefix('param.')}={r[k]}" for k in r.index
+                               if k.startswith("param.") and r[k] == r[k])
+            style.label(ax, f"{label} {i + 1} of {len(done)}: {r.model} on {r.route} {params}\n"
+                        f"{metric} = {r[metric]:.3g}, errors {r.errors}, seed {r.seed}", "x (m)", "y (m)")
+            ax.title.set_fontsize(8)
+    handles = {h.get_label(): h for ax in axes.ravel() if ax.get_visible() for h in ax.get_lines()}
+    fig.suptitle(f"best and worst runs by {metric} ({len(best)} best, {len(worst)} worst of {len(done)} done runs, "
+                 "each shown once)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    fig.legend(handles=list(handles.values()), loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=3)
+    return style.save(fig, path)

@@ -10,23 +10,39 @@ import numpy as np
 from antarium.plots import style
 
 
+def _density(ax, values: np.ndarray, bins: np.ndarray, name: str, kind: str, lim: float) -> None:
+    """Histogram of `values` (mm) as a probability density (1/mm) over all of them, those outside `bins` counted
+    in the legend entry; `kind`: "step" (a line) or "stepfilled"."""
+    width = float(bins[1] - bins[0])
+    beyond = int(np.sum((values < bins[0]) | (values > bins[-1])))
+    label = name
+    if name == "distance" and values.size:
+        label += f": median {np.median(values):.2f} mm, p99 {np.percentile(values, 99):.2f} mm"
+    if beyond:
+        label += f" ({beyond} of {values.size} beyond {lim:.2f} mm, not drawn)"
+    weights = np.full(values.size, 1.0 / (values.size * width)) if values.size else None
+    ax.hist(values, bins=bins, weights=weights, histtype=kind, lw=1.5, alpha=0.3 if kind == "stepfilled" else 1.0,
+            label=label)
+
+
 def error_figure(err_x_mm: np.ndarray, err_y_mm: np.ndarray, true_path_m: np.ndarray | None,
                  ball_path_m: np.ndarray | None, out: str | Path, title: str = "") -> Path:
-    """Write a PNG: left, probability density of the error from the apex (x, y and distance, mm); right, the
-    paths (m, (N, 2) each) if given. NaN errors (frames with a fault) are left out and counted in the legend."""
+    """Write a PNG: left, probability density of the error from the apex (x, y and distance, mm) over a range
+    that covers 99.9 % of all three (the few beyond it counted in the legend, not drawn; each density is over
+    every frame, so that those few lower it rather than raise the rest); right, the paths (m, (N, 2) each) if
+    given. NaN errors (frames with a fault) are left out and counted in the title."""
     ex, ey = np.asarray(err_x_mm, float), np.asarray(err_y_mm, float)
     ok = np.isfinite(ex) & np.isfinite(ey)
     dist = np.hypot(ex[ok], ey[ok])
     paths = true_path_m is not None and ball_path_m is not None
     fig, axes = style.figure((12 if paths else 6.5, 5.2), ncols=2 if paths else 1, squeeze=False)
     ax = axes[0, 0]
-    lim = max(1.0, float(np.percentile(np.abs(np.concatenate([ex[ok], ey[ok]])), 99.9)) * 1.2) if ok.any() else 1.0
-    bins = np.linspace(-lim, lim, 121)
-    ax.hist(ex[ok], bins=bins, density=True, histtype="step", lw=1.5, label="x error")
-    ax.hist(ey[ok], bins=bins, density=True, histtype="step", lw=1.5, label="y error")
-    ax.hist(dist, bins=np.linspace(0, lim, 61), density=True, histtype="stepfilled", alpha=0.3,
-            label=f"distance: median {np.median(dist):.2f} mm, p99 {np.percentile(dist, 99):.2f} mm"
-            if dist.size else "distance")
+    sizes = np.concatenate([np.abs(ex[ok]), np.abs(ey[ok]), dist])
+    lim = max(1.0, float(np.percentile(sizes, 99.9)) * 1.2) if ok.any() else 1.0
+    for values, bins, name, kind in ((ex[ok], np.linspace(-lim, lim, 121), "x error", "step"),
+                                     (ey[ok], np.linspace(-lim, lim, 121), "y error", "step"),
+                                     (dist, np.linspace(0.0, lim, 61), "distance", "stepfilled")):
+        _density(ax, values, bins, name, kind, lim)
     ax.set_xlabel("error from the apex (mm)")
     ax.set_ylabel("probability density (1/mm)")
     ax.set_title(f"Tracker error, {ok.sum()} frames ({(~ok).sum()} with a fault)")

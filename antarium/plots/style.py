@@ -19,6 +19,8 @@ RC = {"font.size": 9, "axes.titlesize": 10, "axes.labelsize": 9, "legend.fontsiz
 _UNIT = re.compile(r"\(.+\)\s*$")
 #: label of the front mark on dome maps
 FRONT = "front"
+#: elevation (degrees) of the azimuth ticks on dome maps: the horizon
+AZIMUTH_LABEL_ELEVATION_DEG = 0.0
 
 
 def pyplot():
@@ -64,17 +66,21 @@ def azimuth_label(deg: float) -> str:
 
 def dome_axes(ax, min_elevation_deg: float = -57.0, step_deg: int = 30) -> None:
     """Mollweide axes seen from inside the dome: azimuth grows to the left (plot longitudes at -azimuth),
-    the front (azimuth 0, +x) in the centre marked, azimuth ticks below the lowest LEDs (`min_elevation_deg`)
-    so that they cover no data, elevation ticks at the left edge, axis labels with units."""
+    the front (azimuth 0, +x) in the centre marked, each azimuth tick straight under its meridian's point on the
+    horizon (elevation `AZIMUTH_LABEL_ELEVATION_DEG`, where the meridians are as far apart as anywhere and the data
+    are: reading straight up or down from a tick gives its azimuth; half-transparent, so the LEDs under it show), the
+    direction of growing azimuth as an arrow below the lowest LEDs (`min_elevation_deg`), elevation ticks at the
+    left edge, axis labels with units."""
     ax.set_facecolor("black")
     ax.grid(True, color="0.55", lw=0.3)
     lons = np.arange(-180 + step_deg, 180, step_deg)
     ax.set_xticks(np.radians(lons))
     ax.set_xticklabels([])
-    y = np.radians(min_elevation_deg - 12.0)
-    for lon in lons:
-        ax.text(np.radians(lon), y, azimuth_label(-lon), ha="center", va="center", fontsize=7, color="0.15",
-                bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.8})
+    y = np.radians(AZIMUTH_LABEL_ELEVATION_DEG)
+    for lon in lons:  # just under the horizon line, straight below its point on the meridian: the front mark shows
+        ax.annotate(azimuth_label(-lon), (np.radians(lon), y), xytext=(0.0, -9.0), textcoords="offset points",
+                    ha="center", va="center", fontsize=7, color="0.1",
+                    bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.55})
     ax.set_yticks(np.radians(np.arange(-60, 90, 30)))
     ax.plot([0.0], [0.0], marker="^", ms=9, mfc="none", mec="red", mew=1.5, ls="none",
             label=f"{FRONT} (azimuth 0°, +x)")
@@ -121,9 +127,10 @@ def _legend_over_data(ax, name: str) -> list[str]:
     return []
 
 
-def save(fig, path: str | Path, dpi: int = 110) -> Path:
+def save(fig, path: str | Path, dpi: float = 110, width_px: int | None = None) -> Path:
     """Check the house style, write `fig` as PNG (folders made), close it; returns the absolute path.
-    ValueError names what is wrong."""
+    `width_px`: the PNG is exactly that many pixels wide (the dpi is chosen for it, `dpi` unused); else the
+    figure's tight box at `dpi`. ValueError names what is wrong."""
     plt = pyplot()
     wrong = problems(fig)
     if wrong:
@@ -131,6 +138,11 @@ def save(fig, path: str | Path, dpi: int = 110) -> Path:
         raise ValueError(f"picture {Path(path).name} breaks the house style: " + "; ".join(wrong))
     path = Path(path).expanduser().resolve()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
+    if width_px is None:
+        fig.savefig(path, dpi=dpi)
+    else:  # the tight box (inches) fixed, the dpi that makes it width_px wide (rounded down by Agg: + 0.5)
+        fig.canvas.draw()
+        box = fig.get_tightbbox(fig.canvas.get_renderer()).padded(RC["savefig.pad_inches"])
+        fig.savefig(path, dpi=(int(width_px) + 0.5) / box.width, bbox_inches=box)
     plt.close(fig)
     return path

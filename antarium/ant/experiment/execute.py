@@ -15,7 +15,7 @@ import time
 import traceback
 from functools import lru_cache
 
-from antarium.ant.experiment.inputs import cached_world, load_route, route_digest
+from antarium.ant.experiment.inputs import load_route, route_digest, run_world
 from antarium.ant.experiment.spec import PROTOCOLS, Run
 from antarium.ant.routes import Route, RouteError, curved_route
 
@@ -73,22 +73,19 @@ def run_row(run: Run) -> dict:
     """Learn and follow the run's route; the row of the results table (see `spec.METRICS`)."""
     from antarium.ant.route_following import train_and_follow
 
-    row = {"run_id": run.run_id, "condition": run.condition, "world": run.world.name, "route_set": run.route_set,
-           "route": run.route, "model": run.model, "lateral_cm": run.lateral_cm, "heading_deg": run.heading_deg,
-           "seed": run.seed, "protocol": run.protocol, "worker": f"{socket.gethostname()}:{os.getpid()}"}
-    row.update({f"param.{k}": v for k, v in run.params})
+    row = {**run.columns(), "worker": f"{socket.gethostname()}:{os.getpid()}"}
     t0 = time.perf_counter()
     try:
         route = _route(run.route_source, run.route_sha1)
         eye_params, overrides, spacing = _model_args(run)
-        scene = cached_world(run.world)
-        renderer = _renderer(run.face_size, scene, *route.start, run.eye_z_m)
+        scene, floor = run_world(run.world)   # z lowered by `floor` (m): the eye above z = 0, as the loop takes it
+        renderer = _renderer(run.face_size, scene, *route.start, run.eye_z_m - floor)
         outcome, track = train_and_follow(
             run.model, route, None, run.run_id, scene=scene, model_params=overrides,
             learn_spacing=spacing, max_decisions=run.max_decisions or None,
             start_offset=(run.lateral_cm / 100.0, math.radians(run.heading_deg + run.route_heading_deg)),
             eye_params=eye_params, save=False, face_size=run.face_size, put_back=PROTOCOLS[run.protocol],
-            eye_height=run.eye_z_m, renderer=renderer)
+            eye_height=run.eye_z_m - floor, renderer=renderer)
     except Exception as exc:  # a failed run is recorded, not raised: the others go on
         row.update(status="failed", error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(),
                    run_s=time.perf_counter() - t0)

@@ -1,9 +1,13 @@
 """Real inputs of an experiment: worlds (a named scene, any mesh or panorama, at a stated scale, up axis and eye
 height) and route sets (a folder or glob of route files), each route checked against the world it is run in.
 
-Route files: CSV (or whitespace) with `x_m, y_m` and an optional `heading_deg` column (a header row allowed; the
-columns are found by name when there is one), or a trial log (.h5: the pose's x, y of every frame). `heading_deg`
-of the first row is the heading the ant is released with (degrees CCW from +x); otherwise the route's own.
+Route files: CSV (or whitespace) with `x_m, y_m` and an optional `heading_deg` column (a header row allowed: it
+names these columns and no others, `ROUTE_COLUMNS`; without one they come in that order), or a trial log (.h5:
+the pose's x, y of every frame). `heading_deg` of the first row is the heading the ant is released with (degrees
+CCW from +x); otherwise the route's own.
+
+The ground is a surface facing up (`ground_along`); a run renders its world lowered by its lowest point
+(`run_world`), so that worlds in survey coordinates run, reported in their own coordinates.
 """
 
 from __future__ import annotations
@@ -11,10 +15,12 @@ from __future__ import annotations
 import glob
 import hashlib
 import itertools
+import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 
@@ -24,6 +30,8 @@ ROUTE_SUFFIXES = (".csv", ".txt", ".tsv", ".h5", ".hdf5")
 UP_AXES = ("z", "y")
 #: a triangle is ground (something the eye cannot be under) when its normal is this close to vertical
 GROUND_NORMAL_Z = 0.5
+#: surfaces over a point closer in height than this (m) are one (the triangles sharing an edge or a corner there)
+SAME_SURFACE_M = 1e-6
 #: route points are checked against the ground every this many metres
 CHECK_SPACING_M = 0.05
 #: the ground at a route's start has at least this much free space above it (m; or twice the eye height)
@@ -39,8 +47,8 @@ class WorldSpec:
     """A world as an experiment names it: a scene name or file, its scale (world metres per file unit), which
     file axis is up (GLB/GLTF are +y up by their standard and converted on loading: give "y" or leave the
     default), and the eye's height above the ground under the route's start (m). `digest`: the SHA-1 of the
-    scene file when the spec was read ("" for a named scene), so that an edited file is another world (another
-    run id, not a stale cached one)."""
+    scene file and the files it names (`scene_digest`) when the spec was read ("" for a named scene), so that an
+    edited file is another world (another run id, not a stale cached one)."""
 
     scene: str
     name: str = ""
@@ -70,6 +78,50 @@ def file_digest(path: str | Path) -> str:
     return h.hexdigest()
 
 
+#: words that open an MTL line naming a texture file (its last word)
+MTL_TEXTURES = ("map_", "bump", "disp", "decal", "refl", "norm")
+
+
+def scene_files(path: str | Path) -> list[Path]:
+    """A scene file and the files it names that its loader reads, those that exist: a glTF's or GLB's external
+    buffers and images (`uri`s, not data: URIs), an OBJ's MTL files (`mtllib`) and their textures (map_Kd and
+    the other map_*, bump, disp, decal, refl, norm lines: the last word), all next to it."""
+    path = Path(path)
+    folder, names = path.parent, []
+    suffix = path.suffix.lower()
+    if suffix in (".gltf", ".glb"):
+        data = path.read_bytes()
+        if suffix == ".glb":   # 12-byte header, then the JSON chunk: length (uint32 LE), type, text
+            data = data[20:20 + int.from_bytes(data[12:16], "little")] if data[:4] == b"glTF" else b"{}"
+        try:
+            doc = json.loads(data)
+        except ValueError:
+            doc = {}
+        names = [unquote(item["uri"]) for key in ("buffers", "images") for item in doc.get(key, [])
+                 if isinstance(item, dict) and isinstance(item.get("uri"), str) and not item["uri"].startswith("data:")]
+    elif suffix == ".obj":
+        for line in path.read_bytes().decode("utf-8", "replace").splitlines():
+            words = line.split()
+            if len(words) >= 2 and words[0] == "mtllib":
+                mtls = [" ".join(words[1:]), *words[1:]]
+                names += mtls
+                for mtl in (folder / m for m in mtls):
+                    if mtl.is_file():
+                        names += [w[-1] for w in (ln.split() for ln in mtl.read_bytes().decode("utf-8", "replace")
+                                                  .splitlines()) if len(w) >= 2 and w[0].startswith(MTL_TEXTURES)]
+    found = sorted({folder / n for n in names if (folder / n).is_file() and (folder / n) != path})
+    return [path, *found]
+
+
+def scene_digest(path: str | Path) -> str:
+    """SHA-1 (hex) of a scene file and every file it names (`scene_files`): an edited buffer, material or texture
+    is another world."""
+    h = hashlib.sha1()
+    for f in scene_files(path):
+        h.update(f"{f.relative_to(Path(path).parent).as_posix()}\0{file_digest(f)}\n".encode())
+    return h.hexdigest()
+
+
 def route_digest(route: Route) -> str:
     """SHA-1 (hex) of a route's points (float64 x, y in metres): what a run learns and is released on."""
     return hashlib.sha1(np.ascontiguousarray(route.points, np.float64).tobytes()).hexdigest()
@@ -86,7 +138,7 @@ def build_world(world: WorldSpec):
 
     if _is_gltf(world.scene) and world.up != "y":
         raise WorldError(f"world {world.scene}: GLB/GLTF files are +y up by their standard; give up = \"y\"")
-    if world.digest and Path(world.scene).is_file() and file_digest(world.scene) != world.digest:
+    if world.digest and Path(world.scene).is_file() and scene_digest(world.scene) != world.digest:
         raise WorldError(f"world {world.scene!r}: the file changed since the spec was read; read the spec again")
     try:
         scene = build_scene({"scene": world.scene, **dict(world.params)})
@@ -116,22 +168,47 @@ def cached_world(world: WorldSpec):
     return _WORLDS[world]
 
 
+_RUN_WORLDS: dict = {}
+
+
+def run_world(world: WorldSpec):
+    """(the `Scene` a run renders, its z = 0 in the world's own z (m)): `cached_world` lowered by its lowest point
+    (0 for a panorama world), once per process. The frame loop takes an eye 0..1000 m above z = 0, so a world in
+    survey coordinates (its ground below z = 0, or far above it) runs lowered; x and y, and so the tracks, are the
+    world's own. The meshes are shared with `cached_world`'s scene, only their positions move."""
+    from antarium.renderers.scene import SceneObject
+
+    if world not in _RUN_WORLDS:
+        scene = cached_world(world)
+        tris = _triangles(scene)
+        floor = float(tris[..., 2].min()) if len(tris) else 0.0
+        if floor != 0.0:
+            scene = replace(scene, objects={
+                name: SceneObject(o.mesh, (o.position[0], o.position[1], o.position[2] - floor), o.yaw, o.scale)
+                for name, o in scene.objects.items()})
+        _RUN_WORLDS[world] = scene, floor
+    return _RUN_WORLDS[world]
+
+
 def _triangles(scene) -> np.ndarray:
     """(T, 3, 3) float64 world-frame triangles of every object of `scene` (empty for a panorama world)."""
     tris = [obj.world_vertices()[np.asarray(obj.mesh.faces, np.int64)] for obj in scene.objects.values()]
     return np.concatenate(tris).astype(np.float64) if tris else np.zeros((0, 3, 3))
 
 
-def ground_candidates(triangles: np.ndarray, xy: np.ndarray) -> list[np.ndarray]:
-    """Heights (m) of every near-horizontal triangle (|normal z| >= GROUND_NORMAL_Z) over each point, ascending.
+def ground_candidates(triangles: np.ndarray, xy: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Every near-horizontal triangle (|normal z| >= GROUND_NORMAL_Z) over each point: its height and whether it
+    faces up (its corners counter-clockwise seen from above, as the top of a slab or a terrain is wound).
 
-    triangles: (T, 3, 3) float64 m; xy: (P, 2) float64 m. Returns P float64 arrays (empty where nothing is under).
+    triangles: (T, 3, 3) float64 m; xy: (P, 2) float64 m. Returns P pairs (heights (K,) float64 m ascending,
+    faces up (K,) bool), one per surface (triangles within SAME_SURFACE_M of each other there are one, facing up if
+    any does); K = 0 where nothing is over the point.
     """
     a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
     n = np.cross(b - a, c - a)
     norm = np.linalg.norm(n, axis=1)
     flat = (norm > 0) & (np.abs(n[:, 2]) >= GROUND_NORMAL_Z * np.where(norm > 0, norm, 1.0))
-    a, b, c = a[flat], b[flat], c[flat]
+    a, b, c, up = a[flat], b[flat], c[flat], n[flat, 2] > 0
     lo = np.minimum(np.minimum(a, b), c)[:, :2]
     hi = np.maximum(np.maximum(a, b), c)[:, :2]
     out = []
@@ -145,32 +222,37 @@ def ground_candidates(triangles: np.ndarray, xy: np.ndarray) -> list[np.ndarray]
         u = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
         w = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
         inside = ok & (u >= -1e-9) & (w >= -1e-9) & (u + w <= 1 + 1e-9)
-        z = a[k, 2] + u * (b[k, 2] - a[k, 2]) + w * (c[k, 2] - a[k, 2])
-        out.append(np.sort(z[inside]))
+        z = (a[k, 2] + u * (b[k, 2] - a[k, 2]) + w * (c[k, 2] - a[k, 2]))[inside]
+        order = np.argsort(z, kind="stable")
+        z, faces_up = z[order], up[k][inside][order]
+        # a point on an edge or a corner is in every triangle there: one surface
+        first = np.flatnonzero(np.append(True, np.diff(z) > SAME_SURFACE_M))
+        out.append((z[first], np.logical_or.reduceat(faces_up, first) if z.size else faces_up))
     return out
 
 
-def ground_along(candidates: list[np.ndarray], spacing: float, clearance: float) -> np.ndarray:
-    """The ground's height (m) along a route, from its surfaces over each sample (`ground_candidates`).
+def ground_along(candidates: list[tuple[np.ndarray, np.ndarray]], spacing: float, clearance: float) -> np.ndarray:
+    """The ground's height (m) along a route, from the surfaces over each sample (`ground_candidates`).
 
-    At the start: the lowest surface with at least `clearance` m of free space above it (the top of a slab, not
-    its underside; the ground under a tree, not its canopy). Then the surface nearest the last ground height,
-    if it is no steeper than 45 degrees over `spacing` m (a stone or a canopy beside the path is not the ground);
-    where none is, the last height is kept. Returns (P,) float64; NaN before the first sample with a surface.
+    The ground is a surface that faces up: the top of a slab or a closed terrain, not its underside (which faces
+    down); the ground under a tree, not its canopy's underside. At the start: the lowest surface facing up with
+    at least `clearance` m of free space above it (to the next surface, facing either way). Then the surface
+    facing up nearest the last ground height, if it is no steeper than 45 degrees over `spacing` m (a stone or a
+    canopy beside the path is not the ground); where none is, the last height is kept. Returns (P,) float64; NaN
+    before the first sample with a surface facing up (everywhere, for a mesh whose every surface faces down).
     """
     out = np.full(len(candidates), np.nan)
     g = math.nan
-    for i, z in enumerate(candidates):
-        if z.size == 0:
-            out[i] = g
-            continue
+    for i, (z, up) in enumerate(candidates):
         if not math.isfinite(g):
             gaps = np.append(np.diff(z), np.inf)
-            g = float(z[np.flatnonzero(gaps >= clearance)[0]])
-        else:
-            j = int(np.argmin(np.abs(z - g)))
-            if abs(z[j] - g) <= max(spacing, 1e-3):
-                g = float(z[j])
+            ground = np.flatnonzero(up & (gaps >= clearance))
+            g = float(z[ground[0]]) if ground.size else math.nan
+        elif up.any():
+            zu = z[up]
+            j = int(np.argmin(np.abs(zu - g)))
+            if abs(zu[j] - g) <= max(spacing, 1e-3):
+                g = float(zu[j])
         out[i] = g
     return out
 
@@ -208,7 +290,13 @@ def eye_z(world: WorldSpec, route: Route, geometry: WorldGeometry | None = None)
                          f"which spans x {x0:.2f}..{x1:.2f} m, y {y0:.2f}..{y1:.2f} m (check its scale and up axis)")
     xy, _ = route.sample(CHECK_SPACING_M)
     clearance = max(GROUND_CLEARANCE_M, 2 * world.eye_height_m)
-    ground = ground_along(ground_candidates(geometry.triangles, xy), CHECK_SPACING_M, clearance)
+    candidates = ground_candidates(geometry.triangles, xy)
+    ground = ground_along(candidates, CHECK_SPACING_M, clearance)
+    if not np.isfinite(ground[0]) and candidates[0][0].size:
+        raise RouteError(f"world {world.name!r} has {candidates[0][0].size} surface(s) under the route's start "
+                         f"({xy[0, 0]:.3f}, {xy[0, 1]:.3f}) m and no ground: none faces up (its corners "
+                         f"counter-clockwise seen from above) with {clearance:g} m free above it; a mesh wound the "
+                         "other way needs its normals flipped")
     g0 = ground[0] if np.isfinite(ground[0]) else 0.0
     z = g0 + world.eye_height_m
     under = np.isfinite(ground) & (ground >= z)
@@ -235,47 +323,67 @@ class RouteInput:
         return route_digest(self.route)
 
 
+#: the columns a route file's header may name (case aside): x_m and y_m required, heading_deg optional
+ROUTE_COLUMNS = ("x_m", "y_m", "heading_deg")
+
+
+def _header(path: Path, names: list[str]) -> list[int]:
+    """Column indices of x_m, y_m and heading_deg (-1: none) named by a header row (`ROUTE_COLUMNS`)."""
+    names = [n.strip().strip("\"'").lower() for n in names]
+    other = [n for n in names if n not in ROUTE_COLUMNS]
+    twice = [n for n in ROUTE_COLUMNS if names.count(n) > 1]
+    if other or twice or "x_m" not in names or "y_m" not in names:
+        raise RouteError(f"{path}: header {', '.join(names)!r} — a route file's header names the columns x_m, y_m "
+                         "(metres) and optionally heading_deg (degrees), each once, and no others")
+    return [names.index(n) if n in names else -1 for n in ROUTE_COLUMNS]
+
+
 def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
-    lines = [(n, ln) for n, ln in enumerate(path.read_text().splitlines(), 1)
+    """(P, 2) float64 x, y (m) and the release heading (rad, or None) of a CSV / whitespace route file.
+
+    A header is a first row with a field that is not a number (float() refuses it); it names its columns
+    (`ROUTE_COLUMNS`). Without one the columns are x_m, y_m[, heading_deg] in that order. Every value is a
+    finite number. Raises RouteError naming the file and line."""
+    lines = [(n, ln) for n, ln in enumerate(path.read_text(encoding="utf-8-sig").splitlines(), 1)
              if ln.strip() and not ln.lstrip().startswith("#")]
-    delimiter = "," if any("," in ln for _, ln in lines) else None
     if not lines:
         raise RouteError(f"{path}: empty route file; expected columns x_m, y_m (and optionally heading_deg)")
-    first = lines[0][1]
-    has_header = any(c.isalpha() and c not in "eE" for c in first)
-    columns = [0, 1]
-    heading_col = None
+    delimiter = "," if any("," in ln for _, ln in lines) else None
+    first = [f.strip() for f in lines[0][1].split(delimiter)]
+    has_header = not all(_is_float(f) for f in first)
     if has_header:
-        names = [h.strip().lower() for h in first.split(delimiter)]
-        if "x_m" in names and "y_m" in names:
-            columns = [names.index("x_m"), names.index("y_m")]
-            heading_col = names.index("heading_deg") if "heading_deg" in names else None
-        elif len(names) >= 3 and names[2] == "heading_deg":
-            heading_col = 2
+        x, y, h = _header(path, first)
     rows = []
     for n, line in lines[int(has_header):]:
         row = []
         for field in (f.strip() for f in line.split(delimiter)):
-            try:
-                row.append(float(field))
-            except ValueError:
-                raise RouteError(f"{path}, line {n}: {field!r} is not a number; a route file holds x_m, y_m"
-                                 "[, heading_deg] numbers (metres, degrees), with an optional header row") from None
+            if not _is_float(field) or not math.isfinite(float(field)):
+                raise RouteError(f"{path}, line {n}: {field!r} is not a {'finite ' * _is_float(field)}number; a "
+                                 "route file holds x_m, y_m[, heading_deg] numbers (metres, degrees), finite, with an "
+                                 "optional header row")
+            row.append(float(field))
         rows.append(row)
-        if len(rows[-1]) != len(rows[0]):
-            raise RouteError(f"{path}, line {n}: {len(rows[-1])} columns where the rows before have {len(rows[0])}")
+        width = len(first) if has_header else len(rows[0])
+        if len(row) != width:
+            raise RouteError(f"{path}, line {n}: {len(row)} columns where the "
+                             f"{'header names' if has_header else 'rows before have'} {width}")
     if not rows:
         raise RouteError(f"{path}: a header and no points; expected rows of x_m, y_m (and optionally heading_deg)")
+    if not has_header:
+        if not 2 <= len(rows[0]) <= 3:
+            raise RouteError(f"{path}: a route file needs columns x_m, y_m (metres), got {len(rows[0])} column(s) "
+                             "(without a header: x_m, y_m and optionally heading_deg, in that order)")
+        x, y, h = 0, 1, 2 if len(rows[0]) == 3 else -1
     data = np.array(rows, np.float64)
-    if data.shape[1] < 2 or data.shape[1] <= max(columns + [heading_col or 0]):
-        raise RouteError(f"{path}: a route file needs columns x_m, y_m (metres), got {data.shape[1]} column(s)")
-    heading = None
-    if heading_col is not None:
-        h = data[:, heading_col]
-        if not np.all(np.isfinite(h)):
-            raise RouteError(f"{path}: heading_deg must be finite degrees")
-        heading = math.radians(float(h[0]))
-    return data[:, columns], heading
+    return data[:, [x, y]], math.radians(float(data[0, h])) if h >= 0 else None
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def load_route(path: str | Path, name: str | None = None) -> RouteInput:
@@ -302,8 +410,9 @@ def load_route(path: str | Path, name: str | None = None) -> RouteInput:
 
 def route_files(pattern: str | Path, base: Path | None = None) -> tuple[Path, list[Path]]:
     """The set's folder and its route files: a folder (its files with a route suffix) or a glob, relative to
-    `base`; absolute paths, sorted. The set's folder is the folder named, or the glob's leading part without
-    wildcards (routes/*.csv: routes; day*/r1.csv: the spec's folder). Raises FileNotFoundError when it names none."""
+    `base` (`**` matches any depth of folders: routes/**/*.csv); absolute paths, sorted. The set's folder is the
+    folder named, or the glob's leading part without wildcards (routes/*.csv: routes; day*/r1.csv: the spec's
+    folder). Raises FileNotFoundError when it names none."""
     p = Path(pattern)
     if not p.is_absolute() and base is not None:
         p = base / p
@@ -314,7 +423,7 @@ def route_files(pattern: str | Path, base: Path | None = None) -> tuple[Path, li
     else:
         fixed = list(itertools.takewhile(lambda part: not any(c in part for c in "*?["), p.parts))
         folder = Path(*fixed) if len(fixed) < len(p.parts) else p.parent
-        files = sorted(Path(f) for f in glob.glob(str(p)) if Path(f).suffix.lower() in ROUTE_SUFFIXES)
+        files = sorted(Path(f) for f in glob.glob(str(p), recursive=True) if Path(f).suffix.lower() in ROUTE_SUFFIXES)
     if not files:
         raise FileNotFoundError(f"route set {str(pattern)!r} names no route files ({', '.join(ROUTE_SUFFIXES)}); "
                                 f"give a folder or a glob such as routes/*.csv")

@@ -3,6 +3,7 @@ confidence intervals, and pictures (metric vs parameter; paths of the worst and 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -14,16 +15,21 @@ from antarium.plots.experiments import plot_metric_vs_parameter, plot_worst_and_
 BOOTSTRAP = 2000
 CI_LEVEL = 0.95
 #: the columns that name a condition (what repetitions over routes and seeds share)
-CONDITION = ["world", "model", "protocol", "lateral_cm", "heading_deg"]
+CONDITION = ["world", "route_set", "model", "protocol", "lateral_cm", "heading_deg"]
 
 
-def load_results(out: str | Path):
-    """Every run's row under `out/runs/` as one pandas DataFrame (done and failed runs; see column `status`)."""
+def load_results(out: str | Path, run_ids: Iterable[str] | None = None):
+    """The rows under `out/runs/` as one pandas DataFrame (done and failed runs; see column `status`): those of
+    `run_ids` (a spec's runs; the others, of specs run into `out` before, are left out), or every row."""
     import pandas as pd
 
     files = sorted((Path(out) / RUNS_DIR).glob("*.parquet"))
+    if run_ids is not None:
+        wanted = set(run_ids)
+        files = [f for f in files if f.stem in wanted]
     if not files:
-        raise FileNotFoundError(f"no run results under {Path(out) / RUNS_DIR}")
+        raise FileNotFoundError(f"no run results under {Path(out) / RUNS_DIR}"
+                                + (" of this spec's runs" if run_ids is not None else ""))
     return pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
 
 
@@ -40,8 +46,8 @@ def bootstrap_ci(values, level: float = CI_LEVEL, n: int = BOOTSTRAP, seed: int 
 
 
 def summary(df, metrics=("errors", "lateral_median_m", "angular_median_deg", "arrived", "ms_per_decision_model")):
-    """Per condition (world, model, its parameters, release, protocol): runs, failed, and per metric the mean
-    over routes and seeds with its bootstrap 95 % interval (columns `<metric>`, `<metric>_lo`, `<metric>_hi`)."""
+    """Per condition (world, route set, model, its parameters, release, protocol): runs, failed, and per metric the
+    mean over routes and seeds with its bootstrap 95 % interval (columns `<metric>`, `<metric>_lo`, `<metric>_hi`)."""
     import pandas as pd
 
     params = [c for c in df.columns if c.startswith("param.")]
@@ -59,15 +65,25 @@ def summary(df, metrics=("errors", "lateral_median_m", "angular_median_deg", "ar
     return pd.DataFrame(rows)
 
 
-def report(out: str | Path, routes: dict, metrics) -> str:
-    """Write `results.parquet` (every run), `summary.csv` / `summary.md` and the pictures into `out`; returns the
-    summary as markdown."""
+def report(out: str | Path, routes: dict, metrics, run_ids: Iterable[str] | None = None) -> str:
+    """Write `results.parquet` (every run of `run_ids`, or every run under `out/runs/`), `summary.csv` /
+    `summary.md` and the pictures into `out`; returns the summary as markdown, after a line saying how many of
+    the runs have a row and how many rows of other specs (other run ids) sit in `out/runs/`, not summarised."""
     out = Path(out)
-    df = load_results(out)
+    df = load_results(out, run_ids)
+    done = int((df.status == "done").sum())
+    counts = f"{done} done, {len(df) - done} failed"
+    if run_ids is None:
+        head = f"{len(df)} runs: {counts}"
+    else:
+        ids = set(run_ids)
+        others = sum(1 for f in (out / RUNS_DIR).glob("*.parquet") if f.stem not in ids)
+        head = (f"{len(ids)} runs of this spec: {counts}, {len(ids) - len(df)} without a result yet"
+                + (f"; {others} rows of other specs in {out / RUNS_DIR} not summarised" if others else ""))
     df.to_parquet(out / "results.parquet", index=False)
     table = summary(df, tuple(m for m in metrics if m in df.columns) or ("errors",))
     table.to_csv(out / "summary.csv", index=False)
-    text = table.to_markdown(index=False) if _has_tabulate() else table.to_string(index=False)
+    text = head + "\n\n" + (table.to_markdown(index=False) if _has_tabulate() else table.to_string(index=False))
     (out / "summary.md").write_text(text + "\n")
     if (df.status == "done").any():
         plot_worst_and_best(df, routes, out / "worst_and_best_paths.png")
@@ -75,7 +91,8 @@ def report(out: str | Path, routes: dict, metrics) -> str:
             if df[param].nunique() > 1:
                 for metric in ("errors", "lateral_median_m"):
                     name = f"{metric}_vs_{param.removeprefix('param.').replace('.', '_')}.png"
-                    plot_metric_vs_parameter(df, metric, param, out / name, ci=bootstrap_ci)
+                    plot_metric_vs_parameter(df, metric, param, out / name, ci=bootstrap_ci,
+                                             conditions=CONDITION)
     return text
 
 

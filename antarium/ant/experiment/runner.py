@@ -7,8 +7,11 @@ of the same spec skips the runs whose file says "done" (failed runs are tried ag
 
 from __future__ import annotations
 
+import contextlib
 import os
-from collections.abc import Callable, Iterable
+import signal
+import threading
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,10 +80,7 @@ def _record(out: Path, row: dict, progress: Progress, bar) -> None:
 
 def _failed_row(run: Run, exc: BaseException) -> dict:
     """The row of a run whose worker died or could not return it (the run itself never raises)."""
-    return {"run_id": run.run_id, "condition": run.condition, "world": run.world.name, "route_set": run.route_set,
-            "route": run.route, "model": run.model, "lateral_cm": run.lateral_cm, "heading_deg": run.heading_deg,
-            "seed": run.seed, "protocol": run.protocol, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
-            **{f"param.{k}": v for k, v in run.params}}
+    return {**run.columns(), "status": "failed", "error": f"{type(exc).__name__}: {exc}"}
 
 
 def run_experiment(runs: list[Run], out: str | Path, scheduler: str | None = None, workers: int | None = None,
@@ -146,7 +146,30 @@ def worker_env(n_workers: int) -> dict[str, str]:
     return {"LP_NUM_THREADS": str(max(1, (os.cpu_count() or 1) // n_workers))}
 
 
+#: how often the main process looks for a Ctrl-C while it waits for the runs' results (s)
+INTERRUPT_POLL_S = 0.1
+
+
+@contextlib.contextmanager
+def _interrupt_flag() -> Iterator[threading.Event]:
+    """An event set by Ctrl-C (SIGINT) while the block runs, in place of a KeyboardInterrupt: raised at any point
+    of Dask's machinery, one can be swallowed (a garbage-collector callback of distributed's printed it and went
+    on) and the command waited for workers that Ctrl-C had ended. Outside the main thread no handler can be set:
+    the event is then never set."""
+    flag = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: flag.set())
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _run_dask(pending: list[Run], out: Path, scheduler, workers, progress: Progress, bar, on_row) -> None:
+    """Run `pending` on Dask, recording each row as it comes; Ctrl-C stops waiting within INTERRUPT_POLL_S,
+    closes the client and the local cluster and raises KeyboardInterrupt (the rows recorded so far are kept)."""
     from distributed import Client, as_completed
 
     from antarium.ant.experiment.execute import run_row
@@ -158,20 +181,25 @@ def _run_dask(pending: list[Run], out: Path, scheduler, workers, progress: Progr
         cluster = local_cluster(workers or os.cpu_count() or 1)
         client = Client(cluster)
     try:
-        by_key = {f"run-{r.run_id}": r for r in pending}
-        futures = client.map(run_row, pending, key=list(by_key), pure=False, retries=0)
-        for fut in as_completed(futures):
-            try:
-                row = fut.result()
-            except Exception as exc:  # the worker died (e.g. out of memory): record it, go on
-                row = _failed_row(by_key[fut.key], exc)
-            _record(out, row, progress, bar)
-            if on_row is not None:
-                on_row(row)
-            fut.release()
+        with _interrupt_flag() as interrupted:
+            by_key = {f"run-{r.run_id}": r for r in pending}
+            futures = as_completed(client.map(run_row, pending, key=list(by_key), pure=False, retries=0))
+            while not futures.is_empty():
+                if interrupted.is_set():
+                    raise KeyboardInterrupt
+                if not futures.has_ready():
+                    interrupted.wait(INTERRUPT_POLL_S)
+                    continue
+                fut = next(futures)
+                try:
+                    row = fut.result()
+                except Exception as exc:  # the worker died (e.g. out of memory): record it, go on
+                    row = _failed_row(by_key[fut.key], exc)
+                _record(out, row, progress, bar)
+                if on_row is not None:
+                    on_row(row)
+                fut.release()
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
-
-

@@ -18,7 +18,7 @@
     eye_height_m = 0.01
 
     [[route_sets]]
-    paths = "routes/*.csv"             # a folder or a glob of route files (CSV, trial logs), relative to the spec
+    paths = "routes/*.csv"             # a folder or a glob (** recurses) of route files (CSV, logs), from the spec
     # or: curved = {seeds = [0, 1, 2], length_m = 10}
 
     [models.antcar]
@@ -31,9 +31,11 @@ parameters from their dataclasses' field types) before anything is built: a wron
 an unknown key or an empty list is a SpecError naming the key, the value and what is allowed.
 
 Every combination of world x route x model x grid point x release x seed x protocol is one `Run`, named by a
-hash of its contents (`run_id`: the world, its file's SHA-1, the route file's absolute path and the SHA-1 of its
-points, the parameters, ...), so a rerun of the same spec finds the runs already done, and an edited route or
-world file is a new run.
+hash of its contents (`run_id`: the world and the SHA-1 of its file and the files that loads, `scene_digest`;
+the route file's absolute path and the SHA-1 of its points, the parameters, face_size, max_decisions, the eye's
+z, ...), so a rerun of the same spec finds the runs already done, and an edited route or world file is a new
+run. A run's condition (what its repetitions over routes and seeds share) is its world, route set, model,
+parameters, release and protocol.
 """
 
 from __future__ import annotations
@@ -52,10 +54,10 @@ from antarium.ant.experiment.inputs import (
     RouteInput,
     WorldSpec,
     eye_z,
-    file_digest,
     load_route,
     route_files,
     route_name,
+    scene_digest,
     world_geometry,
 )
 from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M
@@ -102,10 +104,22 @@ class Run:
 
     @property
     def condition(self) -> str:
-        """What the run's repetitions (routes, seeds) share: world, model, parameters, release, protocol."""
+        """What the run's repetitions (routes, seeds) share: world, route set, model, parameters, release,
+        protocol."""
         p = ",".join(f"{k}={v}" for k, v in self.params)
-        return (f"{self.world.name}/{self.model}[{p}]/release {self.lateral_cm:g} cm {self.heading_deg:g} deg/"
-                f"{self.protocol}")
+        return (f"{self.world.name}/{self.route_set}/{self.model}[{p}]/release {self.lateral_cm:g} cm "
+                f"{self.heading_deg:g} deg/{self.protocol}")
+
+    def columns(self) -> dict:
+        """What the run is, as columns of its results row: its id and condition, world, route set, route (name
+        and source), model, `param.<key>`s, release, seed, protocol, face_size, max_decisions and eye_z_m (the
+        eye's z in the world's own coordinates, m)."""
+        return {"run_id": self.run_id, "condition": self.condition, "world": self.world.name,
+                "route_set": self.route_set, "route": self.route, "route_source": self.route_source,
+                "model": self.model, "lateral_cm": self.lateral_cm, "heading_deg": self.heading_deg,
+                "seed": self.seed, "protocol": self.protocol, "face_size": self.face_size,
+                "max_decisions": self.max_decisions, "eye_z_m": self.eye_z_m,
+                **{f"param.{k}": v for k, v in self.params}}
 
 
 @dataclass
@@ -356,7 +370,7 @@ def _world(table: dict, base: Path) -> WorldSpec:
         if not Path(scene).is_absolute():
             scene = str((base / scene).resolve())
         if Path(scene).is_file():
-            digest = file_digest(scene)
+            digest = scene_digest(scene)
     kw = {k: t.pop(k) for k in ("name", "scale", "up", "eye_height_m") if k in t}
     return WorldSpec(scene, params=tuple(sorted(t.items())), digest=digest, **kw)
 
