@@ -237,9 +237,9 @@ def check_path(path) -> str | None:
 class GpuFramePath:
     """Compute passes and buffers of the GPU path for one GL context (use it with that context current).
 
-    GPU memory: the CSR matrix (set_matrix), the scene's far-field table (set_table), 4 x 20350 x 8 bytes of
-    pairs, far pairs, gains, and the 142,560-byte output; host: the 142,560-byte read-back array (`frame` and
-    `datagrams` are views of it).
+    GPU memory: the CSR matrix (set_matrix), the scene's far-field table and each LED's cell in it (set_table,
+    dropped with drop_table), 3 x 20350 x 8 bytes of pairs, far pairs and gains, the 142,560-byte output, 16 bytes of
+    means and the busy pass's 256; host: the 142,560-byte read-back array (`frame` and `datagrams` are views of it).
     """
 
     def __init__(self, ctx):
@@ -302,13 +302,19 @@ class GpuFramePath:
         cells = np.empty((len(g.row), 4), np.int32)
         cells[:, 0], cells[:, 1] = g.row, col
         cells[:, 2:].view(np.float32)[:] = np.stack([g.row_frac, g.col0 - col], axis=1)
-        for b in (self._table, self._cells):
-            if b is not None:
-                b.release()
+        self.drop_table()
         self._table, self._cells = self.ctx.buffer(grids.view(np.uint32)), self.ctx.buffer(cells)
         self._sample["n_cols"].value = g.n_cols
         self._sample["uv_offset"].value = table.table_gb.size // 2
         self._table_source, self._n_cols = table, g.n_cols
+
+    def drop_table(self) -> None:
+        """Release the uploaded far-field table, and the reference to its source (a scene without one)."""
+        for b in (self._table, self._cells):
+            if b is not None:
+                b.release()
+        self._table = self._cells = None
+        self._table_source, self._n_cols = None, 0
 
     def set_gain(self, gain: np.ndarray) -> None:
         """(20350, 2) float32 per-LED gains of the output columns (`FrameConverter.gain`)."""

@@ -57,8 +57,37 @@ def smallest_face_size(footprint_deg: float = LED_PITCH_DEG) -> int:
 
 #: default face size of the near meshes when a far layer carries the rest (`far_layer`)
 NEAR_FACE_SIZE = 96
+#: a time-varying far field is drawn from a texture rebuilt every frame at one sample a texel: its finest period must
+#: span this many of the texture's largest texels, 2 atan(1 / far_face_size) (measured: LED error against the same
+#: pattern standing still, max over the dome, under 0.02 from 6.7 texels at far faces 64 and 96, 0.04 at 4.5)
+DRIFT_TEXELS = 7
 #: texels across the footprint's FWHM below which a wider footprint samples a coarser mipmap level
 TEXELS_PER_FWHM = 2.5
+
+
+def mip_face_size(n: int) -> int:
+    """The face side (texels) a Renderer uses for a requested side `n`: `n` rounded up to the next m * 2**k with m in
+    16..31, so that each mipmap level a low-pass samples (`Renderer._sampling`: down to a level of 16..31 texels a
+    face) halves every face exactly; an odd side would sample level 0 only, thousands of weights per LED (55 -> 56,
+    150 -> 152; 2**k and multiples of 8 up to 248 stay)."""
+    k = max(0, int(n).bit_length() - 5)
+    return -(-int(n) >> k) << k
+
+
+def _default_face_size(face_size: int | None, far_layer: str) -> int:
+    """The requested face side, or the default for a `far_layer` mode ("off", "sync" or "async")."""
+    return (DEFAULT_FACE_SIZE if far_layer == "off" else NEAR_FACE_SIZE) if face_size is None else face_size
+
+
+def _check_face_size(label: str, value, footprint_deg: float | None = None) -> int:
+    """`value` as an int face side, from `smallest_face_size(footprint_deg)` (None: MIN_FACE_SIZE) to MAX_FACE_SIZE;
+    ValueError otherwise."""
+    lo = MIN_FACE_SIZE if footprint_deg is None else smallest_face_size(footprint_deg)
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= MAX_FACE_SIZE:
+        why = "" if lo == MIN_FACE_SIZE else (f" (a smaller face leaves LEDs of a {footprint_deg:g} degree "
+                                              "footprint between texels: raise face_size)")
+        raise ValueError(f"{label} must be an integer in {lo}..{MAX_FACE_SIZE}{why}, got {value!r}")
+    return int(value)
 
 
 def _rot_z(angle: float) -> np.ndarray:
@@ -71,6 +100,8 @@ def _gl_current(method):
 
     @functools.wraps(method)
     def wrapper(self, *args, **kwargs):
+        if self._released:
+            raise RuntimeError("renderer was released")
         with self.ctx:
             return method(self, *args, **kwargs)
 
@@ -120,50 +151,59 @@ class Renderer:
                  chunk_size: float = 1.0, lod_texels: float = 1.0, clock=None, fast_far_field: bool = True,
                  far_layer: str = "off", near_radius: float = 2.0, far_layer_error_deg: float = 0.5,
                  layer_face_size: int | None = None, path: str | None = None):
-        if dome is None:
-            from antarium.geometry import load_dome
-
-            dome = load_dome()
         from .far_layer import MODES
 
         path = check_path(path)
         if far_layer not in (*MODES, "auto"):
             raise ValueError(f"far_layer must be one of {', '.join(MODES)} or auto, got {far_layer!r}")
-        ctx = None
-        if path is None or far_layer == "auto":  # the renderer's own context tells (a probe context of its own
-            ctx = create_context()               # made the first frame's helper thread start late)
-            path = path or default_path(ctx.info["GL_RENDERER"])  # current: no `with`, set-up follows in it
-            if far_layer == "auto":  # a GPU draws every mesh every frame; a CPU needs the far layer
-                far_layer = "off" if path == "gpu" else "async"
         if not (np.isfinite(near_radius) and near_radius > 0):
             raise ValueError(f"near_radius must be a positive number of metres, got {near_radius!r}")
         if not (np.isfinite(far_layer_error_deg) and 0 < far_layer_error_deg <= 5):
             raise ValueError(f"far_layer_error_deg must be in (0, 5], got {far_layer_error_deg!r}")
-        layered = far_layer != "off"
-        n = (NEAR_FACE_SIZE if layered else DEFAULT_FACE_SIZE) if face_size is None else face_size
-        m = DEFAULT_FACE_SIZE if layer_face_size is None else layer_face_size
         if not (np.isfinite(footprint_deg) and 0 < footprint_deg < footprint.MAX_FWHM_DEG):
             raise ValueError(f"footprint_deg must be in (0, {footprint.MAX_FWHM_DEG:g}), got {footprint_deg!r}")
-        low = smallest_face_size(footprint_deg)
-        for label, value, lo in (("face_size", n, low), ("layer_face_size", m, MIN_FACE_SIZE)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= MAX_FACE_SIZE:
-                why = "" if lo == MIN_FACE_SIZE else (f" (a smaller face leaves LEDs of a {footprint_deg:g} degree "
-                                                      "footprint between texels: raise face_size)")
-                raise ValueError(f"{label} must be an integer in {lo}..{MAX_FACE_SIZE}{why}, got {value!r}")
-        self.far_layer_mode, self.near_radius = far_layer, float(near_radius)
-        self.far_layer_error = math.radians(far_layer_error_deg)
-        self.layer_face_size = int(m)
+        if face_size is not None or far_layer != "auto":  # else the default depends on the path: checked below
+            _check_face_size("face_size", _default_face_size(face_size, far_layer), footprint_deg)
+        m = DEFAULT_FACE_SIZE if layer_face_size is None else layer_face_size
+        _check_face_size("layer_face_size", m)
         if not (0 < near < far and np.isfinite(far)):
             raise ValueError(f"clip planes must satisfy 0 < near < far, got near={near!r}, far={far!r}")
+        if not (np.isfinite(lod_texels) and lod_texels >= 0):
+            raise ValueError(f"lod_texels must be a non-negative number, got {lod_texels!r}")
+        if dome is None:
+            from antarium.geometry import load_dome
+
+            dome = load_dome()
+        # every check is made: the GL context comes last, and is released again if anything after it fails
+        self._released = False
+        self.ctx = create_context()
+        try:
+            self._set_up(dome, face_size, footprint_deg, brightness, near, far, far_face_size, chunk_size,
+                         lod_texels, clock, fast_far_field, far_layer, near_radius, far_layer_error_deg, m, path)
+        except BaseException:
+            self._released = True
+            self.ctx.release()
+            raise
+
+    def _set_up(self, dome, face_size, footprint_deg, brightness, near, far, far_face_size, chunk_size, lod_texels,
+                clock, fast_far_field, far_layer, near_radius, far_layer_error_deg, layer_face_size, path) -> None:
+        """`__init__` past its checks, in the renderer's own (current) GL context."""
+        # the renderer's own context tells the path (a probe context of its own made the first frame's helper
+        # thread start late)
+        path = path or default_path(self.ctx.info["GL_RENDERER"])
+        if far_layer == "auto":  # a GPU draws every mesh every frame; a CPU needs the far layer
+            far_layer = "off" if path == "gpu" else "async"
+        n = mip_face_size(_check_face_size("face_size", _default_face_size(face_size, far_layer), footprint_deg))
+        self.far_layer_mode, self.near_radius = far_layer, float(near_radius)
+        self.far_layer_error = math.radians(far_layer_error_deg)
+        self.layer_face_size = int(layer_face_size)
         self.dome = dome
-        self.face_size = int(n)
+        self.face_size = n
         self.far_face_size = int(far_face_size or n)
         self.footprint_deg = float(footprint_deg)
         self.near, self.far = float(near), float(far)
         self.chunk_size = float(chunk_size)
         self.fast_far_field = bool(fast_far_field)
-        if not (np.isfinite(lod_texels) and lod_texels >= 0):
-            raise ValueError(f"lod_texels must be a non-negative number, got {lod_texels!r}")
         #: level-of-detail error bound (rad): a fraction of the largest texel
         self.lod_texels = float(lod_texels)
         #: the async far-layer builders' nice value, set by this (the frame loop's) thread's scheduling
@@ -181,7 +221,6 @@ class Renderer:
         self._convert = FrameConverter(np.asarray(dome.gain), brightness)
         self._channel = np.where(self._convert.is_uv, 2, 0).astype(np.int64)
 
-        self.ctx = ctx or create_context()
         self._setup_gl()
         #: GL renderer and version, and the per-frame path taken after the cube map ("gpu" or "cpu")
         self.gl_renderer = describe(self.ctx)
@@ -192,7 +231,6 @@ class Renderer:
                 with self.ctx:
                     self._gpu = GpuFramePath(self.ctx)
             except Exception as exc:
-                self.ctx.release()
                 raise RuntimeError(f"the gpu render path needs OpenGL 4.3 compute shaders, which {self.gl_renderer} "
                                    f"does not give ({exc}); use path 'cpu'") from exc
             self._gain_version = None
@@ -277,6 +315,24 @@ class Renderer:
         tex.extra = float(v.max())
         return tex
 
+    def smallest_drift_period_deg(self) -> float:
+        """Shortest period (degrees) a time-varying far field may have here: DRIFT_TEXELS largest texels of the far
+        texture it is drawn from, rebuilt every frame at one sample a texel (finer ones alias into false patterns)."""
+        return DRIFT_TEXELS * cubemap.largest_texel_deg(self.far_face_size)
+
+    def _check_drift(self, scene: Scene) -> None:
+        """ValueError, one line, for a far field redrawn every frame (`Scene.far_time_varying`) whose moving layers
+        (gratings: drifting in any direction but azimuth, or drums turning at another rate than a layer beside them)
+        have a period finer than `smallest_drift_period_deg`."""
+        if not scene.far_time_varying:
+            return
+        finest = min((layer.period for layer in scene.far if layer.time_varying or layer.yaw_rate), default=math.inf)
+        smallest = self.smallest_drift_period_deg()
+        if math.degrees(finest) < smallest:
+            raise ValueError(f"a drifting grating's period must be at least {smallest:.2f} deg on this renderer (its "
+                             f"far texture, far_face_size {self.far_face_size}, is redrawn every frame at one sample a "
+                             f"texel; finer would alias), got {math.degrees(finest):g} deg")
+
     def footprint_fwhm_for(self, lowpass_deg) -> float:
         """FWHM (rad) of the LED acceptance widened by an angular low-pass of `lowpass_deg` (None: none)."""
         return footprint_fwhm(self.footprint_deg, lowpass_deg)
@@ -293,12 +349,13 @@ class Renderer:
         """(atlas level, CSR arrays) of the footprint matrix, loaded or built on first use.
 
         Wide footprints (a low-pass) are sampled from a mipmap level of the atlas that still has
-        TEXELS_PER_FWHM texels across the FWHM, which keeps the matrix at tens of weights per LED.
+        TEXELS_PER_FWHM texels across the FWHM (and 16 or more across a face), which keeps the matrix at a few
+        hundred weights per LED at most (docs/rendering.md).
         """
         if self._kernel_matrix is None:
             texel = math.radians(cubemap.largest_texel_deg(self.face_size))
             level = 0
-            while (self.face_size % (2 << level) == 0 and (self.face_size >> (level + 1)) >= 16
+            while ((self.face_size >> (level + 1)) >= 16  # each level halves the faces exactly (`mip_face_size`)
                    and self._fwhm / (texel * (2 << level)) >= TEXELS_PER_FWHM):
                 level += 1
             n = self.face_size >> level
@@ -330,6 +387,7 @@ class Renderer:
             if prepared is None:
                 prepared = SceneSettings.of(self).build(scene if isinstance(scene, Scene) else build_scene(scene))
             new, table = prepared.scene, prepared.table
+            self._check_drift(new)
             self._set_footprint(new.lowpass_deg)
             if table is None:
                 far_tex = self._make_far_texture(new)
@@ -346,6 +404,7 @@ class Renderer:
             raise
         old_tex, old_meshes = self._far_tex, self._meshes
         self._far_tex, self._meshes, self._table, self.scene = far_tex, meshes, table, new
+        self._drop_gpu_table()
         self._convert.configure(channel_gain=new.channel_gain, swap_green_blue=new.swap_green_blue,
                                 contrast=new.contrast)
         self._t0 = self.clock.now()
@@ -390,7 +449,13 @@ class Renderer:
         giving the eye's pose now, to wait for the scene's far layer there."""
         from .prepared import LAYER_WAIT_S, prepare_scene
 
-        return prepare_scene(self, scene, pose, LAYER_WAIT_S if timeout_s is None else timeout_s)
+        prepared = prepare_scene(self, scene, pose, LAYER_WAIT_S if timeout_s is None else timeout_s)
+        try:  # refused here, in the preparing thread, rather than at the swap
+            self._check_drift(prepared.scene)
+        except ValueError:
+            prepared.release()
+            raise
+        return prepared
 
     def await_layer(self, prepared, pose, timeout_s: float | None = None) -> None:
         """Wait until a prepared scene's far layer is fresh at the eye of `pose()` (see `prepared.await_layer`):
@@ -444,16 +509,24 @@ class Renderer:
                 self.withdraw_far(far)
                 far = far.far
             far = self.prepare_far(far)
+        self._check_drift(Scene(far=far.far, name=scene.name))
         had_table = self._table is not None
         far_tex = self._make_far_texture(Scene(far=far.far, name=scene.name)) if far.table is None else None
         old_tex, self._far_tex = self._far_tex, far_tex
         scene.far, self._table = far.far, far.table
+        self._drop_gpu_table()
         if old_tex is not None:
             old_tex.release()
         if self._layer is not None and had_table and far.table is not None:
             self._layer_edit(("far", far.table))
         else:
             self._restart_layer()
+
+    def _drop_gpu_table(self) -> None:
+        """The GPU path's copy of a far-field table the scene no longer has is released (a new one is uploaded
+        by the first frame that looks one up)."""
+        if self._gpu is not None and self._table is None:
+            self._gpu.drop_table()
 
     def _restart_layer(self) -> None:
         """A new far layer for the current scene and footprint (none when off, or nothing to split)."""
@@ -921,6 +994,11 @@ class Renderer:
         return (texels.astype(np.float32) / 65535.0).reshape(6, n, n, 4)
 
     def release(self) -> None:
+        """Release the helper thread, the far layer and every GL object with the context; again: nothing. Every GL
+        method called after raises RuntimeError."""
+        if self._released:
+            return
+        self._released = True
         if self._helper is not None:
             self._helper.shutdown()
             self._helper = None
