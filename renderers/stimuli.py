@@ -217,8 +217,9 @@ class Grating:
     def wave(self, d: np.ndarray, t: float = 0.0) -> np.ndarray:
         az, el = azimuth_elevation(d)
         u = np.cos(self.orientation) * az + np.sin(self.orientation) * el
-        shift = 0.0 if self._is_drum else self.speed * t
-        x = 2 * np.pi * (u - shift) / self.period + self.phase
+        # a drum's table and texture are made at t = 0 and turned by the renderer (`yaw_rate`); evaluated at a later t
+        # it is redrawn every frame (a far field of two yaw rates), and must move itself
+        x = 2 * np.pi * (u - self.speed * t) / self.period + self.phase
         s = np.sin(x)
         return s if self.waveform == "sine" else np.where(s >= 0, 1.0, -1.0)
 

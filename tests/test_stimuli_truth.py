@@ -177,3 +177,26 @@ def test_check_config_reports_bad_stimulus_parameters_in_one_line(spec, message)
     with pytest.raises(ConfigError) as info:
         check_config(resolve({"bus": {"enabled": False}, "render": {"scene": spec}}))
     assert str(info.value) == f"[render] scene {spec['scene']!r}: {message}"
+
+
+def test_a_drum_turns_when_the_far_field_has_two_yaw_rates(renderer, dome):
+    """A drifting drum over a layer that does not turn: the far field is redrawn every frame (no single yaw rate)
+    and the drum must move itself; it stood still (found 2026-11-27). It shows what the drum alone shows."""
+    from antarium.renderers.scene import Scene
+
+    drum = build_scene({"scene": "grating", "period_deg": 20, "speed_deg_s": 30, "colour": [0.5, 0.0, 0.0],
+                        "mean": 0.5, "contrast": 0.8})
+    bar = build_scene({"scene": "bars", "azimuth_deg": 180, "width_deg": 10, "background": None})
+    both = Scene(far=[*drum.far, *bar.far], name="drum and a bar")
+    assert both.far_time_varying and both.yaw_rate == 0.0
+    t = 1.0 / 3.0  # the drum moved 10 deg: half a period
+    renderer.set_scene(drum)
+    alone = renderer.render(HOME, t=t).astype(np.float64) / (65535.0 * dome.gain[:, None])
+    renderer.set_scene(both)
+    start = renderer.render(HOME, t=0.0).astype(np.float64) / (65535.0 * dome.gain[:, None])
+    later = renderer.render(HOME, t=t).astype(np.float64) / (65535.0 * dome.gain[:, None])
+    # where the bar does not cover the drum, away from the zenith (where the two ways of drawing a far field differ
+    # by up to 0.18 at t = 0 too: the texture redrawn every frame against the table)
+    front = ~dome.is_uv & (np.abs(dome.azimuth) < math.radians(90)) & (np.abs(dome.elevation) < math.radians(60))
+    assert np.abs(later - start)[front, 0].max() > 0.3           # it moved (the drum spans 0.05..0.45)
+    assert np.abs(later - alone)[front, 0].max() < 0.05          # as the drum alone does
