@@ -126,6 +126,20 @@ class LinkSection(Section):
     host: str = "127.0.0.1"
     port: int = Field(0, ge=0, le=65535, description="0 with spawn_emulator: a free port")
     spawn_emulator: bool = True
+    brightness_percent: int = Field(100, ge=0, le=100, description=(
+        "the panels' global LED current limit, sent at start and again to a distributor that rebooted"))
+    dot_correction: int | str = Field(100, description=(
+        "per-LED current percent, sent with brightness_percent: one for every LED, or a .npy file of them"))
+    ALLOWED: ClassVar[dict[str, str]] = {
+        "dot_correction": "a whole percent 0..100 for every LED, or the path of a .npy file of percents, shape "
+                          "(55, 740) or (20350, 2)"}
+
+    @field_validator("dot_correction")
+    @classmethod
+    def _dot_correction(cls, v: int | str) -> int | str:
+        if isinstance(v, str) and not v.endswith(".npy") or isinstance(v, int) and not 0 <= v <= 100:
+            raise ValueError(f"must be {cls.ALLOWED['dot_correction']}")
+        return v
 
 
 class RenderSection(Section):

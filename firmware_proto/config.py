@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from antarium.geometry.constants import LEDS_PER_PANEL, N_PANELS
+from antarium.geometry.constants import LEDS_PER_PANEL, N_PANELS, N_PIXELS
 
 from .errors import FieldRangeError, LengthError, PanelError, UnknownTypeError
 from .header import ADDR_ALL, CLASS_CONTROL, CONTROL_HEADER_SIZE, control_header, parse_control_header
@@ -42,6 +42,35 @@ def check_percent(name: str, values) -> np.ndarray:
         i = int(np.argmax(bad.ravel()))
         raise ValueError(f"{name} entry {i} is {a.ravel()[i]}: allowed 0..{MAX_PERCENT} percent")
     return a.astype(np.uint8)
+
+
+def dot_correction_table(dot) -> np.ndarray:
+    """Dot correction percent 0..100 per LED as (55, 740) uint8 (LED k = 2 * local + led), from a scalar (every
+    LED), (55, 740), or (20350, 2) in frame layout. Raises ValueError naming the shape or the first bad entry."""
+    dot = np.asarray(dot)
+    if dot.ndim == 0:
+        dot = np.full((N_PANELS, LEDS_PER_PANEL), dot)
+    if dot.shape == (N_PIXELS, 2):
+        dot = dot.reshape(N_PANELS, LEDS_PER_PANEL)
+    if dot.shape != (N_PANELS, LEDS_PER_PANEL):
+        raise ValueError(f"dot correction must be a scalar, ({N_PANELS}, {LEDS_PER_PANEL}) or ({N_PIXELS}, 2); "
+                         f"got shape {dot.shape}")
+    return check_percent("dot correction", dot)
+
+
+def read_dot_correction(value: int | str) -> np.ndarray:
+    """A rig's `[link] dot_correction` as `dot_correction_table`: a percent for every LED, or the path of a .npy
+    file of percents ((55, 740) or (20350, 2)). Raises ValueError naming the file and what is wrong with it."""
+    if isinstance(value, str):
+        try:
+            table = np.load(value, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"dot correction file {value!r} cannot be read as a .npy array ({exc})") from None
+        try:
+            return dot_correction_table(table)
+        except ValueError as exc:
+            raise ValueError(f"dot correction file {value!r}: {exc}") from None
+    return dot_correction_table(value)
 
 
 def encode_dot_correction(panel: int, percent) -> bytes:

@@ -12,9 +12,9 @@ from importlib import import_module
 
 import numpy as np
 
-from antarium.geometry.constants import LEDS_PER_PANEL, N_ACTUATORS, N_PANELS, N_PIXELS
+from antarium.geometry.constants import N_ACTUATORS, N_PANELS
 
-from .config import check_percent, encode_brightness, encode_dot_correction
+from .config import check_percent, dot_correction_table, encode_brightness, encode_dot_correction
 from .control import encode_hello, encode_latch, encode_status_request
 from .errors import ProtocolError
 from .header import ADDR_ALL, PROTOCOL_VERSION, SEQ_MODULO, split_td
@@ -228,15 +228,7 @@ class Link(ABC):
         (nothing sent). The link keeps them and sends them again to a distributor that may have lost them (class
         doc)."""
         if dot_correction is not None:
-            dot = np.asarray(dot_correction)
-            if dot.ndim == 0:
-                dot = np.full((N_PANELS, LEDS_PER_PANEL), dot)
-            if dot.shape == (N_PIXELS, 2):
-                dot = dot.reshape(N_PANELS, LEDS_PER_PANEL)
-            if dot.shape != (N_PANELS, LEDS_PER_PANEL):
-                allowed = f"a scalar, ({N_PANELS}, {LEDS_PER_PANEL}) or ({N_PIXELS}, 2)"
-                raise ValueError(f"dot correction must be {allowed}; got shape {dot.shape}")
-            dot = check_percent("dot correction", dot)
+            dot = dot_correction_table(dot_correction)
         if brightness is not None:
             check_percent("brightness", np.asarray([brightness]))
         datagrams = [] if dot_correction is None else [encode_dot_correction(p, dot[p]) for p in range(N_PANELS)]

@@ -24,11 +24,21 @@ def check_config(config: RigConfig) -> RigConfig:
     _check_scene(config.render.scene)
     _check_face_size(config.render.face_size_px)
     _check_rate(config.loop.rate_hz)
+    _check_dot_correction(config.link.dot_correction)
     _check_locomotion(config)
     _check_trackball(config)
     _check_monitor(config)
     _check_ports(config)
     return config
+
+
+def _check_dot_correction(value: int | str) -> None:
+    from antarium.firmware_proto.config import read_dot_correction
+
+    try:
+        read_dot_correction(value)
+    except ValueError as exc:
+        raise ConfigError(f"[link] dot_correction: {exc}") from None
 
 
 def _check_scene(spec: str | dict) -> None:

@@ -85,8 +85,9 @@ def default_renderer_factory(render_cfg: RenderSection, clock: Clock | None = No
 
 class Server:
     """config: a resolved rig config (`antarium.config.load_config`). Injectable: clock, source,
-    renderer_factory (called in the loop's thread; None for a pose-only rig), link (None: from `[link]`,
-    False: no dome), session (an open zenoh session; None: from `[bus]` if enabled); record: a trial name
+    renderer_factory (called in the loop's thread; None for a pose-only rig), link (None: from `[link]`, which
+    also sets the panels' brightness and dot correction; a link given here is the caller's to configure; False:
+    no dome), session (an open zenoh session; None: from `[bus]` if enabled); record: a trial name
     to record from the first frame (also `[log] record = true`)."""
 
     def __init__(self, config: RigConfig, *, clock: Clock | None = None, source=None,
@@ -545,6 +546,12 @@ class Server:
             loop_cfg = self.config.loop
             self.placement.before_building()
             self.link = self._open_link()
+            if self.link is not None and self._link_arg is None:  # a link of its own: the panels' current settings
+                # from [link], which the link holds and sends again to a distributor that reboots
+                from antarium.firmware_proto.config import read_dot_correction
+
+                self.link.send_config(dot_correction=read_dot_correction(self.config.link.dot_correction),
+                                      brightness=self.config.link.brightness_percent)
             self.renderer = self._renderer_factory(self.config.render, self.clock) if self._renderer_factory \
                 else None
             self.loop = FrameLoop.from_config(
