@@ -167,8 +167,22 @@ POSE_STRUCT = struct.Struct("<BBHIdddddd")  # 56 bytes
 STATS_STRUCT = struct.Struct("<BBHIIIddddddd")  # 72 bytes
 
 
+#: the pose's flag bits this version defines (bit 0 closed loop, bit 1 fixed tether)
+POSE_FLAGS = 0x03
+
+
 class StreamError(ValueError):
-    """A stream payload of the wrong size or version."""
+    """A stream payload of the wrong size or version, or with reserved bits set."""
+
+
+def _check_reserved(stream: str, flags: tuple[int, int] = (0, 0), reserved: int = 0) -> None:
+    """StreamError when a payload sets flags outside `flags[1]` or a reserved field: a later version's meaning
+    is refused, never misread as this one's."""
+    if flags[0] & ~flags[1]:
+        raise StreamError(f"{stream} payload flags 0x{flags[0]:02x} set bits this version does not define "
+                          f"(allowed: 0x{flags[1]:02x})")
+    if reserved:
+        raise StreamError(f"{stream} payload reserved fields must be 0")
 
 
 def encode_pose(frame: int, t: float, pose, scene_rotation: float, closed_loop: bool, fixed_tether: bool) -> bytes:
@@ -182,9 +196,10 @@ def decode_pose(payload: bytes) -> dict[str, Any]:
     """A pose payload as a dict: frame, t, x, y, z, heading, scene_rotation, closed_loop, fixed_tether."""
     if len(payload) != POSE_STRUCT.size:
         raise StreamError(f"pose payload must be {POSE_STRUCT.size} bytes, got {len(payload)}")
-    version, flags, _, frame, t, x, y, z, heading, rot = POSE_STRUCT.unpack(payload)
+    version, flags, reserved, frame, t, x, y, z, heading, rot = POSE_STRUCT.unpack(payload)
     if version != STREAM_VERSION:
         raise StreamError(f"pose payload version {version} not supported (allowed: {STREAM_VERSION})")
+    _check_reserved("pose", flags=(flags, POSE_FLAGS), reserved=reserved)
     return {
         "frame": frame, "t": t, "x": x, "y": y, "z": z, "heading": heading, "scene_rotation": rot,
         "closed_loop": bool(flags & 1), "fixed_tether": bool(flags & 2),
@@ -200,8 +215,9 @@ def encode_stats(frame: int, late_frames: int, t: float, latency: float, render:
 def decode_stats(payload: bytes) -> dict[str, Any]:
     if len(payload) != STATS_STRUCT.size:
         raise StreamError(f"stats payload must be {STATS_STRUCT.size} bytes, got {len(payload)}")
-    version, _, _, frame, late, _, t, latency, render, sample, encode, send, pacing = STATS_STRUCT.unpack(payload)
+    version, r8, r16, frame, late, r32, t, latency, render, sample, encode, send, pacing = STATS_STRUCT.unpack(payload)
     if version != STREAM_VERSION:
         raise StreamError(f"stats payload version {version} not supported (allowed: {STREAM_VERSION})")
+    _check_reserved("stats", reserved=r8 | r16 | r32)
     return {"frame": frame, "late_frames": late, "t": t, "latency": latency, "render": render, "sample": sample,
             "encode": encode, "send": send, "pacing_error": pacing}

@@ -103,3 +103,19 @@ def test_pose_and_stats_structs_round_trip():
         bus.decode_pose(payload[:-1])
     with pytest.raises(bus.StreamError, match="version 9"):
         bus.decode_pose(bytes([9]) + payload[1:])
+
+
+
+@pytest.mark.parametrize(("stream", "offset", "value", "message"), [
+    ("pose", 1, 0x04, "flags 0x07 set bits this version does not define"),   # bit 2: a later version's flag
+    ("pose", 2, 0x01, "reserved fields must be 0"),
+    ("stats", 1, 0x01, "reserved fields must be 0"),
+    ("stats", 12, 0x01, "reserved fields must be 0"),
+])
+def test_pose_and_stats_payloads_of_a_later_version_are_refused_not_misread(stream, offset, value, message):
+    """Reserved bytes and undefined flags were ignored until 2026-11-27 (the locomotion struct refused them)."""
+    payload = bytearray(bus.encode_pose(5, 1.5, Pose(1.0, 2.0, 0.01, 0.5), 1.25, True, True) if stream == "pose"
+                        else bus.encode_stats(3, 1, 2.0, 0.001, 0.002, 0.0, 0.0005, 0.0003, 1e-5))
+    payload[offset] |= value
+    with pytest.raises(bus.StreamError, match=f"^{stream} payload {message}"):
+        (bus.decode_pose if stream == "pose" else bus.decode_stats)(bytes(payload))
