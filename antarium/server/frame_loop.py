@@ -182,8 +182,7 @@ class FrameLoop:
         self.rejected_frames = 0
         self._last_reject_event_t = -math.inf
         self.faults: dict[str, int] = {}
-        self.last_fault_t: dict[str, float] = {}  # per part: when it last failed (loop clock), and how
-        self.last_fault_error: dict[str, str] = {}
+        self.last_fault: dict[str, tuple[float, str]] = {}  # per part: when it last failed (loop clock), and how
         self._source_failing = False
         self._last_fault_event_t: dict[str, float] = {}
         self._last_late_event_t = -math.inf
@@ -474,7 +473,7 @@ class FrameLoop:
     def fault(self, part: str, t: float, exc: Exception) -> None:
         """Count an exception of a part (render, locomotion, bus); an event at most once a second per part."""
         self.faults[part] = self.faults.get(part, 0) + 1
-        self.last_fault_t[part], self.last_fault_error[part] = t, f"{type(exc).__name__}: {exc}"
+        self.last_fault[part] = t, f"{type(exc).__name__}: {exc}"
         if t - self._last_fault_event_t.get(part, -math.inf) >= 1.0:
             self._last_fault_event_t[part] = t
             self.event(f"{part}_error", error=f"{type(exc).__name__}: {exc}", count=self.faults[part])

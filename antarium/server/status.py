@@ -39,10 +39,9 @@ def rig_status(server: Server) -> dict[str, Any]:
             alarms.append("dome link down: " + (loop.last_link_error or "no telemetry"))
         if not loop.locomotion_connected:
             alarms.append("locomotion source disconnected: pose held")
-        failed_t = loop.last_fault_t.get("render")
-        if failed_t is not None and out["t"] - failed_t <= RENDER_ALARM_S:
+        if "render" in loop.last_fault and out["t"] - loop.last_fault["render"][0] <= RENDER_ALARM_S:
             alarms.append(f"renderer failing, the dome keeps its last frame: {loop.faults['render']} render errors, "
-                          f"the last: {loop.last_fault_error['render']}")
+                          f"the last: {loop.last_fault['render'][1]}")
     renderer = server.renderer
     if renderer is not None and hasattr(renderer, "far_layer_status"):
         out["far_layer"] = renderer.far_layer_status()
