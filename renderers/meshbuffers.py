@@ -12,8 +12,7 @@ same cube of side LOD_CELLS[k-1] (metres) into their mean (position and colour) 
 collapse. A merged vertex moves by at most the cube's diagonal, sqrt(3) cells; a chunk at distance D (to its
 bounding sphere) uses the coarsest level whose cell is below `lod_angle * D / LOD_REACH`, so that no vertex moves
 by more than half of `lod_angle` as seen from the eye (`Renderer`'s default `lod_angle`: one texel at a face's
-centre). Merging folds some triangles of a closed mesh over: its levels above 0 are drawn double-sided (each
-triangle in both windings), only level 0 has its back faces culled. Textured meshes keep level 0 only.
+centre). Textured meshes keep level 0 only.
 """
 
 from __future__ import annotations
@@ -48,13 +47,6 @@ def _chunk_order(mesh, chunk_size: float) -> tuple[np.ndarray, np.ndarray]:
     order = np.argsort(key, kind="stable")
     _, chunk = np.unique(key[order], return_inverse=True)
     return order, chunk
-
-
-def both_windings(faces: np.ndarray, tri_chunk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(2F, 3) faces, each followed by itself wound the other way, and their (2F,) chunks (still sorted): a level
-    of detail of a closed mesh drawn as double-sided under back-face culling (merging vertices folds some of its
-    triangles over, and culling them would open holes to the sky through the object)."""
-    return np.stack([faces, faces[:, ::-1]], axis=1).reshape(-1, 3), np.repeat(tri_chunk, 2)
 
 
 def cluster_vertices(vertices, colours, faces, tri_chunk, cell: float):
@@ -131,7 +123,7 @@ class MeshArrays:
                         levels.append(levels[-1])
                         continue
                     v, c, f, tc = lod
-                    levels.append((f + base, tc) if mesh.double_sided else both_windings(f + base, tc))
+                    levels.append((f + base, tc))
                     verts.append(v)
                     cols.append(c)
                     base += len(v)
