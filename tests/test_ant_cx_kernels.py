@@ -89,14 +89,16 @@ def test_compiled_compass_fit_equals_the_straightforward_sums():
         drive = f[compass.pixels].astype(np.float64) * compass._scale[:, None]
         pol, total = drive[:, 1], drive.sum(1)
         e = e_vectors_from_polarisers(compass._dirs, a[compass._uv_slot], compass._axes)
-        lit, pol_lit, total_lit, m, bright = compass_fit(f, compass.pixels, compass._scale, compass._uv_slot, a,
-                                                         compass._px, compass._py, compass._dirs, 0.01)
+        lit, pol_lit, total_lit, m, gradient = compass_fit(f, compass.pixels, compass._scale, compass._uv_slot, a,
+                                                           compass._px, compass._py, compass._dirs, 0.01, 0.05)
         on = total > 0.01
+        sky = on & (pol >= 0.05 * total)
         assert lit == on.sum()
         assert pol_lit == pytest.approx(pol[on].sum(), rel=1e-12)
         assert total_lit == pytest.approx(total[on].sum(), rel=1e-12)
         np.testing.assert_allclose(m, (e * pol[:, None]).T @ e, rtol=1e-10, atol=1e-12)
-        np.testing.assert_allclose(bright, total @ compass._dirs, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(gradient, (total[sky] - total[sky].mean()) @ compass._dirs[sky], rtol=1e-10,
+                                   atol=1e-12)
 
 
 def _reference_flow(of, before, after):

@@ -156,10 +156,13 @@ class CentralComplex:
         return self.cpu4.copy()
 
     def restore(self, memory: np.ndarray) -> None:
+        """Set the CPU4 memory to `memory` (16,) rates in [0, 1] (as `memory` gives them); anything else is
+        refused (ValueError) and the memory kept."""
         m = np.asarray(memory, np.float64)
-        if m.shape != (2 * N_COLUMNS,) or not np.all(np.isfinite(m)):
-            raise ValueError(f"CPU4 memory must be ({2 * N_COLUMNS},) finite floats, got shape {m.shape}")
-        self.cpu4 = np.clip(m, 0.0, 1.0)
+        if m.shape != (2 * N_COLUMNS,) or not np.all((m >= 0.0) & (m <= 1.0)):
+            raise ValueError(f"CPU4 memory must be ({2 * N_COLUMNS},) rates in [0, 1], got shape {m.shape} with "
+                             f"values {np.min(m, initial=np.inf)} to {np.max(m, initial=-np.inf)}")
+        self.cpu4 = m.copy()
 
     def home_vector(self) -> tuple[float, float]:
         """(direction rad, strength) of the memory's population vector (shifted CPU4 halves): it points from the

@@ -16,16 +16,21 @@ from numba import njit
 
 
 @njit(cache=True)
-def compass_fit(leds, pixels, scale, slots, angles, px, py, dirs, min_intensity):
+def compass_fit(leds, pixels, scale, slots, angles, px, py, dirs, min_intensity, min_degree):
     """Dorsal-rim sums for one LED frame: (lit pixels, polarised sum of the lit, total sum of the lit, (3, 3)
-    e-vector scatter sum_i P_i e_i e_i^T, (3,) brightness vector sum_i I_i d_i).
+    e-vector scatter sum_i P_i e_i e_i^T, (3,) brightness gradient sum_sky (I_i - mean_sky I) d_i).
+    The gradient is the sky's alone: over the lit pixels polarised at least `min_degree` (objects in the scene
+    are unpolarised) about their mean intensity, so pixels an object hides pull it to no side.
 
     leds (N, 2) uint16; pixels (M,) int64 LED rows; scale (M,) 1 / (65535 gain); slots (M,) places in the flat
     polariser angle array `angles` (rad); px, py (M, 3) the panel's x and y axes projected normal to the pixel
     direction (so e = cos a px + sin a py, normalised); dirs (M, 3) unit pixel directions."""
     m = np.zeros((3, 3))
     bright = np.zeros(3)
+    dir_sum = np.zeros(3)
     lit = 0
+    sky = 0
+    total_sky = 0.0
     pol_lit = 0.0
     total_lit = 0.0
     for i in range(pixels.shape[0]):
@@ -36,6 +41,12 @@ def compass_fit(leds, pixels, scale, slots, angles, px, py, dirs, min_intensity)
             lit += 1
             pol_lit += pol
             total_lit += total
+            if pol >= min_degree * total:
+                sky += 1
+                total_sky += total
+                for k in range(3):
+                    bright[k] += total * dirs[i, k]
+                    dir_sum[k] += dirs[i, k]
         a = angles[slots[i]]
         c = math.cos(a)
         s = math.sin(a)
@@ -50,12 +61,45 @@ def compass_fit(leds, pixels, scale, slots, angles, px, py, dirs, min_intensity)
         m[1, 1] += w * e1 * e1
         m[1, 2] += w * e1 * e2
         m[2, 2] += w * e2 * e2
-        for k in range(3):
-            bright[k] += total * dirs[i, k]
     m[1, 0] = m[0, 1]
     m[2, 0] = m[0, 2]
     m[2, 1] = m[1, 2]
-    return lit, pol_lit, total_lit, m, bright
+    mean = total_sky / max(sky, 1)
+    return lit, pol_lit, total_lit, m, bright - mean * dir_sum
+
+
+@njit(cache=True)
+def degree_excess(leds, pixels, scale, dirs, sun, min_intensity, min_degree):
+    """Root mean square excess of the sky pixels' (lit, polarised at least `min_degree`) degrees of polarisation
+    over single scattering's pattern q = (1 - c^2) / (1 + c^2), c = d . `sun` (3,) unit, as a share of p_max, the
+    median of degree / q over the sky pixels with q >= 0.3; 0.0 without such pixels. Arguments as `compass_fit`."""
+    n = pixels.shape[0]
+    degree = np.empty(n)
+    pattern = np.empty(n)
+    ratio = np.empty(n)
+    sky = 0
+    clear = 0
+    for i in range(n):
+        row = pixels[i]
+        pol = leds[row, 1] * scale[i]
+        total = leds[row, 0] * scale[i] + pol
+        if total > min_intensity and pol >= min_degree * total:
+            c = dirs[i, 0] * sun[0] + dirs[i, 1] * sun[1] + dirs[i, 2] * sun[2]
+            q = (1.0 - c * c) / (1.0 + c * c)
+            degree[sky] = pol / total
+            pattern[sky] = q
+            sky += 1
+            if q >= 0.3:
+                ratio[clear] = pol / total / q
+                clear += 1
+    if clear == 0:
+        return 0.0
+    p_max = np.median(ratio[:clear])
+    excess = 0.0
+    for i in range(sky):
+        e = max(0.0, degree[i] - p_max * pattern[i])
+        excess += e * e
+    return math.sqrt(excess / sky) / p_max
 
 
 @njit(cache=True)

@@ -4,10 +4,11 @@ vector-memory and CXMB trips, Mitchell 2019 section 2.5).
 Foraging task: from the nest at the origin the ant walks a random outbound route (a correlated random walk of
 `n_outbound` decisions driven from outside, its CX integrating what the ball and the compass tell it), then homes
 by its CX for `n_inbound` decisions. Metrics (Stone 2017): closest approach to the nest as a share of the outbound
-path length; tortuosity of the homeward path, tau = L / C as Stone 2017's: the path length L (m) from the feeder
-to the closest approach over the distance C (m) it brought the ant nearer the nest (feeder-to-nest distance minus
-the closest approach; 1 = a straight approach, NaN when the ant never came nearer than the feeder; Stone 2017
-reads C after a path as long as the feeder distance); the search around the nest (median distance from the nest
+path length; tortuosity of the homeward path, tau = L / C after Stone 2017 but read at the closest approach: L
+(m) the length of the whole homeward path from the feeder to the closest approach (any loops walked before it
+included), C (m) how much nearer the nest the ant is there than at the feeder (feeder-to-nest distance minus the
+closest approach); 1 = a straight approach, NaN when the ant never came nearer than the feeder (Stone 2017 reads
+C after a path as long as the feeder distance instead); the search around the nest (median distance from the nest
 after the closest approach, as a share of the outbound path).
 
 A trip on which the compass loses its cue (the sky compass reads no polarised sky, e.g. with the ant inside or
@@ -56,6 +57,24 @@ def write_json(path: Path, record: Any) -> None:
         return v
 
     path.write_text(json.dumps(strict(record), indent=2, allow_nan=False, default=float))
+
+
+#: frames the polarisers get to come to rest before an experiment (they reach it in about 150, at 190 Hz)
+SETTLE_FRAMES = 400
+
+
+def settle(ant) -> None:
+    """Run frames until the polarisers rest exactly (two frames with the same angles, at most SETTLE_FRAMES):
+    until then they still turn towards the sky's e-vectors by ever smaller amounts, and a trip would start from
+    a dome that depends on how many frames ran before it (the trials before it); RuntimeError if they do not."""
+    angles = None
+    for _ in range(SETTLE_FRAMES):
+        ant.frame()
+        now = ant.read_polarisers()
+        if angles is not None and np.array_equal(now, angles):
+            return
+        angles = now
+    raise RuntimeError(f"the polarisers did not come to rest within {SETTLE_FRAMES} frames")
 
 
 def outbound_turns(seed: int, n: int) -> np.ndarray:
@@ -153,7 +172,8 @@ def path_length(xy: np.ndarray, start=(0.0, 0.0)) -> float:
 def homing_metrics(outbound: Trip, inbound: Trip, nest=(0.0, 0.0)) -> dict[str, float]:
     """Closest approach (m, share of the outbound length), tortuosity and search spread of a homeward trip, over
     the feeder and the decisions it walked (a trip that lost its cue at once stays at the feeder's distance).
-    Tortuosity: Stone 2017's L / C, path length (m) to the closest approach over how much nearer (m) the nest it
+    Tortuosity: L / C (after Stone 2017, read at the closest approach): L the length (m) of the whole homeward
+    path from the feeder to the closest approach, loops before it included; C how much nearer (m) the nest the ant
     is there than at the feeder; NaN when it never came nearer (its closest approach is the feeder)."""
     length = path_length(outbound.xy, nest)
     start = outbound.xy[-1]
@@ -181,7 +201,8 @@ def _check_compass(model_params: dict | None, compass: str) -> None:
 
 def trial_cx(params, seed: int) -> CentralComplex:
     """A fresh CX for trial `seed` of a model with `params` (`CXModelParams`): its noise stream seeded from
-    (params.seed, seed), so that a trial walks the same whichever trials ran before it."""
+    (params.seed, seed), so that a trial walks the same whichever trials ran before it (bit for bit, once the
+    experiment let the polarisers come to rest: `settle`)."""
     stream = int(np.random.SeedSequence([params.seed, seed]).generate_state(1)[0])
     return CentralComplex(replace(params.cx(), seed=stream))
 
@@ -212,26 +233,26 @@ def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 150
     n_inbound = n_inbound or n_outbound
     _check_compass(model_params, compass)
     model = make_model("cx", EyeParams().n_pn, **{"compass": compass, **(model_params or {})})
+    out = Path(out_dir) if out_dir is not None else None
+    if out is not None:  # an unwritable folder is found before the run, not after it
+        out.mkdir(parents=True, exist_ok=True)
     outcomes: list[HomingOutcome] = []
     trips: dict[str, tuple[Trip, Trip]] = {}
     with virtual_rig(model, scene=scene, eye_params=None, renderer_kwargs={"face_size": FACE_SIZE},
                      compass=compass) as ant:
-        for _ in range(40):  # the polarisers turn to the sky's e-vectors
-            ant.frame()
+        settle(ant)
         for seed in seeds:
             t0 = time.perf_counter()
-            metrics, out, home = pi_trial(ant, seed, n_outbound, n_inbound)
+            metrics, outbound, home = pi_trial(ant, seed, n_outbound, n_inbound)
             rate = (n_outbound + n_inbound) / (time.perf_counter() - t0)
             outcomes.append(HomingOutcome(seed, compass, "cx", decisions_per_s=rate, **metrics))
-            trips[f"seed {seed}"] = (out, home)
+            trips[f"seed {seed}"] = (outbound, home)
             if echo is not None:
                 lost = f"; ended without a compass cue: {metrics['lost_cue']}" if metrics["lost_cue"] else ""
                 echo(f"seed {seed} ({compass} compass): closest approach {100 * metrics['closest_approach_share']:.2f}"
                      f" % of {metrics['outbound_length_m']:.1f} m, tortuosity {metrics['tortuosity']:.2f}{lost}")
     summary = summarise(outcomes)
-    if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
+    if out is not None:
         write_json(out / f"pi_homing_{compass}.json",
                    {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
                     "n_inbound": n_inbound, "scene": str(scene)})
@@ -362,8 +383,7 @@ def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound:
                                                       **(model_params or {})})
         with virtual_rig(model, scene=clutter_scene(clutter, sky), renderer_kwargs={"face_size": FACE_SIZE},
                          compass=compass) as ant:
-            for _ in range(40):
-                ant.frame()
+            settle(ant)
             outcome, trips = arena_trial(ant, clutter, seed, n_outbound, n_inbound)
         outcomes.append(outcome)
         if out is not None:
@@ -396,12 +416,14 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
     from antarium.ant.world import virtual_rig
 
     n_inbound = n_inbound or n_outbound
+    path = Path(out_dir) if out_dir is not None else None
+    if path is not None:  # an unwritable folder is found before the run, not after it
+        path.mkdir(parents=True, exist_ok=True)
     model = make_model("cxmb", EyeParams().n_pn, compass=compass, seed=seed)
     trips: dict[str, Trip] = {}
     result: dict[str, Any] = {"seed": seed, "lateral_m": lateral, "compass": compass, "runs": {}}
     with virtual_rig(model, scene=scene, renderer_kwargs={"face_size": FACE_SIZE}, compass=compass) as ant:
-        for _ in range(40):
-            ant.frame()
+        settle(ant)
         model.cx.reset()
         out = walk_outbound(ant, outbound_turns(seed, n_outbound), model.params.step)
         memory = model.home_memory()
@@ -428,9 +450,7 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
             if echo is not None:
                 echo(f"k = {k}: closest to nest {result['runs'][str(k)]['closest_to_nest_m']:.2f} m, to the fictive "
                      f"nest {result['runs'][str(k)]['closest_to_fictive_nest_m']:.2f} m")
-    if out_dir is not None:
-        path = Path(out_dir)
-        path.mkdir(parents=True, exist_ok=True)
+    if path is not None:
         write_json(path / f"displacement_{compass}.json", result)
         pictures = {name: (out, trip) for name, trip in trips.items()}
         result["png"] = str(plot_trips(path / f"displacement_{compass}.png", pictures,

@@ -55,6 +55,11 @@ class CXModelParams:
             raise ValueError(f"compass {self.compass!r} not known; allowed: {', '.join(COMPASSES)}")
         if self.step <= 0 or self.speed_scale <= 0 or self.max_turn <= 0:
             raise ValueError("CX step, speed_scale and max_turn must be > 0")
+        from antarium.ant.optic_flow import METHODS
+
+        if self.flow_method not in METHODS or not self.flow_gain > 0:
+            raise ValueError(f"CX flow_method must be one of {', '.join(METHODS)} and flow_gain > 0 rad, got "
+                             f"{self.flow_method!r} and {self.flow_gain!r}")
 
     def cx(self) -> CXParams:
         return CXParams(noise=self.noise, cpu4_gain=self.cpu4_gain, leak=self.leak, seed=self.seed)
@@ -112,6 +117,8 @@ class CXModel:
                 "memory_strength": strength}
 
     def _extra(self, senses: Senses) -> tuple[np.ndarray | None, float, dict[str, float]]:
+        """CPU1's extra memory input (16,) or None, CPU4's weight k against it, the trace; the trace holds
+        "flow_turn" when the optic flow went into the extra input (then `decide` adds no avoidance turn)."""
         return None, 1.0, {}
 
     def decide(self, senses: Senses) -> Command:
@@ -120,7 +127,7 @@ class CXModel:
         self.cx.steering(extra, k)
         motor = self.cx.motor()
         turn = float(np.clip(self.params.turn_gain * motor, -self.params.max_turn, self.params.max_turn))
-        if self.params.avoid:
+        if self.params.avoid and "flow_turn" not in more:  # the flow is read once per decision
             flow_turn, flow_trace = self.avoidance(senses)
             more = {**more, **flow_trace}
             turn = float(np.clip(turn + flow_turn, -self.params.max_turn, self.params.max_turn))

@@ -161,8 +161,8 @@ def run(args: argparse.Namespace) -> int:
 
         from antarium.ant.homing import displacement
 
-        if args.steps < 2:
-            raise ValueError(f"--steps must be >= 2, got {args.steps}")
+        if args.steps < 2 or args.seed < 0:
+            raise ValueError(f"--steps must be >= 2 and --seed >= 0, got {args.steps} and {args.seed}")
         print(json.dumps(displacement(args.out, args.seed, args.steps, None, args.lateral_cm / 100.0,
                                       compass=args.compass, scene=args.scene, echo=print), indent=2))
         return 0
