@@ -31,3 +31,12 @@ def check_number(name: str, value: Any, low: float = -math.inf, high: float = ma
         raise ValueError(f"{name} must be {what}{' ' + ' and '.join(bounds) if bounds else ''}, "
                          f"got {repr(value)[:60]}")
     return int(value) if integer else number
+
+
+def is_float_text(text: str) -> bool:
+    """Whether `float(text)` reads a field of a text file ("nan" and "inf" do; check finiteness apart)."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

@@ -25,6 +25,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from antarium.ant.routes import Route, RouteError
+from antarium.core.numbers import is_float_text
 
 ROUTE_SUFFIXES = (".csv", ".txt", ".tsv", ".h5", ".hdf5")
 UP_AXES = ("z", "y")
@@ -350,15 +351,15 @@ def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
         raise RouteError(f"{path}: empty route file; expected columns x_m, y_m (and optionally heading_deg)")
     delimiter = "," if any("," in ln for _, ln in lines) else None
     first = [f.strip() for f in lines[0][1].split(delimiter)]
-    has_header = not all(_is_float(f) for f in first)
+    has_header = not all(is_float_text(f) for f in first)
     if has_header:
         x, y, h = _header(path, first)
     rows = []
     for n, line in lines[int(has_header):]:
         row = []
         for field in (f.strip() for f in line.split(delimiter)):
-            if not _is_float(field) or not math.isfinite(float(field)):
-                raise RouteError(f"{path}, line {n}: {field!r} is not a {'finite ' * _is_float(field)}number; a "
+            if not is_float_text(field) or not math.isfinite(float(field)):
+                raise RouteError(f"{path}, line {n}: {field!r} is not a {'finite ' * is_float_text(field)}number; a "
                                  "route file holds x_m, y_m[, heading_deg] numbers (metres, degrees), finite, with an "
                                  "optional header row")
             row.append(float(field))
@@ -376,14 +377,6 @@ def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
         x, y, h = 0, 1, 2 if len(rows[0]) == 3 else -1
     data = np.array(rows, np.float64)
     return data[:, [x, y]], math.radians(float(data[0, h])) if h >= 0 else None
-
-
-def _is_float(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def load_route(path: str | Path, name: str | None = None) -> RouteInput:

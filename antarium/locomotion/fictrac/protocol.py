@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+from antarium.core.numbers import is_float_text
 from antarium.locomotion import BallSample
 
 PREFIX = "FT"
@@ -72,7 +73,7 @@ def parse_line(line: str | bytes) -> FicTracFrame:
     try:
         values = [float(p) for p in parts]
     except ValueError:
-        bad = next(i for i, p in enumerate(parts) if not _is_float(p))
+        bad = next(i for i, p in enumerate(parts) if not is_float_text(p))
         raise FicTracParseError(
             f"FicTrac field {bad + 1} ({FicTracFrame._fields[bad]}) is not a number: {parts[bad].strip()!r}"
         ) from None
@@ -86,14 +87,6 @@ def parse_line(line: str | bytes) -> FicTracFrame:
         values[i] = int(values[i])
     values += [math.nan] * (N_FIELDS - len(values))
     return FicTracFrame(*values)
-
-
-def _is_float(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def format_line(frame: FicTracFrame, prefix: bool = True) -> str:
