@@ -1,5 +1,7 @@
 """`antarium servosphere`: the simulated live loop, its summary and picture; bad arguments get one clear line."""
 
+import re
+
 from antarium.cli import main
 
 
@@ -46,7 +48,10 @@ def test_a_run_where_no_ant_is_ever_seen_says_so(tmp_path, capsys):
     config = _config(tmp_path, "area_mm2 = [100, 200]")
     assert main(["servosphere", "--config", config, "--seconds", "0.1", "--plot", str(out)]) == 0
     captured = capsys.readouterr().out
-    assert "no ant tracked" in captured and "'no_ant': 7" in captured and not out.exists()
+    frames = re.search(r"frames (\d+),", captured)
+    assert frames and int(frames[1]) > 0, captured
+    # every frame is no_ant (how many frames 0.1 s holds depends on the machine: 69 on a slow day)
+    assert "no ant tracked" in captured and f"'no_ant': {frames[1]}," in captured and not out.exists()
 
 
 def test_options_that_would_be_ignored_are_refused(tmp_path, capsys):
