@@ -149,27 +149,6 @@ def test_displace_names_a_negative_seed(tmp_path, capsys):
     assert "--seed >= 0, got 600 and -1" in capsys.readouterr().err
 
 
-def test_a_seeds_sky_compass_trip_does_not_depend_on_the_seeds_before_it(monkeypatch):
-    """Bit for bit: the experiment lets the polarisers come to rest first (they still crept by ~1e-5 rad after
-    its 40 frames, and a trip after another started from a dome more at rest: 8e-8 m apart after 200 steps)."""
-    from antarium.ant import homing
-
-    ends: dict[int, list] = {}
-    trial = homing.pi_trial
-
-    def spy(ant, seed, n_outbound, n_inbound):
-        metrics, out, home = trial(ant, seed, n_outbound, n_inbound)
-        ends.setdefault(seed, []).append(np.vstack([out.xy, home.xy]))
-        return metrics, out, home
-
-    monkeypatch.setattr(homing, "pi_trial", spy)
-    pi_homing(None, seeds=[1], n_outbound=60, n_inbound=60, compass="sky")
-    pi_homing(None, seeds=[0, 1], n_outbound=60, n_inbound=60, compass="sky")
-    alone, after_seed_0 = ends[1]
-    assert alone.shape == (119, 2)
-    np.testing.assert_array_equal(alone, after_seed_0)
-
-
 def test_compiled_degree_check_equals_the_straightforward_numpy():
     from antarium.ant.compass import SkyCompass
     from antarium.ant.cx_kernels import degree_excess
