@@ -429,6 +429,16 @@ def test_a_face_size_the_renderer_cannot_draw_with_is_refused_by_the_spec(field)
         load_spec(_spec(d, "[models.perfect_memory]\n", face_size=16))
 
 
+def test_runs_carry_the_face_size_the_renderer_draws(field):
+    """A spec's face_size 55 is drawn at 56 (`mip_face_size`): the runs, their ids and their rows say 56 (they said
+    55 until 2026-11-27), and a spec of 56 names the same runs."""
+    d, _ = field
+    runs55 = load_spec(_spec(d, "[models.perfect_memory]\n", face_size=55)).runs
+    runs56 = load_spec(_spec(d, "[models.perfect_memory]\n", face_size=56)).runs
+    assert {r.face_size for r in runs55} == {56}
+    assert [r.run_id for r in runs55] == [r.run_id for r in runs56]
+
+
 def test_kill_then_rerun_runs_each_run_once(field, tmp_path):
     """A sweep killed half way restarts and completes; no run is done twice (each run's worker pid is kept)."""
     d, _ = field

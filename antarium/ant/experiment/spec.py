@@ -4,7 +4,8 @@
     protocols = ["ardin"]              # ardin: put back at 20 cm and counted; antcar: never put back
     seeds = [0, 1]                     # the mushroom bodies' random PN->KC wiring (a model without one runs once)
     releases = [{lateral_cm = 0, heading_deg = 0}, {lateral_cm = 5, heading_deg = 20}]
-    face_size = 64                     # the renderer's cube-face side (an integer 55..2048)
+    face_size = 64                     # the renderer's cube-face side (an integer 55..2048; runs and rows
+                                       # carry the side the renderer draws: 55 -> 56, `mip_face_size`)
     max_decisions = 0                  # 0: three times the route length in steps
     eye = {cols = 50, rows = 16}       # eye parameters over each model's own (optional)
     metrics = ["errors", "lateral_median_m"]   # the summary's metrics (default: all)
@@ -400,6 +401,7 @@ def expand(data: dict, base: Path = Path(".")) -> Experiment:
     """Runs of a spec's tables (see the module docstring); paths relative to `base` (the spec's folder), made
     absolute. Raises SpecError for a spec that breaks its declaration (`_schema`)."""
     from antarium.ant.models import MODELS
+    from antarium.renderers.renderer import mip_face_size
 
     base = Path(base).resolve()
     spec = _schema()("", data)
@@ -423,6 +425,7 @@ def expand(data: dict, base: Path = Path(".")) -> Experiment:
         # the seed is the model's random wiring: a model without one runs once per condition (seed 0)
         seeds[kind] = exp["seeds"] if "seed" in MODELS[kind][1].__dataclass_fields__ else [0]
     releases = [(r["lateral_cm"], r["heading_deg"]) for r in exp["releases"]]
+    face_size = mip_face_size(exp["face_size"])  # the side the renderer draws (55 -> 56): one run, one record
     runs, routes = [], {}
     for world in worlds:
         geometry = world_geometry(world)
@@ -439,7 +442,7 @@ def expand(data: dict, base: Path = Path(".")) -> Experiment:
                     for params, (lat, hdg), seed, protocol in itertools.product(grid, releases, seeds[kind],
                                                                                 exp["protocols"]):
                         runs.append(Run(world, set_name, ri.name, ri.source, kind, params, lat, hdg, seed,
-                                        protocol, exp["face_size"], exp["max_decisions"], z, extra, digest))
+                                        protocol, face_size, exp["max_decisions"], z, extra, digest))
     ids = [r.run_id for r in runs]
     if len(set(ids)) != len(ids):
         raise SpecError("the spec names the same run twice (a repeated world, route set or route)")
