@@ -27,7 +27,7 @@ def test_render_writes_an_equal_area_map_and_the_cube_map(tmp_path, capsys):
 
 @pytest.mark.parametrize("args, message", [
     (["render", "nonsense"], "unknown scene 'nonsense'"),
-    (["render", "grating", "--set", "period_deg=-3"], "period"),
+    (["render", "grating", "--set", "period_deg=-3"], "(scene 'grating' with --set period_deg=-3)"),  # names --set
     (["render", "uniform", "--heading", "nan"], "heading"),
     (["render", "{not json"], "JSON"),
     (["render", "uniform", "--face-size", "8"], "face_size"),

@@ -86,7 +86,12 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.cube, "--cube", suffixes=(".png",))
         if Path(args.cube).expanduser().resolve() == Path(args.out).expanduser().resolve():
             raise ValueError(f"--cube and --out name the same file {args.out!r}; give two names")
-    scene = build_scene(parse_scene_spec(args.scene, args.settings))  # bad scenes fail before GL starts
+    try:  # bad scenes fail before GL starts
+        scene = build_scene(parse_scene_spec(args.scene, args.settings))
+    except ValueError as exc:
+        if not args.settings:
+            raise
+        raise ValueError(f"{exc} (scene {args.scene!r} with --set {' --set '.join(args.settings)})") from None
     dome = load_dome()
     renderer = Renderer(dome, face_size=args.face_size)
     try:
