@@ -200,7 +200,8 @@ def test_the_page_shows_the_dome_the_path_and_the_stats_live(browser, rig):
         assert after["status"] > before["status"] and after["stats"] > before["stats"]
         assert after["frame"] > before["frame"]
         # the path view adds the new poses to what it drew: the same path as drawing it all again, but where the
-        # strokes' edges meet
+        # strokes' edges meet (drawn piece by piece, a joint is covered twice, and its anti-aliased fringe can cross
+        # the colour threshold below a pixel further out: 1-2 such pixels in 2 of 6 full runs with a 1-pixel margin)
         incremental, whole = browser.execute_script(
             "drawPath(); const W = 360, a = pathCtx.getImageData(0, 0, W, W).data; pathBox = null; drawPath(); "
             "const b = pathCtx.getImageData(0, 0, W, W).data, blue = (d) => { const m = []; "
@@ -209,9 +210,9 @@ def test_the_page_shows_the_dome_the_path_and_the_stats_live(browser, rig):
         incremental, whole = (np.asarray(m, bool).reshape(360, 360) for m in (incremental, whole))
         assert whole.sum() > 20, whole.sum()
         for this, other in ((incremental, whole), (whole, incremental)):
-            near = np.zeros_like(other)  # within a pixel of the other picture's path
-            for dy in (-1, 0, 1):
-                for dx in (-1, 0, 1):
+            near = np.zeros_like(other)  # within two pixels of the other picture's path
+            for dy in (-2, -1, 0, 1, 2):
+                for dx in (-2, -1, 0, 1, 2):
                     near |= np.roll(np.roll(other, dy, 0), dx, 1)
             assert (this & ~near).sum() == 0, f"{(this & ~near).sum()} path pixels not in the other picture"
 
