@@ -122,7 +122,7 @@ def _colours_and_texture(geom, name: str, mtl_kd: dict, gltf: bool):
     return np.full((n, 3), DEFAULT_GREY, dtype=np.float32), None, None
 
 
-def _gltf_json(path: Path) -> dict:
+def gltf_json(path: Path) -> dict:
     """The JSON document of a .gltf file or of a .glb file's first chunk; ValueError naming the file if unreadable."""
     import json
     import struct
@@ -142,7 +142,7 @@ def _gltf_json(path: Path) -> dict:
 def check_gltf_textures(path: Path) -> None:
     """ValueError naming the file and the material whose base colour texture does not lead to an image: a texture
     or image index out of range, or an image file that is missing (trimesh drew such a material untextured)."""
-    doc = _gltf_json(path)
+    doc = gltf_json(path)
     textures, images = doc.get("textures", []), doc.get("images", [])
     for m, material in enumerate(doc.get("materials", [])):
         ref = material.get("pbrMetallicRoughness", {}).get("baseColorTexture")

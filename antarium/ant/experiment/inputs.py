@@ -15,7 +15,6 @@ from __future__ import annotations
 import glob
 import hashlib
 import itertools
-import json
 import math
 import os
 from dataclasses import dataclass, replace
@@ -91,12 +90,11 @@ def scene_files(path: str | Path) -> list[Path]:
     folder, names = path.parent, []
     suffix = path.suffix.lower()
     if suffix in (".gltf", ".glb"):
-        data = path.read_bytes()
-        if suffix == ".glb":   # 12-byte header, then the JSON chunk: length (uint32 LE), type, text
-            data = data[20:20 + int.from_bytes(data[12:16], "little")] if data[:4] == b"glTF" else b"{}"
+        from antarium.renderers.meshes import gltf_json
+
         try:
-            doc = json.loads(data)
-        except ValueError:
+            doc = gltf_json(path)
+        except ValueError:  # unreadable: the loader will say so; no files named
             doc = {}
         names = [unquote(item["uri"]) for key in ("buffers", "images") for item in doc.get(key, [])
                  if isinstance(item, dict) and isinstance(item.get("uri"), str) and not item["uri"].startswith("data:")]
