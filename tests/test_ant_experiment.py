@@ -258,6 +258,20 @@ BAD_SPECS = [
      "models.perfect_memory.learn_spacing_m: expected a finite number > 0, got 0"),
     ("models", "[models.perfect_memory]\nlearn_spacing_m = [0.02, -0.01]\n",
      "models.perfect_memory.learn_spacing_m[1]: expected a finite number > 0, got -0.01"),
+    # values out of a model's or the eye's range, and models that do not follow routes: refused when the spec is
+    # read, not run by run (each run failed with the same error, or a KeyError for the central-complex models)
+    ("models", ANTCAR + "kappa = [0.01, 2.0]\n", "[models.antcar] with kappa = 2.0: kappa must be in (0, 1], got 2.0"),
+    ("models", ANTCAR + "phi_max = 2\n", "[models.antcar] with phi_max = 2.0: Antcar phi_max must be in (0, pi/2) "
+     "rad, got 2.0"),
+    ("models", "[models.ardin]\nscan_step_deg = 0\n", "[models.ardin] with scan_step_deg = 0.0: Ardin scan_step_deg "
+     "must be > 0 deg, got 0.0"),
+    ("models", "[models.perfect_memory]\nstep = -0.02\n", "[models.perfect_memory] with step = -0.02: perfect "
+     "memory step must be > 0 m, got -0.02"),
+    ("models", "[models.ardin]\neye.gamma = [1.0, 0.0]\n", "[models.ardin] with eye.gamma = 0.0: eye gamma must be "
+     "in (0, 1] (1 = linear response), got 0.0"),
+    ("models", "[models.cx]\n", "models: unknown model 'cx'; allowed: antcar, ardin, perfect_memory"),
+    ("models", '[models.ardin]\n"eye.gamma" = 1.0\neye.gamma = 0.5\n',
+     'models.ardin: eye.gamma given twice (as "eye.gamma" and in its eye table)'),
     # two worlds of one name would be pooled into one condition (1)
     ("worlds", '[[worlds]]\nscene = "wa/pano.png"\n[[worlds]]\nscene = "wb/pano.png"\n',
      "worlds[0] ({d}/wa/pano.png) and worlds[1] ({d}/wb/pano.png) are both named 'pano': their runs would be one "
@@ -279,6 +293,15 @@ def test_bad_spec_values_get_one_clear_line(pano, part, text, message):
     with pytest.raises(SpecError) as err:
         _expand(pano, **{part: text})
     assert str(err.value) == message.replace("{d}", str(pano.resolve()))
+
+
+def test_model_eye_keys_quoted_or_dotted_are_one(pano):
+    """TOML reads an unquoted eye.gamma in a model table as a table eye = {gamma = ...}: the same runs as the
+    quoted "eye.gamma" (it was refused as an unknown parameter 'eye')."""
+    quoted = _expand(pano, models='[models.ardin]\n"eye.gamma" = [1.0, 0.5]\n"eye.cols" = 25\n')
+    dotted = _expand(pano, models="[models.ardin]\neye.gamma = [1.0, 0.5]\neye.cols = 25\n")
+    assert [r.params for r in dotted.runs] == [r.params for r in quoted.runs]
+    assert {dict(r.params)["eye.gamma"] for r in dotted.runs} == {1.0, 0.5}
 
 
 def test_routes_of_one_name_in_a_set_are_refused_and_globbed_folders_name_them(pano, tmp_path):
@@ -414,12 +437,19 @@ def test_bootstrap_interval_covers_the_mean_and_narrows_with_more_data():
 
 
 def test_a_failed_run_is_recorded_and_the_others_go_on(field, tmp_path):
+    """A run that fails when it runs (here: its route file changed after the spec was read; values out of range
+    are refused with the spec) is a row with its error, and the other runs are done."""
     d, _ = field
-    exp = load_spec(_spec(d, "[models.perfect_memory]\n\"eye.neighbours\" = [4, 0]\n"))
-    p = run_experiment(exp.runs, tmp_path, serial=True, progress_bar=False)
-    assert (p.done, p.failed) == (2, 2)
-    df = load_results(tmp_path)
-    assert set(df.loc[df.status == "failed", "error"].str.contains("neighbours")) == {True}
+    (tmp_path / "late").mkdir()
+    route = tmp_path / "late" / "r9.csv"
+    route.write_text("0.0 -0.2\n0.25 -0.2\n")
+    exp = load_spec(_spec(d, f'[[route_sets]]\nname = "late"\npaths = "{tmp_path}/late"\n[models.perfect_memory]\n'))
+    route.write_text("0.0 -0.2\n0.2 -0.2\n")
+    p = run_experiment(exp.runs, tmp_path / "out", serial=True, progress_bar=False)
+    assert (p.done, p.failed) == (2, 1)
+    df = load_results(tmp_path / "out")
+    assert list(df.loc[df.status == "failed", "route"]) == ["r9"]
+    assert set(df.loc[df.status == "failed", "error"].str.contains("changed since the spec was read")) == {True}
 
 
 def test_a_face_size_the_renderer_cannot_draw_with_is_refused_by_the_spec(field):

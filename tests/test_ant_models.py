@@ -8,6 +8,7 @@ import pytest
 from antarium.ant.eye import View
 from antarium.ant.metrics import memory_pi_error, pi_error
 from antarium.ant.models import (
+    MODELS,
     AntcarModel,
     AntcarParams,
     ArdinModel,
@@ -143,6 +144,24 @@ def test_make_model_rejects_unknown_kinds_and_parameters():
     assert isinstance(make_model("ardin", N_PN, n_kc=500), ArdinModel)
 
 
+@pytest.mark.parametrize(("kind", "params", "message"), [
+    ("ardin", {"scan_step_deg": 0.0}, "Ardin scan_step_deg must be > 0 deg, got 0.0"),  # was ZeroDivisionError
+    ("ardin", {"step": -0.02}, "Ardin step must be > 0 m, got -0.02"),                  # walked backwards
+    ("perfect_memory", {"scan_deg": -5.0}, "perfect memory scan_deg must be >= 0 deg, got -5.0"),
+    ("antcar", {"turn_length": 0.0}, "Antcar turn_length must be > 0 m, got 0.0"),
+    ("antcar", {"phi_max": math.nan}, "Antcar phi_max must be in (0, pi/2) rad, got nan"),
+    ("antcar", {"place_n_kc": 0}, "place_n_kc must be >= 1, got 0"),
+    ("antcar", {"sat_min": 1.5}, "Antcar sat_min must be in [0, 1], got 1.5"),
+])
+def test_model_parameters_out_of_range_are_refused_when_the_parameters_are_made(kind, params, message):
+    """The parameter classes check every range (an experiment spec is checked with them when it is read)."""
+    with pytest.raises(ValueError) as err:
+        make_model(kind, N_PN, **params)
+    assert str(err.value) == message
+    with pytest.raises(ValueError):
+        MODELS[kind][1](**params)
+
+
 def test_pi_error_counts_steering_errors_cumulatively():
     # theta_e > 0 (left of the route) is steered right by lambda_diff < 0: no error.
     curve = pi_error([-0.3, 0.2, 0.1, -0.1], np.radians([10, -10, 10, 5]))
@@ -163,3 +182,15 @@ def test_memory_pi_error_is_taken_about_the_direction_the_views_were_learned_in(
         for v in views:
             model.learn(v)
         assert memory_pi_error(model, views) < 0.05, phase
+
+
+def test_route_models_table_is_the_one_the_route_following_tables_and_spec_use():
+    """One table of the route-following models (`antarium.ant.ROUTE_MODELS`) for the CLI's choices, the experiment
+    spec's model tables and the runner's eyes, parameters and view spacings."""
+    from antarium.ant import ROUTE_MODELS
+    from antarium.ant.experiment.spec import _schema
+    from antarium.ant.route_following import LEARN_SPACING_M, MODEL_EYES, MODEL_PARAMS
+
+    assert tuple(MODEL_EYES) == tuple(MODEL_PARAMS) == tuple(LEARN_SPACING_M) == ROUTE_MODELS
+    assert set(ROUTE_MODELS) <= set(MODELS)
+    assert tuple(_schema().fields["models"].fields) == ROUTE_MODELS

@@ -15,7 +15,7 @@ import numpy as np
 
 from antarium.ant.command import Command
 from antarium.ant.eye import View
-from antarium.ant.mushroom_body import MBON, KenyonCells
+from antarium.ant.mushroom_body import MBON, KenyonCells, check_wiring
 from antarium.ant.navigation import NAVIGATION_MODELS
 from antarium.core.numbers import check_number
 
@@ -33,6 +33,20 @@ def oscillation_angles(amplitude: float, step: float, phase: float = 0.0) -> np.
     n_steps = int(round(2 * amplitude / step))
     n = np.arange(n_steps + 1)
     return amplitude * np.sin(n * math.tau / (n_steps + 1))
+
+
+def _check_ranges(model: str, params, rules: dict[str, tuple[bool, str]]) -> None:
+    """One ValueError for the first parameter whose rule (holds, what is allowed) does not hold (NaN never does)."""
+    for key, (holds, allowed) in rules.items():
+        if not holds:
+            raise ValueError(f"{model} {key} must be {allowed}, got {getattr(params, key)!r}")
+
+
+def _check_scan(model: str, params) -> None:
+    """The scanning models' scan (half range >= 0 deg, step > 0 deg) and step (> 0 m per decision)."""
+    _check_ranges(model, params, {"scan_deg": (params.scan_deg >= 0, ">= 0 deg"),
+                                  "scan_step_deg": (params.scan_step_deg > 0, "> 0 deg"),
+                                  "step": (params.step > 0, "> 0 m")})
 
 
 def _scan_angles(half_range: float, step: float) -> np.ndarray:
@@ -79,6 +93,14 @@ class AntcarParams:
     def __post_init__(self) -> None:
         if self.task not in ("route", "homing", "shuttle"):
             raise ValueError(f"Antcar task {self.task!r} not known; allowed: route, homing, shuttle")
+        check_wiring(self.n_kc, self.pn_per_kc, self.kappa)
+        check_wiring(self.place_n_kc, self.pn_per_kc, self.kappa, name="place_")
+        _check_ranges("Antcar", self, {
+            "amplitude_deg": (self.amplitude_deg > 0, "> 0 deg"), "step_deg": (self.step_deg > 0, "> 0 deg"),
+            "place_amplitude_deg": (self.place_amplitude_deg > 0, "> 0 deg"), "k_v": (self.k_v > 0, "> 0 m"),
+            "sat_min": (0 <= self.sat_min <= 1, "in [0, 1]"), "k_phi": (self.k_phi >= 0, ">= 0 rad"),
+            "phi_max": (0 < self.phi_max < math.pi / 2, "in (0, pi/2) rad"),
+            "turn_length": (self.turn_length > 0, "> 0 m"), "threshold": (0 <= self.threshold <= 1, "in [0, 1]")})
 
 
 class AntcarModel:
@@ -171,6 +193,10 @@ class ArdinParams:
     step: float = 0.02                # m per decision
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        check_wiring(self.n_kc, self.pn_per_kc, self.kappa)
+        _check_scan("Ardin", self)
+
 
 class ArdinModel:
     """A single familiarity MBON; route following by scanning and stepping toward the most familiar direction."""
@@ -206,6 +232,9 @@ class PerfectMemoryParams:
     scan_deg: float = 60.0
     scan_step_deg: float = 2.0
     step: float = 0.02
+
+    def __post_init__(self) -> None:
+        _check_scan("perfect memory", self)
 
 
 class PerfectMemoryModel:

@@ -13,6 +13,19 @@ import numpy as np
 from scipy import sparse
 
 
+def check_wiring(n_kc: int, pn_per_kc: int, kappa: float, n_pn: int | None = None, name: str = "") -> None:
+    """ValueError unless n_kc >= 1, pn_per_kc in 1..n_pn (>= 1 when n_pn is None) and 0 < kappa <= 1; `name`
+    prefixes n_kc's name in the message (e.g. "place_" for Antcar's place KCs)."""
+    if n_pn is None and not pn_per_kc >= 1:
+        raise ValueError(f"pn_per_kc must be >= 1, got {pn_per_kc}")
+    if n_pn is not None and not 1 <= pn_per_kc <= n_pn:
+        raise ValueError(f"pn_per_kc must be in 1..{n_pn}, got {pn_per_kc}")
+    if not n_kc >= 1:
+        raise ValueError(f"{name}n_kc must be >= 1, got {n_kc}")
+    if not 0.0 < kappa <= 1.0:
+        raise ValueError(f"kappa must be in (0, 1], got {kappa}")
+
+
 class KenyonCells:
     """A fixed random PN -> KC expansion.
 
@@ -24,12 +37,7 @@ class KenyonCells:
     """
 
     def __init__(self, n_pn: int, n_kc: int, pn_per_kc: int, kappa: float, seed: int) -> None:
-        if not (1 <= pn_per_kc <= n_pn):
-            raise ValueError(f"pn_per_kc must be in 1..{n_pn}, got {pn_per_kc}")
-        if n_kc < 1:
-            raise ValueError(f"n_kc must be >= 1, got {n_kc}")
-        if not (0.0 < kappa <= 1.0):
-            raise ValueError(f"kappa must be in (0, 1], got {kappa}")
+        check_wiring(n_kc, pn_per_kc, kappa, n_pn)
         self.n_pn, self.n_kc, self.pn_per_kc, self.kappa, self.seed = n_pn, n_kc, pn_per_kc, kappa, int(seed)
         self.k = max(1, round(kappa * n_kc))
         rng = np.random.default_rng(self.seed)

@@ -7,9 +7,9 @@ import argparse
 import math
 from pathlib import Path
 
-HELP = "virtual ant: learn a route, follow it in closed loop, evaluate models over seeded routes"
+from antarium.ant import ROUTE_MODELS
 
-KINDS = ("antcar", "ardin", "perfect_memory")
+HELP = "virtual ant: learn a route, follow it in closed loop, evaluate models over seeded routes"
 
 
 def _params(pairs: list[str] | None, kind: str) -> dict:
@@ -44,7 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION")
     sub.required = True
     p = sub.add_parser("learn", help="walk the ant along a route while its model learns; save the model")
-    p.add_argument("--model", choices=KINDS, default="antcar", help="mushroom-body model to train (default antcar)")
+    p.add_argument("--model", choices=ROUTE_MODELS, default="antcar",
+                   help="mushroom-body model to train (default antcar)")
     p.add_argument("--route", required=True, help="curved:SEED, a path file (x_m,y_m) or a trial log (.h5)")
     p.add_argument("--length", type=float, default=10.0, help="length of a curved:SEED route (m, default 10)")
     p.add_argument("--spacing", type=float, default=None, help="metres between learned views (model default)")
@@ -65,7 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("evaluate", help="each model learns and follows seeded curved routes; writes a table")
     p.add_argument("--routes", type=int, default=10, help="number of seeded curved routes per model (default 10)")
     p.add_argument("--length", type=float, default=10.0, help="route length (m, default 10)")
-    p.add_argument("--models", default=",".join(KINDS), help=f"comma-separated, from {', '.join(KINDS)}")
+    p.add_argument("--models", default=",".join(ROUTE_MODELS), help=f"comma-separated, from {', '.join(ROUTE_MODELS)}")
     p.add_argument("--seed", type=int, default=0, help="seed of the first route")
     p.add_argument("--out", required=True, help="folder for logs, pictures, evaluation.md/.json")
     p.add_argument("--scene", default="habitat", help="scene shown by the dome (name or file; default: habitat)")
@@ -179,9 +180,9 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if args.action == "evaluate":
         kinds = tuple(k.strip() for k in args.models.split(",") if k.strip())
-        bad = [k for k in kinds if k not in KINDS]
+        bad = [k for k in kinds if k not in ROUTE_MODELS]
         if bad or not kinds:
-            raise ValueError(f"--models: unknown {bad or 'none given'}; allowed: {', '.join(KINDS)}")
+            raise ValueError(f"--models: unknown {bad or 'none given'}; allowed: {', '.join(ROUTE_MODELS)}")
         if args.routes < 1 or args.length <= 0:
             raise ValueError("--routes must be >= 1 and --length > 0 m")
         if args.put_back_cm < 0:

@@ -6,7 +6,6 @@ Worlds and routes are built once per process and reused across its runs.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import socket
@@ -16,7 +15,7 @@ import traceback
 from functools import lru_cache
 
 from antarium.ant.experiment.inputs import load_route, route_digest, run_world
-from antarium.ant.experiment.spec import PROTOCOLS, Run
+from antarium.ant.experiment.spec import PROTOCOLS, Run, model_args
 from antarium.ant.routes import Route, RouteError, curved_route
 
 
@@ -53,22 +52,6 @@ def _renderer(face_size: int, scene, x: float, y: float, z: float):
     return renderer
 
 
-def _model_args(run: Run):
-    """(eye parameters, model overrides, learning spacing) of a run: each model's own eye and parameters, then
-    the run's eye.* keys, model parameters and seed (where the model has one)."""
-    from antarium.ant.models import MODELS
-    from antarium.ant.route_following import MODEL_EYES, MODEL_PARAMS
-
-    params = dict(run.params)
-    eye = {k[4:]: params.pop(k) for k in list(params) if k.startswith("eye.")}
-    spacing = params.pop("learn_spacing_m", None)
-    eye_params = dataclasses.replace(MODEL_EYES[run.model], **eye)
-    overrides = {**MODEL_PARAMS[run.model], **params}
-    if "seed" in MODELS[run.model][1].__dataclass_fields__:
-        overrides["seed"] = run.seed
-    return eye_params, overrides, spacing
-
-
 def run_row(run: Run) -> dict:
     """Learn and follow the run's route; the row of the results table (see `spec.METRICS`)."""
     from antarium.ant.route_following import train_and_follow
@@ -77,7 +60,7 @@ def run_row(run: Run) -> dict:
     t0 = time.perf_counter()
     try:
         route = _route(run.route_source, run.route_sha1)
-        eye_params, overrides, spacing = _model_args(run)
+        eye_params, overrides, spacing = model_args(run.model, run.params, run.seed)
         scene, floor = run_world(run.world)   # z lowered by `floor` (m): the eye above z = 0, as the loop takes it
         renderer = _renderer(run.face_size, scene, *route.start, run.eye_z_m - floor)
         outcome, track = train_and_follow(

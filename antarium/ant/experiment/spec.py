@@ -41,6 +41,7 @@ parameters, release and protocol.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import itertools
@@ -50,6 +51,7 @@ import tomllib
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
+from antarium.ant import ROUTE_MODELS
 from antarium.ant.experiment.inputs import (
     UP_AXES,
     RouteInput,
@@ -313,9 +315,9 @@ def _schema() -> Table:
 
     eye = {k: Axis(c) for k, c in declared(EyeParams).items()}
     special = {"learn_spacing_m": Axis(Number(gt=0.0))}
-    models = {kind: Table({**{k: Axis(c) for k, c in declared(cls, exclude=("seed",)).items()},
+    models = {kind: Table({**{k: Axis(c) for k, c in declared(MODELS[kind][1], exclude=("seed",)).items()},
                            **{f"eye.{k}": c for k, c in eye.items()}, **special}, noun="parameter")
-              for kind, (_, cls) in MODELS.items()}
+              for kind in ROUTE_MODELS}
     release = Table({"lateral_cm": Number(), "heading_deg": Number()},
                     defaults={"lateral_cm": 0.0, "heading_deg": 0.0})
     experiment = Table(
@@ -334,6 +336,55 @@ def _schema() -> Table:
                   "models": Table(models, noun="model")},
                  defaults={"experiment": experiment("experiment", {}), "worlds": [{"scene": "habitat"}]},
                  noun="table")
+
+
+def model_args(kind: str, params: tuple, seed: int):
+    """(eye parameters, model overrides, learning spacing) of a run of model `kind` with `params` (sorted (key,
+    value) tuples): the model's own eye and parameters, then the eye.* keys, model parameters and `seed` (where the
+    model has one). Raises ValueError for values out of range (the parameter classes check them)."""
+    from antarium.ant.models import MODELS
+    from antarium.ant.route_following import MODEL_EYES, MODEL_PARAMS
+
+    params = dict(params)
+    eye = {k[4:]: params.pop(k) for k in list(params) if k.startswith("eye.")}
+    spacing = params.pop("learn_spacing_m", None)
+    eye_params = dataclasses.replace(MODEL_EYES[kind], **eye)
+    overrides = {**MODEL_PARAMS[kind], **params}
+    params_cls = MODELS[kind][1]
+    if "seed" in params_cls.__dataclass_fields__:
+        overrides["seed"] = seed
+    params_cls(**overrides)
+    return eye_params, overrides, spacing
+
+
+def _check_models(grids: dict[str, list[tuple]]) -> None:
+    """SpecError naming the model table and its values for the first combination a model would refuse when made
+    (out of range, e.g. kappa = 2 or eye.gamma = 0): refused when the spec is read, not run by run."""
+    for kind, grid in grids.items():
+        for params in grid:
+            try:
+                model_args(kind, params, 0)
+            except ValueError as exc:
+                values = ", ".join(f"{k} = {v!r}" for k, v in params) or "its defaults"
+                raise SpecError(f"[models.{kind}] with {values}: {exc}") from None
+
+
+def _eye_keys(data: dict) -> dict:
+    """`data` with each model table's eye table (TOML reads an unquoted `eye.gamma = ...` as `eye = {gamma = ...}`)
+    as its "eye.*" keys; SpecError for a key given both ways."""
+    models = data.get("models")
+    if not isinstance(models, dict):
+        return data
+    out = {}
+    for kind, table in models.items():
+        if isinstance(table, dict) and isinstance(table.get("eye"), dict):
+            eye = {f"eye.{k}": v for k, v in table["eye"].items()}
+            twice = sorted(set(eye) & set(table))
+            if twice:
+                raise SpecError(f"models.{kind}: {twice[0]} given twice (as \"{twice[0]}\" and in its eye table)")
+            table = {**{k: v for k, v in table.items() if k != "eye"}, **eye}
+        out[kind] = table
+    return {**data, "models": out}
 
 
 def _grid(axes: dict[str, list]) -> list[tuple]:
@@ -404,12 +455,12 @@ def expand(data: dict, base: Path = Path(".")) -> Experiment:
     from antarium.renderers.renderer import mip_face_size
 
     base = Path(base).resolve()
-    spec = _schema()("", data)
+    spec = _schema()("", _eye_keys(data))
     exp = spec["experiment"]
     if "route_sets" not in spec:
         raise SpecError("the spec needs at least one [[route_sets]] (paths = \"routes/*.csv\" or curved = {...})")
     if not spec.get("models"):
-        raise SpecError(f"the spec needs at least one [models.<kind>] table; kinds: {', '.join(MODELS)}")
+        raise SpecError(f"the spec needs at least one [models.<kind>] table; kinds: {', '.join(ROUTE_MODELS)}")
     worlds = [_world(w, base) for w in spec["worlds"]]
     _unique_names("worlds", [w.name for w in worlds],
                   [" ".join([w.scene, *(f"{k}={v}" for k, v in w.params)]) for w in worlds], "worlds")
@@ -424,6 +475,7 @@ def expand(data: dict, base: Path = Path(".")) -> Experiment:
         grids[kind] = _grid({**eye, **axes})
         # the seed is the model's random wiring: a model without one runs once per condition (seed 0)
         seeds[kind] = exp["seeds"] if "seed" in MODELS[kind][1].__dataclass_fields__ else [0]
+    _check_models(grids)
     releases = [(r["lateral_cm"], r["heading_deg"]) for r in exp["releases"]]
     face_size = mip_face_size(exp["face_size"])  # the side the renderer draws (55 -> 56): one run, one record
     runs, routes = [], {}
