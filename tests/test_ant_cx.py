@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from antarium.ant.central_complex import CentralComplex, CXParams
-from antarium.ant.homing import Trip, homing_metrics, pi_homing
+from antarium.ant.homing import Trip, cluttered_arena, displacement, homing_metrics, pi_homing
 
 
 def _walk(cx, heading, n, speed=0.5):
@@ -213,3 +213,17 @@ def test_one_ring_refuses_cxmbs_k_which_it_does_not_use():
     assert OneRingParams().k == 0.8  # the default stays valid (files and make_model without k)
     assert make_model("one_ring", 800, k_cx=0.5, k_mb=0.3, k_of=0.2, n_kc=100).params.k_mb == 0.3
     assert make_model("cxmb", 800, k=0.3, n_kc=100).params.k == 0.3
+
+
+@pytest.mark.parametrize("task", [pi_homing, cluttered_arena, displacement])
+def test_the_tasks_refuse_trip_lengths_they_cannot_walk_before_anything_runs(task, tmp_path):
+    """An inbound trip of 0 decisions is refused (it was read as "as long as the outbound trip", `n or default`),
+    and so are an outbound trip shorter than 2 decisions and a non-integer count; nothing is written."""
+    for n_outbound, n_inbound, message in ((10, 0, "inbound decisions must be an integer >= 1, got 0"),
+                                           (1, None, "outbound decisions must be an integer >= 2, got 1"),
+                                           (10, 2.5, "inbound decisions must be an integer >= 1, got 2.5")):
+        which = {"seed": 0} if task is displacement else {"seeds": [0]}
+        with pytest.raises(ValueError) as err:
+            task(tmp_path, n_outbound=n_outbound, n_inbound=n_inbound, **which)
+        assert str(err.value) == message
+    assert list(tmp_path.iterdir()) == []

@@ -77,6 +77,16 @@ def settle(ant) -> None:
     raise RuntimeError(f"the polarisers did not come to rest within {SETTLE_FRAMES} frames")
 
 
+def trip_decisions(n_outbound: int, n_inbound: int | None) -> tuple[int, int]:
+    """(outbound, inbound) decisions of a task, the inbound trip as long as the outbound one when None; one
+    ValueError unless outbound >= 2 (the first decision only sets the heading) and inbound >= 1 integers."""
+    n_inbound = n_outbound if n_inbound is None else n_inbound
+    for name, n, least in (("outbound", n_outbound, 2), ("inbound", n_inbound, 1)):
+        if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < least:
+            raise ValueError(f"{name} decisions must be an integer >= {least}, got {n!r}")
+    return int(n_outbound), int(n_inbound)
+
+
 def outbound_turns(seed: int, n: int) -> np.ndarray:
     """(n,) turns (rad) of a seeded correlated random walk, the first turn a random initial heading."""
     rng = np.random.default_rng(seed)
@@ -230,7 +240,7 @@ def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 150
     from antarium.ant.models import make_model
     from antarium.ant.world import virtual_rig
 
-    n_inbound = n_inbound or n_outbound
+    n_outbound, n_inbound = trip_decisions(n_outbound, n_inbound)
     _check_compass(model_params, compass)
     model = make_model("cx", EyeParams().n_pn, **{"compass": compass, **(model_params or {})})
     out = Path(out_dir) if out_dir is not None else None
@@ -371,7 +381,7 @@ def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound:
     from antarium.ant.models import make_model
     from antarium.ant.world import virtual_rig
 
-    n_inbound = n_inbound or n_outbound
+    n_outbound, n_inbound = trip_decisions(n_outbound, n_inbound)
     _check_compass(model_params, compass)
     outcomes: list[ArenaOutcome] = []
     out = Path(out_dir) if out_dir is not None else None
@@ -415,7 +425,7 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
     from antarium.ant.models import make_model
     from antarium.ant.world import virtual_rig
 
-    n_inbound = n_inbound or n_outbound
+    n_outbound, n_inbound = trip_decisions(n_outbound, n_inbound)
     path = Path(out_dir) if out_dir is not None else None
     if path is not None:  # an unwritable folder is found before the run, not after it
         path.mkdir(parents=True, exist_ok=True)
