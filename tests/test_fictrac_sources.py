@@ -1,5 +1,6 @@
 """FicTrac live stream (UDP and TCP on loopback) and .dat replay as locomotion sources."""
 
+import re
 import socket
 import threading
 import time
@@ -134,7 +135,7 @@ def test_bad_arguments_are_rejected_clearly(tmp_path):
         open_source("fictrac", transport="serial")
     with pytest.raises(ValueError, match="port must be"):
         open_source("fictrac", port=70000)
-    with pytest.raises(ValueError, match="speed must be > 0"):
+    with pytest.raises(ValueError, match=r"speed must be a finite number in \(0, 1000\]"):
         open_source("fictrac-replay", path=tmp_path / "x.dat", speed=0)
     with pytest.raises(FileNotFoundError, match="not found"):
         open_source("fictrac-replay", path=tmp_path / "x.dat").start()
@@ -147,6 +148,19 @@ def test_max_match_error_must_be_a_positive_number(tmp_path, source, value):
     with pytest.raises(ValueError, match=r"^FicTrac max_match_error must be a finite number > 0 \(FicTrac's match "
                                          rf"error; leave it out for quality 1\), got {value!r}$"):
         open_source(source, max_match_error=value, **path)
+
+
+@pytest.mark.parametrize("source", ["replay", "fictrac-replay"])
+@pytest.mark.parametrize("value", [0, -1.0, float("nan"), float("inf"), 1000.5, "2", True])
+def test_replay_speed_must_be_a_finite_number_up_to_1000(tmp_path, source, value):
+    """Both replays check speed with one function (inf used to play the whole FicTrac log at start(), "2" gave a
+    bare TypeError): one line naming the source, the value and the range."""
+    path = tmp_path / "x.csv"
+    path.write_text("t,seq,rx,ry,rz,t_device,quality\n0.0,1,0,0,0,0.0,1\n")
+    with pytest.raises(ValueError, match=rf"^{source} speed must be a finite number in \(0, 1000\] \(1 = real "
+                                         rf"time\), got {re.escape(repr(value))}$"):
+        open_source(source, path=path, speed=value)
+    assert open_source(source, path=path, speed=1000).speed == 1000.0
 
 
 @pytest.mark.parametrize("value", [0, float("nan"), "1"])

@@ -182,6 +182,18 @@ def test_wire_refuses_unknown_flag_bits_and_reserved_bytes(offset, value, match)
     assert src.read() == [] and src.status()["malformed"] == 1
 
 
+@pytest.mark.parametrize("quality", [7.5, -3.0, 1.0001])
+def test_wire_refuses_a_quality_outside_0_to_1(quality):
+    payload = wire.encode(BallSample(1.0, 1, (0.0, 0.0, 0.0), 2.0, quality))
+    with pytest.raises(wire.LocomotionWireError, match=r"quality must be in \[0, 1\], got "):
+        wire.decode(payload, 0.0)
+    src = BusSource()
+    src._on_sample(zenoh_sample(payload))
+    assert src.read() == [] and src.status()["malformed"] == 1
+    assert [wire.decode(wire.encode(BallSample(1.0, 1, (0.0,) * 3, 2.0, q)), 0.0).quality for q in (0.0, 1.0)] == [
+        0.0, 1.0]
+
+
 # --- 7: a duplicate USB report is dropped and counted, its motion counted once ---------------------------------
 def test_usb_duplicate_report_is_dropped_and_counted():
     backend = EmulatedTrackball(motion=constant(WALK), realtime=False, faults={100: "duplicate"})

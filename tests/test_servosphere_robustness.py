@@ -96,23 +96,29 @@ def test_no_yaw_is_commanded_before_the_walk_confirms_the_heading():
 
 
 class RebootedFirmware(FirmwareEmulator):
-    """The emulated firmware after a reset at `t_boot` (s): step counts and clock restart at 0."""
+    """The emulated firmware at rig time `t` (s), booted `uptime_s` before: step counts from 0 and its u32
+    microsecond clock at `uptime_s`."""
 
-    def __init__(self, limits, t_boot):
-        super().__init__(limits, t0=t_boot)
-        self.t_boot = t_boot
+    def __init__(self, limits, t, uptime_s=0.0):
+        super().__init__(limits, t0=t)
+        self.t_boot = t - uptime_s
 
     def status(self, seq):
         s = super().status(seq)
         return dataclasses.replace(s, t_us=int(round((self.t - self.t_boot) * 1e6)) % 2 ** 32)
 
 
-@pytest.mark.parametrize("clock_restarts", [True, False])
-def test_a_firmware_reset_is_a_fault_not_a_rotation(sim, clock_restarts):
+@pytest.mark.parametrize("clock_restarts, uptime_s", [(True, 0.0), (False, 0.0), (True, 2400.0)],
+                         ids=["clock_back", "clock_on", "clock_past_2_31"])
+def test_a_firmware_reset_is_a_fault_not_a_rotation(sim, clock_restarts, uptime_s):
+    """The counts fall back to 0 and the clock to 0 (it went back), or goes on (the counts jump), or falls to 0 from
+    2.4e9 us, past 2^31: a forward step of 1.9e9 us mod 2^32, far more than the host time since the previous reply."""
     src, clock, rows = sim
-    _run(src, clock, 1.0)
     rig = src.rig
+    rig.firmware = RebootedFirmware(rig.limits, rig.t, uptime_s)  # up for `uptime_s` when the run starts
+    _run(src, clock, 1.0)
     before = rig.firmware.status(0)
+    assert before.t_us == pytest.approx((uptime_s + 1.0) * 1e6, abs=1e4)
     assert max(abs(before.steps1), abs(before.steps2), abs(before.steps3)) > 200  # counts the reset loses
     rig.firmware = RebootedFirmware(rig.limits, rig.t) if clock_restarts else FirmwareEmulator(rig.limits, t0=rig.t)
     n = len(rows)

@@ -177,6 +177,47 @@ def test_stopped_device_is_restarted_by_the_silence_probe():
         assert src.status()["connected"]
 
 
+def test_a_device_silent_while_it_says_running_gets_its_stream_restarted():
+    """The report path hangs after 300 reports while GET_INFO says running: the probe restarts the stream (STOP,
+    START; it used to take "running" for fine and wait for ever), reports come again from seq 0, nothing is lost."""
+    events = []
+    backend = EmulatedTrackball(realtime=True, faults={300: "hang"})
+    with UsbTrackball(backend=backend, on_event=events.append) as src:
+        samples = collect(src, 400, 5.0)
+        status = src.status()
+    seqs = [s.seq for s in samples]
+    assert seqs[:300] == list(range(300)) and seqs[300:400] == list(range(100))  # restarted: seq from 0
+    assert status["connected"] and status["unplugs"] == 0 and status["connects"] == 1
+    assert status["seq_resets"] == 1 and status["gaps"] == 0
+    assert [e["event"] for e in events] == ["locomotion_connected"]
+
+
+def test_a_device_still_silent_after_its_stream_restart_is_lost_until_it_sends():
+    """A connected device says running but sends nothing, even after the restart of its stream: one
+    locomotion_lost naming it; last_report_age_s counts from its last report (probes used to reset it, and
+    `connected` stayed True); reconnections that get no report stay quiet; its first report is locomotion_back."""
+    events = []
+    backend = EmulatedTrackball(realtime=True, faults={300: "hang"})
+    with UsbTrackball(backend=backend, on_event=events.append) as src:
+        assert wait_for(lambda: src.status()["reports"] > 100)
+        backend.faults[0] = "hang"  # from the next START on its report path hangs at once
+        assert wait_for(lambda: not src.status()["connected"], 2.0)
+        lost = events[-1]
+        assert [e["event"] for e in events] == ["locomotion_connected", "locomotion_lost"]
+        assert "says it is running" in lost["reason"] and "(STOP, START)" in lost["reason"]
+        assert lost["last_seq"] == 299
+        time.sleep(0.3)  # the driver reconnects, restarts, gives up, ... every ~0.1 s
+        status = src.status()
+        assert not status["connected"] and status["unplugs"] == 1 and len(events) == 2
+        assert status["last_report_age_s"] > 0.3 and status["last_seq"] == 299
+        assert "says it is running" in status["last_error"]
+        del backend.faults[0]  # the report path works again: the next connection's START gets reports
+        assert wait_for(lambda: src.status()["connected"], 2.0)
+        assert collect(src, 10)[-1].seq < 300
+    assert [e["event"] for e in events] == ["locomotion_connected", "locomotion_lost", "locomotion_back"]
+    assert src.status()["connects"] == 2
+
+
 def test_raw_buffer_read_path_matches_pyusb_array_semantics():
     backend = EmulatedTrackball(realtime=False)
     dev = usb.core.find(backend=backend)

@@ -20,7 +20,21 @@ from typing import Any
 import numpy as np
 
 from antarium.core.clock import Clock, MonotonicClock
+from antarium.core.numbers import as_real
 from antarium.locomotion import BallSample, LocomotionSource
+
+#: the fastest a recording is played back, times its recorded pace
+MAX_SPEED = 1000.0
+
+
+def check_speed(source: str, speed: Any) -> float:
+    """A replay's `speed` (times the recorded pace; 1 = real time) as a float: a finite real number in
+    (0, MAX_SPEED], else one ValueError naming the `source` ("replay", "fictrac-replay"), the value and the range."""
+    number = as_real(speed)
+    if not 0 < number <= MAX_SPEED:
+        raise ValueError(f"{source} speed must be a finite number in (0, {MAX_SPEED:g}] (1 = real time), "
+                         f"got {repr(speed)[:60]}")
+    return number
 
 
 def trial_start(path: str | Path) -> float | None:
@@ -95,14 +109,13 @@ class ReplaySource(LocomotionSource):
     """Play back recorded samples (`path`: trial log or CSV) at `speed` times the recorded pace."""
 
     def __init__(self, path: str, speed: float = 1.0, loop: bool = False, clock: Clock | None = None) -> None:
-        if not isinstance(speed, (int, float)) or not 0 < speed <= 1000:
-            raise ValueError(f"replay speed must be in (0, 1000], got {speed!r}")
+        speed = check_speed("replay", speed)
         self.data = load_samples(path)
         if len(self.data) == 0:
             raise ValueError(f"replay file {path!r} holds no samples")
         if not np.all(np.isfinite(self.data["t"])) or np.any(np.diff(self.data["t"]) < 0):
             raise ValueError(f"replay file {path!r}: sample times must be finite and non-decreasing")
-        self.speed, self.loop = float(speed), bool(loop)
+        self.speed, self.loop = speed, bool(loop)
         self.clock = clock or MonotonicClock()
         start = trial_start(path)
         anchor = self.data["t"][0] if start is None else start

@@ -8,7 +8,7 @@
 | 4      | u32  | seq       | source sequence number (wraps at 2**32)               |
 | 8      | f64  | t_device  | device time, s (0 when flag bit 0 is clear)           |
 | 16     | f64  | rx, ry, rz| ball rotation increment, rad, dome frame (3 x f64)    |
-| 40     | f32  | quality   | 0..1                                                  |
+| 40     | f32  | quality   | in [0, 1] (else refused)                              |
 
 The receiver stamps `t` with its own clock on arrival: clocks of different computers are not compared.
 """
@@ -51,4 +51,6 @@ def decode(payload: bytes, t: float) -> BallSample:
         raise LocomotionWireError(f"locomotion payload reserved field must be 0, got 0x{reserved:04x}")
     if not all(math.isfinite(v) for v in (t_dev, rx, ry, rz, quality)):
         raise LocomotionWireError("locomotion payload holds a non-finite number")
+    if not 0.0 <= quality <= 1.0:
+        raise LocomotionWireError(f"locomotion payload quality must be in [0, 1], got {quality:g}")
     return BallSample(t, seq, (rx, ry, rz), t_dev if flags & _FLAG_DEVICE_TIME else None, quality)

@@ -23,6 +23,7 @@ from antarium.core.clock import Clock, MonotonicClock
 from antarium.locomotion import BallSample, LocomotionSource, ReaderSource, positive
 from antarium.locomotion.fictrac.protocol import FicTracFrame, FicTracParseError, parse_line, to_sample
 from antarium.locomotion.fictrac.timeline import replay_times
+from antarium.locomotion.replay import check_speed
 
 TRANSPORTS = ("udp", "tcp")
 MAX_LINE = 4096  # bytes; a longer line without newline is garbage
@@ -224,11 +225,9 @@ class FicTracReplay(LocomotionSource):
     def __init__(
         self, path: str | Path, clock: Clock | None = None, speed: float = 1.0, max_match_error: float | None = None
     ) -> None:
-        if not speed > 0:
-            raise ValueError(f"replay speed must be > 0 (1 = real time), got {speed!r}")
+        self.speed = check_speed("fictrac-replay", speed)
         self.path = Path(path)
         self.clock = clock or MonotonicClock()
-        self.speed = float(speed)
         self._stats = _Counters(_max_match_error(max_match_error))
         self._frames: list[tuple[float, BallSample, float]] = []  # (replay offset s, sample, log time s)
         self._next = 0

@@ -32,6 +32,12 @@ _BIT = {name: 1 << i for i, name in enumerate(FAULTS)}
 #: a reply whose step counts moved more than max_rate * (its clock's advance + RESET_MARGIN_S) + 2 steps since the
 #: previous one, or whose clock went back, comes from a firmware that restarted (counters and clock from 0)
 RESET_MARGIN_S = 0.002
+#: ... and so does a reply whose clock went forward more than the host time since the previous reply (the camera's
+#: clock: the frame times `_replies` gets) + RESET_CLOCK_MARGIN_S: a restart after the u32 us clock passed 2^31
+#: (35.8 min of run) looks like a step forward of up to 2^31 us. The margin holds how long a reply can wait to be
+#: read (a frame or a few) and the two clocks' drift over the longest step the u32 clock tells (2^31 us at 100 ppm:
+#: 0.21 s); a restart within the margin of the clock's wrap is left to the counts' test
+RESET_CLOCK_MARGIN_S = 0.5
 _STALLS = p.FAULT_STALL_1 | p.FAULT_STALL_2 | p.FAULT_STALL_3
 #: the dome loop's tether -> the counter_rotate it needs (with counter_rotate the ball's yaw is the ant's turning)
 _COUNTER_ROTATE = {"free_yaw": False, "fixed": True}
@@ -136,7 +142,7 @@ class ServosphereLoop:
         faults = None
         reset = False
         for status, steps in self.link.poll():
-            self._last_reply_t = t
+            t_last, self._last_reply_t = self._last_reply_t, t  # the host times of the previous reply, this one
             cleared = False
             if self._clear_seq is not None:
                 if (status.seq - self._clear_seq) % 65536 >= 32768:
@@ -148,9 +154,10 @@ class ServosphereLoop:
             if self._t_dev is not None:
                 dt_us = (status.t_us - self._t_us) % 2 ** 32
                 jump = np.abs(steps - self._steps).max()
-                if dt_us >= 2 ** 31 or jump > self.max_rate * (dt_us * 1e-6 + RESET_MARGIN_S) + 2:
-                    # the firmware restarted (its clock went back, or the counts jumped further than the rotors
-                    # can turn): no rotation from this reply; the counts and the clock go on from it
+                if (dt_us >= 2 ** 31 or dt_us * 1e-6 > t - t_last + RESET_CLOCK_MARGIN_S
+                        or jump > self.max_rate * (dt_us * 1e-6 + RESET_MARGIN_S) + 2):
+                    # the firmware restarted (its clock went back or ran ahead of the host's, or the counts jumped
+                    # further than the rotors can turn): no rotation from this reply; counts and clock go on from it
                     reset = True
                     self._steps, self._t_us = steps, status.t_us
                     continue

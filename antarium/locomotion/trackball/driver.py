@@ -7,9 +7,11 @@ A reader thread finds the device by vendor/product id, claims its interface, set
 sends START and reads reports. Each report is decoded, checked for a sequence gap, converted from counts
 to ball rotation (least squares over the four sensor axes, `BallSolver`) and queued for `read()`; the
 optional `on_sample(sample)` callback publishes it (e.g. on the bus). Short or garbage reports are counted
-and dropped. When the device goes away (ENODEV, or a silent endpoint whose probe fails) `status()`
-says `connected: False` at once and `on_event` gets a "locomotion_lost" event; the thread keeps looking
-for the device every `retry_s` and resumes on its own ("locomotion_back").
+and dropped. A device is connected when first found and started ("locomotion_connected"). When it goes away
+(ENODEV; a silent endpoint whose probe fails; or one still silent after a restart of its stream while it says it
+is running) `status()` says `connected: False` at once and `on_event` gets a "locomotion_lost" event; the thread
+keeps looking for the device every `retry_s` and resumes on its own ("locomotion_back", at its first report, so
+that a device found again that sends nothing stays lost). Silence is measured on `clock`.
 
 `backend` is a pyusb backend (None = libusb); `emulate=True` builds an `EmulatedTrackball` instead.
 """
@@ -73,7 +75,12 @@ class UsbTrackball(ReaderSource):
         self._prev_seq: int | None = None
         self._prev_t_us = 0  # the device time of report `_prev_seq` (µs)
         self._prev_counts: tuple[int, ...] | None = None  # its counts (a duplicate report repeats all three)
-        self._last_report = 0.0
+        # times on `clock` (silence is measured on it, so a device on a simulated clock that stands still is not
+        # silent): the last report (None: none yet), the last probe or connection, this connection's latest stream
+        # restart
+        self._last_report: float | None = None
+        self._last_probe = 0.0
+        self._restarted_at: float | None = None
         self.last_error = ""
 
     # --- LocomotionSource ---------------------------------------------------------------------
@@ -98,9 +105,9 @@ class UsbTrackball(ReaderSource):
             time.sleep(0.01)
 
     def status(self) -> dict[str, Any]:
-        age = time.monotonic() - self._last_report if self._last_report else None
+        age = None if self._last_report is None else self.clock.now() - self._last_report
         return {"connected": self._connected, "source": "usb",
-                "device": f"{self.config.vendor_id:04x}:{self.config.product_id:04x}",
+                "device": self._device_id(),
                 "rate_hz": self.config.sample_rate_hz, "resolution_cpi": self.resolution_applied,
                 "last_report_age_s": age, "last_seq": None if self._connected else self._lost_seq,
                 "quality_avg": self.quality_avg, "last_error": self.last_error, **self.counters}
@@ -170,21 +177,22 @@ class UsbTrackball(ReaderSource):
                 self._stop.wait(self.retry_s)
                 continue
             self._prev_seq = None
-            self._last_report = time.monotonic()
-            self._connected = True
-            self.counters["connects"] += 1
-            self._emit("locomotion_back" if self.counters["connects"] > 1 else "locomotion_connected",
-                       device=f"{dev.idVendor:04x}:{dev.idProduct:04x}")
+            self._last_probe, self._restarted_at = self.clock.now(), None
+            if self.counters["connects"] == 0:  # found and started the first time: connected; after a loss it is
+                self._connected = True           # back only at its first report (`_handle`): a device found again
+                self.counters["connects"] += 1   # that sends nothing stays lost, without lost / back flapping
+                self._emit("locomotion_connected", device=self._device_id())
             try:
                 reason = self._read_loop(dev)
             except Exception as exc:  # never die silently: report, reconnect
                 reason = f"driver error: {type(exc).__name__}: {exc}"
-            self._lost_seq = self._prev_seq  # before `connected` turns False: status() names it with the loss
             if reason is not None:
-                self._connected = False
-                self.counters["unplugs"] += 1
                 self.last_error = reason
-                self._emit("locomotion_lost", reason=reason, last_seq=self._prev_seq)  # its last sample
+                if self._connected:  # (a device found again that sent no report since is still lost)
+                    self._lost_seq = self._prev_seq  # before `connected` turns False: status() names it
+                    self._connected = False
+                    self.counters["unplugs"] += 1
+                    self._emit("locomotion_lost", reason=reason, last_seq=self._prev_seq)  # its last sample
             else:  # stopped: leave the device idle
                 try:
                     dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_STOP, 0, 0)
@@ -205,7 +213,7 @@ class UsbTrackball(ReaderSource):
             try:
                 n = dev.read(P.ENDPOINT_IN, buf, self.read_timeout_ms)
             except usb.core.USBTimeoutError:
-                if time.monotonic() - self._last_report > silence_s:
+                if self.clock.now() - max(self._last_report or self._last_probe, self._last_probe) > silence_s:
                     reason = self._probe(dev)
                     if reason is not None:
                         return reason
@@ -215,18 +223,29 @@ class UsbTrackball(ReaderSource):
             self._handle(view[:n], perf())
         return None
 
+    def _device_id(self) -> str:
+        return f"{self.config.vendor_id:04x}:{self.config.product_id:04x}"
+
     def _probe(self, dev) -> str | None:
-        """The endpoint is silent: ask the device (GET_INFO); restart it if it stopped. A reason if it is gone."""
+        """The endpoint has been silent since the last report, probe or connection for the silence limit: ask the
+        device (GET_INFO). Stopped: START it. Running: restart its stream once (STOP, START); a device that says it
+        is running and sent nothing since that restart is lost. The reason of a loss, else None."""
         import usb.core
 
+        now = self.clock.now()
         try:
             info = P.decode_info(dev.ctrl_transfer(P.REQUEST_TYPE_IN, P.REQ_GET_INFO, 0, 0, P.INFO.size, 100))
-            if not info.running:
-                dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_START, 0, 0)
-                self._prev_seq = None
+            if info.running:
+                if self._restarted_at is not None and (self._last_report is None
+                                                       or self._restarted_at > self._last_report):
+                    return (f"device says it is running but sent no report in {now - self._restarted_at:.3f} s "
+                            "since its stream was restarted (STOP, START)")
+                dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_STOP, 0, 0)
+                self._restarted_at = now
+            dev.ctrl_transfer(P.REQUEST_TYPE_OUT, P.REQ_START, 0, 0)  # seq from 0: counted in seq_resets
         except (usb.core.USBError, P.ReportError) as exc:
             return f"device silent and not answering: {exc}"
-        self._last_report = time.monotonic()  # probe again only after another silent period
+        self._last_probe = now  # probe again only after another silent period
         return None
 
     def _restarted(self, gap: int, t_us: int) -> bool:
@@ -249,6 +268,10 @@ class UsbTrackball(ReaderSource):
         if report.seq == self._prev_seq and report.t_us == self._prev_t_us and report.counts == self._prev_counts:
             counters["duplicate_reports"] += 1  # the same report again (not a restart): its motion counted once
             return
+        if not self._connected:  # the first report after a loss: the device is back
+            self._connected = True
+            counters["connects"] += 1
+            self._emit("locomotion_back", device=self._device_id())
         gap = P.seq_gap(self._prev_seq, report.seq)
         if self._prev_seq is not None and self._restarted(gap, report.t_us):
             counters["seq_resets"] += 1
@@ -278,4 +301,4 @@ class UsbTrackball(ReaderSource):
         self.quality_avg += QUALITY_SMOOTHING * (quality - self.quality_avg)
         self._latency[counters["reports"] % LATENCY_WINDOW] = time.perf_counter() - t_arrival
         counters["reports"] += 1
-        self._last_report = time.monotonic()
+        self._last_report = self.clock.now()

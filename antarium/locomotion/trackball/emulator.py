@@ -20,7 +20,9 @@ benchmarks). `transfers` counts the transfers handed to the host, `due()` says w
 Faults, by report index n (0 = first report after START): `faults={n: kind}` with kind
 "short" (a 7-byte transfer), "garbage" (32 bytes with a wrong id), "drop" (the report is lost: a
 sequence gap), "lift" (sensor 1 reads nothing: slip), "duplicate" (the report is sent twice, the same bytes) or
-"unplug" (the device vanishes before report n).
+"unplug" (the device vanishes before report n) or "hang" (from report n on the endpoint sends nothing while GET_INFO
+still says running, as a firmware whose report path hung; a START counts reports from 0 again, so with n > 0 a
+restart revives it for n reports, with n = 0 it stays silent).
 `unplug()` / `replug()` do the same from any thread; `replug_after_s` replugs by itself.
 """
 
@@ -45,7 +47,7 @@ from antarium.locomotion.trackball.config import TrackballConfig
 LIBUSB_ERROR_NO_DEVICE = -4
 LIBUSB_ERROR_TIMEOUT = -7
 LIBUSB_ERROR_PIPE = -9
-FAULT_KINDS = ("short", "garbage", "drop", "lift", "duplicate", "unplug")
+FAULT_KINDS = ("short", "garbage", "drop", "lift", "duplicate", "unplug", "hang")
 #: tolerance (s) when comparing clock readings with report ends, so that a frame loop's slots on a period
 #: that is a multiple of the report period meet the reports exactly despite rounding
 _TIME_EPS_S = 1e-9
@@ -207,8 +209,12 @@ class EmulatedTrackball(usb.backend.IBackend):
     def due(self) -> bool:
         """A realtime device: whether a report is ready to be read now."""
         with self._cond:
-            return (self._plugged and self.running and self.realtime
+            return (self._plugged and self._sending() and self.realtime
                     and self._clock_now() - self._t0 >= self._t_dev + 1.0 / self.rate_hz - _TIME_EPS_S)
+
+    def _sending(self) -> bool:
+        """Whether reports come (called with the lock held): started, and the report path not hung."""
+        return self.running and self.faults.get(self._index) != "hang"
 
     def wake(self) -> None:
         """The injected clock moved on: a waiting read looks at it again now."""
@@ -267,11 +273,11 @@ class EmulatedTrackball(usb.backend.IBackend):
             while True:
                 self._check(handle)
                 now = self._clock_now() - self._t0
-                if self.running and now >= self._t_dev + period - _TIME_EPS_S:
+                if self._sending() and now >= self._t_dev + period - _TIME_EPS_S:
                     # all whole periods elapsed since the last report go into this one
                     t1 = self._t_dev + period * int((now - self._t_dev) / period + _TIME_EPS_S * self.rate_hz)
                     break
-                wait = (self._t_dev + period - now) if self.running else 0.05
+                wait = (self._t_dev + period - now) if self._sending() else 0.05
                 if deadline is not None:
                     left = deadline - time.monotonic()
                     if left <= 0:
@@ -279,7 +285,7 @@ class EmulatedTrackball(usb.backend.IBackend):
                     wait = min(wait, left)
                 self._cond.wait(max(wait, 0.0))
         else:
-            if not self.running:
+            if not self._sending():
                 return None
             t1 = self._t_dev + period
         fault = self.faults.get(self._index)
