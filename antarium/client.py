@@ -181,7 +181,8 @@ class Rig:
             raise RigError(f"{command}: a parameter cannot be sent: {exc}; allowed: numbers, strings, booleans, "
                            "lists and objects (numpy arrays and numbers too)") from None
         key = bus.command_key(self.name, command)
-        replies = self._session.get(key, payload=payload, timeout=self.timeout_s)
+        wait_s = self.reply_s(command)
+        replies = self._session.get(key, payload=payload, timeout=wait_s)
         for reply in replies:
             if reply.ok is not None:
                 body = json.loads(reply.ok.payload.to_bytes())
@@ -189,9 +190,16 @@ class Rig:
             raw = reply.err.payload.to_bytes()
             error = RigTimeout if raw.decode(errors="replace").strip().lower() == "timeout" else RigError
             raise error(self._error_message(command, raw))
-        raise RigTimeout(f"{command}: no reply from rig {self.name!r} within {self.timeout_s} s "
+        raise RigTimeout(f"{command}: no reply from rig {self.name!r} within {wait_s:g} s "
                          "(server gone, or the command was refused by the bus's access control); it may have run: "
                          "check status() before sending it again")
+
+    def reply_s(self, command: str) -> float:
+        """How long `call` waits for `command`'s reply (s): the Rig's `timeout_s`, or the command's own `reply_s`
+        when longer (a scene load)."""
+        from antarium.server.commands import COMMANDS
+
+        return max(self.timeout_s, COMMANDS[command].reply_s or 0.0)
 
     def _error_message(self, command: str, raw: bytes) -> str:
         """The message of an error reply: the server's own (JSON {"error": ...}), or the bus's (zenoh's "Timeout"
@@ -204,9 +212,9 @@ class Rig:
             return body["error"]
         text = raw.decode(errors="replace").strip()
         if text.lower() == "timeout":
-            return (f"no reply from rig {self.name!r} to {command} within {self.timeout_s:g} s (the server is busy "
-                    "or stuck; it may still have run it: check status() before sending it again; raise --timeout, "
-                    "or `timeout_s` of Rig, if it needs longer)")
+            return (f"no reply from rig {self.name!r} to {command} within {self.reply_s(command):g} s (the server is "
+                    "busy or stuck; it may still have run it: check status() before sending it again; raise "
+                    "--timeout, or `timeout_s` of Rig, if it needs longer)")
         return f"{command}: the bus answered with an error instead of rig {self.name!r}: {text or 'no message'}"
 
     # -- commands --------------------------------------------------------------------------------------

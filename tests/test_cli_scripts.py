@@ -8,6 +8,7 @@ import json
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -88,6 +89,34 @@ def test_a_slow_reply_is_a_rig_error_naming_rig_command_and_timeout():
     assert type(info.value) is RigTimeout  # a RigError that says the command may have run
     assert "no reply from rig 'tclislow' to status within 0.5 s" in str(info.value)
     assert "raise --timeout" in str(info.value) and str(info.value) != "Timeout"
+
+
+def test_a_scene_load_waits_for_its_reply_longer_than_other_commands():
+    """A scene load parses, builds and uploads a whole world: the client waits at least its command's `reply_s`
+    (SCENE_REPLY_S) for it, while other commands keep the Rig's timeout. The README's script timed out on
+    load_scene after the default 10 s on a busy machine."""
+    from antarium.server.commands import COMMANDS, SCENE_REPLY_S
+
+    config = resolve({"rig": {"name": "tclscene"}, "bus": {"listen": [bus.free_tcp_endpoint()]}})
+
+    def on_query(query):  # a server that answers every command after 1.2 s
+        time.sleep(1.2)
+        query.reply(query.key_expr, json.dumps({"ok": True, "result": {"done": str(query.key_expr)}}))
+
+    session = bus.open_session(config.bus, role="server")
+    entities = [session.declare_queryable(bus.rig_key("tclscene", "cmd", "*"), on_query),
+                session.liveliness().declare_token(bus.alive_key("tclscene"))]
+    try:
+        with antarium.Rig("tclscene", config=config, timeout_s=0.5) as rig:
+            assert rig.load_scene("habitat") == {"done": bus.command_key("tclscene", "load_scene")}
+            with pytest.raises(RigTimeout, match="to status within 0.5 s"):
+                rig.status()
+            assert rig.reply_s("load_scene") == SCENE_REPLY_S == COMMANDS["load_scene"].reply_s
+            assert rig.reply_s("status") == 0.5
+    finally:
+        for entity in entities:
+            entity.undeclare()
+        session.close()
 
 
 def test_a_rig_refuses_a_timeout_that_is_not_positive():

@@ -45,12 +45,15 @@ class Command:
     """params: name -> declaration; handler(server, checked params) -> result (None: the rig's state);
     in_loop: run in the frame loop's thread between two frames (anything that changes what the dome shows);
     prepare(server, checked params): the slow part of an in-loop command, run before it and beside the loop
-    (`LoopPlacement.beside_loop`: never holding a frame); its result reaches the handler as parameter "prepared"."""
+    (`LoopPlacement.beside_loop`: never holding a frame); its result reaches the handler as parameter "prepared";
+    reply_s: the least time (s) a client waits for the reply of a command whose work takes long (a scene load
+    parses, builds and uploads a whole world: seconds, more on a busy machine); None: the client's own timeout."""
 
     params: dict[str, Param]
     handler: Callable[[Server, dict[str, Any]], Any]
     in_loop: bool = True
     prepare: Callable[[Server, dict[str, Any]], Any] | None = None
+    reply_s: float | None = None
 
 
 _XY = 1e6  # metres: anything farther is a typo, not a world
@@ -230,12 +233,16 @@ def _sky(server: Server, p: dict[str, Any]) -> None:
     server.loop.event("sky", **{k: p[k] for k in p if p[k] is not None and k != "prepared"})
 
 
+#: how long a client waits at least for a scene load's reply (s): the habitat loads in about 1.3 s on a quiet
+#: 2-core machine and took over 10 s (the Rig's default timeout) at a load average of 8
+SCENE_REPLY_S = 120.0
+
 #: command name -> its parameters and handler (the one table: the bus, the Rig client and docs/bus.md follow it)
 COMMANDS: dict[str, Command] = {
     "load_scene": Command(
         {"scene": Param("scene", True, doc="scene name, file path, or {scene: name, ...parameters}")},
         lambda server, p: server.load_scene(p["scene"], p["prepared"]),
-        prepare=lambda server, p: server.prepare_scene(p["scene"])),
+        prepare=lambda server, p: server.prepare_scene(p["scene"]), reply_s=SCENE_REPLY_S),
     "set_pose": Command({
         "x": Param("number", True, lo=-_XY, hi=_XY, doc="m"),
         "y": Param("number", True, lo=-_XY, hi=_XY, doc="m"),
