@@ -46,12 +46,15 @@ class VirtualAnt:
                loop's "bus" source for `BusLegs`)
     read_leds: returns the (20350, 2) uint16 LEDs the dome shows now (`link.emulator.led_values`)
     frames_per_decision: frames the loop runs per decision; the command is spread evenly over them
+    cue_wait_frames: when the sky compass has no cue (e.g. the polarisers still turning after a turn of the scene
+               in the fixed tether), the ant stands still for up to this many frames, reading the compass each
+               frame, before its model decides without a cue (and raises NoSkyCueError); 0: it does not wait
     """
 
     def __init__(self, eye: Eye, model, loop, legs: AntLocomotion | BusLegs | TrackballLegs,
                  read_leds: Callable[[], np.ndarray], frames_per_decision: int = 1,
                  delivery_timeout_s: float = 2.0, compass=None,
-                 read_polarisers: Callable[[], np.ndarray] | None = None) -> None:
+                 read_polarisers: Callable[[], np.ndarray] | None = None, cue_wait_frames: int = 0) -> None:
         if isinstance(legs, BusLegs):
             if not hasattr(loop.source, "received"):
                 raise ValueError("legs on the bus need a frame loop reading the bus (open_source('bus', ...))")
@@ -62,6 +65,10 @@ class VirtualAnt:
             raise ValueError(f"loop tether {loop.tether!r} and ant tether {legs.tether!r} differ")
         if int(frames_per_decision) < 1:
             raise ValueError(f"frames_per_decision must be >= 1, got {frames_per_decision}")
+        if int(cue_wait_frames) < 0:
+            raise ValueError(f"cue_wait_frames must be >= 0, got {cue_wait_frames}")
+        self.cue_wait_frames = int(cue_wait_frames)
+        self.cue_waits = 0  # frames stood still waiting for a compass cue, over the ant's life
         self.eye, self.model, self.loop, self.legs, self.read_leds = eye, model, loop, legs, read_leds
         self.frames_per_decision = int(frames_per_decision)
         self.delivery_timeout_s = float(delivery_timeout_s)
@@ -135,6 +142,13 @@ class VirtualAnt:
             reading = self.compass.read_true(self.heading)
         else:
             reading = self.compass.read(leds, self.read_polarisers(), yaw)
+            for _ in range(self.cue_wait_frames if not reading.cue else 0):
+                self.loop.step()  # nothing queued: the ant stands still while the dome settles
+                self.cue_waits += 1
+                leds = self.read_leds()
+                reading = self.compass.read(leds, self.read_polarisers(), yaw)
+                if reading.cue:
+                    break
         x, y = self.position
         last = self._sensed_at or (x, y)
         self._sensed_at = (x, y)

@@ -35,7 +35,7 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
                 frames_per_decision: int = 1, eye_height: float = EYE_HEIGHT_M,
                 renderer_kwargs: dict | None = None, bus: dict | None = None,
                 rig: str = "rig1", trackball: Any = None, compass: str | None = None,
-                renderer: Any = None) -> Iterator[VirtualAnt]:
+                renderer: Any = None, cue_wait_frames: int = 0) -> Iterator[VirtualAnt]:
     """A `VirtualAnt` with `model` in a frame loop on an emulated dome showing `scene`.
 
     log_path: write an HDF5 trial log there (like a real trial's), or None.
@@ -46,6 +46,7 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
     trackball: True, or a `[trackball]` section (dict, file, `TrackballConfig`): the ant's steps move the ball of
     an emulated USB trackball on the loop's clock, and the real driver reading it is the loop's source
     (`TrackballLegs`); its default reports at 950 Hz, five per frame.
+    cue_wait_frames: frames the ant stands still waiting for a sky compass cue (`VirtualAnt`).
     renderer: a `Renderer` to reuse (its GL context, and its scene when that is `scene` already); it is left
     open for the next run. None: a new one, released at the end.
     """
@@ -101,7 +102,7 @@ def virtual_rig(model, scene: Any = "habitat", eye_params: EyeParams | None = No
         loop = FrameLoop.from_config(loop_cfg, clock=clock, source=source, renderer=renderer, link=link, log=log)
         yield VirtualAnt(eye, model, loop, legs, link.emulator.led_values, frames_per_decision,
                          compass=make_compass(compass or getattr(model.params, "compass", "sky"), dome),
-                         read_polarisers=link.emulator.polariser_angles)
+                         read_polarisers=link.emulator.polariser_angles, cue_wait_frames=cue_wait_frames)
 
 
 def make_compass(kind: str, dome):
