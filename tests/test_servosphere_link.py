@@ -168,3 +168,37 @@ def test_the_watchdog_stops_the_rotors_when_it_expires_however_time_is_stepped()
 def test_unknown_link_names_what_is_allowed():
     with pytest.raises(ValueError, match="allowed: serial, simulated"):
         open_motor_link("can")
+
+
+def test_a_serial_port_that_does_not_take_a_write_drops_the_message_and_breaks_the_link_only_when_it_persists():
+    """pyserial's write timeout (10 ms: the microcontroller is not reading, its buffer full) dropped one message
+    but ended the servosphere loop for good ('SerialTimeoutException: Write timeout', seen on a loaded machine).
+    Now a refused message is counted (`stalled`) and dropped; the link breaks only after MAX_STALLED_WRITES in a
+    row. Nobody reads the pseudo-terminal's other end here until the test drains it."""
+    from antarium.locomotion.servosphere.link import MAX_STALLED_WRITES
+
+    master, slave = os.openpty()
+    link = open_motor_link("serial", url=os.ttyname(slave))
+    try:
+        sent = 0
+        while link.stalled == 0:  # fill the line's buffer
+            link.send_rates((1000, -2000, 0))
+            sent += 1
+            assert sent < 100_000
+        assert link.sent == sent - 1
+        for _ in range(MAX_STALLED_WRITES - 2):  # stalls short of the limit: dropped, counted, no error
+            link.send_rates((0, 0, 0))
+        assert link.stalled == MAX_STALLED_WRITES - 1
+        while select.select([master], [], [], 0.05)[0]:  # the device reads again
+            os.read(master, 65536)
+        link.send_rates((0, 0, 0))
+        assert (link.sent, link.stalled) == (sent, MAX_STALLED_WRITES - 1)
+        while link.stalled < MAX_STALLED_WRITES:  # fill it again: the run of stalls starts from 0
+            link.send_rates((1000, -2000, 0))
+        with pytest.raises(RuntimeError, match=f"took none of the last {MAX_STALLED_WRITES} messages"):
+            for _ in range(MAX_STALLED_WRITES):
+                link.send_rates((0, 0, 0))
+    finally:
+        link.close()
+        os.close(master)
+        os.close(slave)

@@ -161,7 +161,7 @@ class FailingSerial:
 
 def test_a_serial_error_in_the_thread_is_reported_not_hidden():
     from antarium.core.clock import MonotonicClock
-    from antarium.locomotion.servosphere.link import MotorLink, SerialPort
+    from antarium.locomotion.servosphere.link import MAX_STALLED_WRITES, MotorLink, SerialPort
 
     src = open_source("servosphere", clock=MonotonicClock(), process=False, simulation={"seed": 1})
     port = SerialPort.__new__(SerialPort)
@@ -173,8 +173,14 @@ def test_a_serial_error_in_the_thread_is_reported_not_hidden():
     status = src.status()
     src.stop()
     assert not thread.is_alive()
-    assert status["connected"] is False and "SerialTimeoutException" in status["error"]
-    assert status["frames"] == 100
+    # a refused write drops its command; MAX_STALLED_WRITES in a row end the loop (the first one did until
+    # 2026-11-27: tests/test_servosphere_link.py)
+    # (and the Stop the failed loop sends is refused too)
+    assert status["connected"] is False and status["link"]["stalled"] == MAX_STALLED_WRITES + 1
+    assert status["error"] == (f"RuntimeError: the motor link's port took none of the last {MAX_STALLED_WRITES} "
+                               "messages (serial write of 21 bytes not taken: Write timeout): the microcontroller "
+                               "is not reading")
+    assert status["frames"] == 100 + MAX_STALLED_WRITES - 1
 
 
 def test_a_lost_serial_device_reaches_the_parent_of_the_servosphere_process(tmp_path):

@@ -14,6 +14,16 @@ import numpy as np
 from antarium.locomotion.servosphere import finite_numbers
 from antarium.locomotion.servosphere import protocol as p
 
+#: consecutive writes the port may refuse (its write timeout passed: the device is not reading) before the link
+#: counts as broken; each refused message is dropped (the firmware's watchdog stops the rotors when commands stop).
+#: 100 is about 0.5 s of the loop's commands
+MAX_STALLED_WRITES = 100
+
+
+class PortStalled(OSError):
+    """The port did not take a write within its write timeout: the message is dropped (or cut: the firmware's
+    decoder counts it garbled and resynchronises on the next header)."""
+
 
 class Port(Protocol):
     def write(self, data: bytes) -> None: ...
@@ -25,7 +35,9 @@ class Port(Protocol):
 
 class MotorLink:
     """Commands and replies over `port`. `poll()` returns the new `Status` messages; `steps` holds the unwrapped
-    cumulative step counts (int64) of the newest one; `errors` counts garbled or unknown messages by kind."""
+    cumulative step counts (int64) of the newest one; `errors` counts garbled or unknown messages by kind;
+    `stalled` the messages the port did not take in time (dropped; `PortStalled`), which break the link only when
+    MAX_STALLED_WRITES come one after another."""
 
     def __init__(self, port: Port) -> None:
         self.port = port
@@ -33,11 +45,22 @@ class MotorLink:
         self.seq = 0
         self.sent = 0
         self.received = 0
+        self.stalled = 0
+        self._stalled_run = 0  # stalled writes since the last one the port took
         self.steps: np.ndarray | None = None
         self._raw: np.ndarray | None = None
 
     def _send(self, msg) -> int:
-        self.port.write(p.encode(msg))
+        try:
+            self.port.write(p.encode(msg))
+        except PortStalled as exc:
+            self.stalled += 1
+            self._stalled_run += 1
+            if self._stalled_run >= MAX_STALLED_WRITES:
+                raise RuntimeError(f"the motor link's port took none of the last {self._stalled_run} messages "
+                                   f"({exc}): the microcontroller is not reading") from None
+            return msg.seq
+        self._stalled_run = 0
         self.sent += 1
         return msg.seq
 
@@ -97,7 +120,12 @@ class SerialPort:
             raise RuntimeError(f"cannot open servosphere serial port {url!r}: {exc}") from None
 
     def write(self, data: bytes) -> None:
-        self._serial.write(data)
+        import serial
+
+        try:
+            self._serial.write(data)
+        except serial.SerialTimeoutException as exc:  # the device's buffer is full: it did not read for 10 ms
+            raise PortStalled(f"serial write of {len(data)} bytes not taken: {exc}") from exc
 
     def read(self) -> bytes:
         n = self._serial.in_waiting

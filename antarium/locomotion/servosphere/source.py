@@ -328,7 +328,8 @@ class ServosphereSource(BufferedSource):
         return {"connected": self.error is None, "error": self.error, "frames": loop.frame,
                 "faults": dict(loop.fault_counts),
                 "faults_now": [name for name, bit in _BIT.items() if loop.last_faults & bit],
-                "link": {"sent": loop.link.sent, "received": loop.link.received, "errors": loop.link.errors},
+                "link": {"sent": loop.link.sent, "received": loop.link.received, "errors": loop.link.errors,
+                         "stalled": loop.link.stalled},
                 "tracker_faults": dict(loop.tracker.faults)}
 
 
