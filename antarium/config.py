@@ -69,8 +69,14 @@ class RigSection(Section):
     @field_validator("name")
     @classmethod
     def _one_key_chunk(cls, v: str) -> str:
+        from antarium.trial_log import RIG_NAME_MAX_BYTES
+
         if not v or any(c in v for c in "/*?$# "):
             raise ValueError("must be a non-empty key chunk without '/', wildcards or spaces")
+        if len(v.encode()) > RIG_NAME_MAX_BYTES:  # it begins every trial log's file name, which has 255 bytes
+            raise ValueError(f"must be at most {RIG_NAME_MAX_BYTES} bytes in UTF-8 (it begins the trial logs' file "
+                             f"names <rig>_<yyyymmdd-hhmmss>_<trial>.h5, at most 255 bytes); this one has "
+                             f"{len(v.encode())}")
         return v
 
 

@@ -4,20 +4,25 @@ The frame loop only appends rows to in-memory buffers (cheap); every `flush_s` s
 go to a writer process, which opens the file, appends them in SWMR mode and closes it again. So after a
 crash or SIGKILL the file holds everything up to the last batch and is almost always closed and clean
 (any HDF5 >= 1.10 opens it, MATLAB included); a kill in the millisecond of a batch leaves it marked open,
-which `open_log` (SWMR read) still opens. A write error (disk full) does not stop the stimulus: the log
-keeps counting what it could not write and reports it in `status()`, and the server makes that loud.
+which `open_log` (SWMR read) still opens. The writer fsyncs the file after each batch, before it reports the
+batch written, so a power cut keeps what was reported. A write error (disk full) does not stop the stimulus: the
+log keeps counting what it could not write and reports it in `status()`, and the server makes that loud; so does
+a writer that stops answering (a hung disk), which the end of the trial kills after at most `CLOSE_TIMEOUT_S`.
 Every dataset and its units are listed in `docs/logs.md`.
 """
 
 from __future__ import annotations
 
 import atexit
+import collections
 import datetime as _dt
 import hashlib
 import json
 import math
+import os
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,8 +30,19 @@ import numpy as np
 
 from antarium.core.childproc import ChildProcess, connection_from_arg
 
-#: 2: the frames table has `full_render`
-FORMAT_VERSION = 2
+#: 2: the frames table has `full_render`; 3: the root attribute `created_monotonic`
+FORMAT_VERSION = 3
+
+#: the longest the end of a trial (`TrialLog.close`) waits for the writer before killing it (s)
+CLOSE_TIMEOUT_S = 30.0
+
+#: the longest file name the file systems a log goes to take (bytes; NAME_MAX of Linux, macOS and Windows' NTFS)
+NAME_MAX_BYTES = 255
+#: a trial name is cut to this many characters in the file name (`log_path`)
+TRIAL_NAME_MAX = 64
+#: the longest rig name whose log file names fit NAME_MAX_BYTES: `<rig>_<yyyymmdd-hhmmss>_<trial>-<k>.h5` with
+#: the trial name at its longest and a suffix `-<k>` of up to 4 digits (`log_path`)
+RIG_NAME_MAX_BYTES = NAME_MAX_BYTES - len("_yyyymmdd-hhmmss_") - TRIAL_NAME_MAX - len("-9999.h5")
 
 #: HDF5 format bounds: 1.10 is the oldest format with SWMR and the newest that HDF5 1.10 libraries (MATLAB's,
 #: Debian 12's tools) read; h5py's "latest" (HDF5 2.0 here) writes datatype messages that 1.10 cannot decode
@@ -81,21 +97,23 @@ def file_sha256(path: str | Path) -> str:
 
 
 def _json(value: Any) -> str:
-    """`value` as strict JSON text (RFC 8259): NaN and ±Infinity as null, values JSON has no type for as their str()."""
+    """`value` as strict JSON text (RFC 8259): NaN and ±Infinity as null, values JSON has no type for as their str(),
+    dict keys that are not str as their str() (keys of mixed types cannot be sorted as they are)."""
     try:
         return json.dumps(value, sort_keys=True, default=str, allow_nan=False)
-    except ValueError:  # a non-finite float in it: only this rare case pays for the copy
-        return json.dumps(_finite(value), sort_keys=True, default=str, allow_nan=False)
+    except (ValueError, TypeError):  # a non-finite float or a key that is not str: only these rare cases pay the copy
+        return json.dumps(_plain(value), sort_keys=True, default=str, allow_nan=False)
 
 
-def _finite(value: Any) -> Any:
-    """`value` with every non-finite float in it (in dicts, lists and tuples, at any depth) replaced by None."""
+def _plain(value: Any) -> Any:
+    """`value` with every non-finite float in it (in dicts, lists and tuples, at any depth) replaced by None and every
+    dict key that is not a str by its str()."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {key: _finite(item) for key, item in value.items()}
+        return {key if isinstance(key, str) else str(key): _plain(item) for key, item in value.items()}
     if isinstance(value, list | tuple):
-        return [_finite(item) for item in value]
+        return [_plain(item) for item in value]
     return value
 
 
@@ -140,7 +158,9 @@ class TrialLog:
               `config` attribute)
     name:     trial name (a str without NUL, encodable as UTF-8); metadata: dict with str keys and JSON values
               (no NaN or Infinity) stored as JSON in the `metadata` attribute (None: {})
-    flush_s:  seconds between hand-overs to the writer, which appends and flushes to disk (at most 1 s)
+    flush_s:  seconds between hand-overs to the writer, which appends, closes and fsyncs the file (at most 1 s)
+    clock:    the clock the tables' times are read on (s; the frame loop's `clock.now`); read with the wall time
+              into the `created_monotonic` and `created_utc` attributes
 
     The writer is a process of its own so that HDF5 never holds the frame loop's GIL and a failing disk
     cannot take the stimulus down: a write error is reported in `status()["error"]`, the loop goes on.
@@ -148,7 +168,8 @@ class TrialLog:
     """
 
     def __init__(self, path: str | Path, config: dict[str, Any], name: str = "", metadata: dict | None = None,
-                 flush_s: float = 1.0, start_timeout_s: float = 30.0) -> None:
+                 flush_s: float = 1.0, start_timeout_s: float = 30.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         from antarium import __version__
 
         if not 0 < flush_s <= 1.0:
@@ -156,10 +177,11 @@ class TrialLog:
         _check_text("trial name", name, LogError)
         metadata_json = _metadata_json(metadata)
         self.path = Path(path)
-        if self.path.exists():
+        if _exists(self.path):
             raise LogError(f"trial log {str(self.path)!r} already exists; a recording never overwrites one")
+        created, created_utc = clock(), _dt.datetime.now(_dt.UTC)  # the anchor of the tables' times to UTC
         attrs = {"format": "antarium-trial-log", "format_version": FORMAT_VERSION, "software_version": __version__,
-                 "created_utc": _dt.datetime.now(_dt.UTC).isoformat(), "trial_name": name,
+                 "created_utc": created_utc.isoformat(), "created_monotonic": float(created), "trial_name": name,
                  "metadata": metadata_json, "config": _json(config)}
         self._proc = _take_writer()
         self._conn = self._proc.conn
@@ -185,10 +207,14 @@ class TrialLog:
         self._send_lock = threading.Lock()
         self.rows_written = dict.fromkeys(self._tables, 0)
         self._lost_here = 0  # rows lost in this process: added after close(), or never handed over
+        self._unsent = 0  # of these, rows whose hand-over failed (the writer dead or killed)
         self._writer_lost = 0  # as the writer last reported
         self._batch = 0  # number of the last batch (or close) handed to the writer
         self._confirmed = 0  # number of the last one it reported on
         self._rows_sent = 0
+        #: (batch number, monotonic time its hand-over began) of each batch the writer has not reported on yet
+        self._handed: collections.deque[tuple[int, float]] = collections.deque()
+        self._killed = False  # by close() at its deadline
         self.error: str | None = None
         self._closed = False
         self._stop = threading.Event()
@@ -253,34 +279,53 @@ class TrialLog:
             self._writer_lost = report["rows_lost"]
             self.error = report["error"] or self.error
             self._confirmed = report["batch"]
+            while self._handed and self._handed[0][0] <= self._confirmed:
+                self._handed.popleft()
             if kind == "closed":  # its last word: the pipe's end follows
                 break
         return self._confirmed >= batch
 
+    def _hand_over(self, kind: str, rows: dict[str, list]) -> None:
+        """Send the next batch (holding `_send_lock`); the time its hand-over began is kept until the writer reports
+        on it, so that a writer that stops answering shows in `status()["unconfirmed_s"]` even while the hand-over
+        itself is blocked (its pipe full)."""
+        number = self._batch + 1
+        self._handed.append((number, time.monotonic()))
+        try:
+            self._conn.send((kind, number, rows))
+        except BaseException:
+            self._handed.pop()
+            raise
+        self._batch = number
+
     def flush(self, wait: bool = False) -> None:
-        """Hand every pending row to the writer (which appends and flushes it); with `wait`, wait (up to 30 s) for
-        its report on them: then they are on disk or counted in `rows_lost`."""
+        """Hand every pending row to the writer (which appends them, closes and fsyncs the file); with `wait`, wait
+        (up to 30 s) for its report on them: then they are on disk or counted in `rows_lost`."""
         with self._lock:
             pending, self._pending = self._pending, {table: [] for table in self._tables}
+        rows = {table: table_rows for table, table_rows in pending.items() if table_rows}
+        n = sum(len(table_rows) for table_rows in rows.values())
         with self._send_lock:
-            if self._conn is None:
+            if self._conn is None:  # closed meanwhile: rows taken just before, never handed over
+                self._lost_here += n
+                self._unsent += n
                 return
-            rows = {table: table_rows for table, table_rows in pending.items() if table_rows}
-            n = sum(len(table_rows) for table_rows in rows.values())
             try:
                 if n:
-                    self._conn.send(("rows", self._batch + 1, rows))
-                    self._batch += 1
+                    self._hand_over("rows", rows)
                     self._rows_sent, n = self._rows_sent + n, 0
                 self._collect_replies(self._batch if wait else 0, 30.0)
             except (OSError, EOFError, ValueError) as exc:
                 code = self._proc.exitcode
                 self.error = self.error or f"trial log writer for {str(self.path)!r} died (exit {code}): {exc}"
                 self._lost_here += n  # rows it never got; those it got but never reported on count at close()
+                self._unsent += n
 
     def status(self) -> dict[str, Any]:
-        """Path, rows written and lost so far, and the error, if any. Never waits: while a batch is being handed
-        over (a slow disk can hold that up), it answers with what the writer had reported before."""
+        """Path, rows written and lost so far, the error, if any, and `unconfirmed_s`: seconds since the hand-over
+        of the oldest batch the writer has not reported on began (0.0 when there is none; a writer that has stopped
+        answering, a hung disk, makes it grow). Never waits: while a batch is being handed over (a slow disk can
+        hold that up), it answers with what the writer had reported before."""
         if self._send_lock.acquire(blocking=False):
             try:
                 if self._conn is not None:
@@ -289,39 +334,65 @@ class TrialLog:
                 self.error = self.error or f"trial log writer for {str(self.path)!r} died"
             finally:
                 self._send_lock.release()
+        try:
+            unconfirmed_s = time.monotonic() - self._handed[0][1]
+        except IndexError:  # none outstanding (or the last one confirmed just now, in another thread)
+            unconfirmed_s = 0.0
         return {"path": str(self.path), "rows_written": dict(self.rows_written), "rows_lost": self.rows_lost,
-                "error": self.error}
+                "error": self.error, "unconfirmed_s": unconfirmed_s}
 
-    def close(self, timeout_s: float = 30.0) -> None:
-        """Hand over what is pending, wait up to `timeout_s` seconds until it is written and end the writer. Rows
-        added from now on, and rows the writer has not reported on by then, are counted in `rows_lost`; a writer
-        that has not finished in time is killed and named in `error`. Safe twice."""
+    def close(self, timeout_s: float | None = None) -> None:
+        """Hand over what is pending and end the writer, returning within `timeout_s` seconds (None:
+        `CLOSE_TIMEOUT_S`) whatever the writer does. A writer that has not reported on every row and ended by then
+        (a hung disk) is killed, which also ends a hand-over blocked on its full pipe; the rows it had not confirmed
+        count in `rows_lost` and `error` says so. Rows added from now on count in `rows_lost` too. Safe twice."""
         with self._lock:
             if self._closed:
                 return
             self._closed = True
         self._stop.set()
-        if self._thread is not threading.current_thread():
-            self._thread.join()
-        self.flush()
-        timed_out = False
-        with self._send_lock:
-            try:
-                self._conn.send(("close", self._batch + 1, {}))
-                self._batch += 1
-                timed_out = not self._collect_replies(self._batch, timeout_s)
-            except (OSError, EOFError) as exc:
-                self.error = self.error or f"trial log writer for {str(self.path)!r} died before closing: {exc}"
-            unconfirmed = self._rows_sent - sum(self.rows_written.values()) - self._writer_lost
-            self._lost_here += unconfirmed  # 0 once the writer has reported on every row
-            if timed_out:
-                self.error = (f"trial log writer for {str(self.path)!r} did not finish within {timeout_s} s; "
-                              f"{unconfirmed} rows not confirmed written, counted lost")
-            self._conn.close()
-            self._conn = None
-        if not timed_out:
-            self._proc.wait(timeout_s)
+        timeout_s = CLOSE_TIMEOUT_S if timeout_s is None else timeout_s
+        end = time.monotonic() + timeout_s
+        earlier_error, unsent_before = self.error, self._unsent
+        deadline = threading.Timer(timeout_s, self._kill_writer)
+        deadline.daemon = True
+        deadline.start()
+        try:
+            if self._thread is not threading.current_thread():
+                self._thread.join()  # by the deadline at the latest: the kill fails a blocked hand-over
+            self.flush()
+            with self._send_lock:
+                try:
+                    self._hand_over("close", {})
+                    if not self._collect_replies(self._batch, max(0.0, end - time.monotonic())):
+                        self._kill_writer()
+                except (OSError, EOFError) as exc:
+                    self.error = self.error or f"trial log writer for {str(self.path)!r} died before closing: {exc}"
+                unconfirmed = self._rows_sent - sum(self.rows_written.values()) - self._writer_lost
+                self._lost_here += unconfirmed  # 0 once the writer has reported on every row
+                if self._killed:
+                    lost = unconfirmed + self._unsent - unsent_before
+                    self.error = (f"trial log writer for {str(self.path)!r} did not finish within {timeout_s:g} s "
+                                  f"and was killed; {lost} rows not confirmed written, counted lost"
+                                  + (f"; before that: {earlier_error}" if earlier_error else ""))
+                self._handed.clear()
+                self._conn.close()
+                self._conn = None
+        finally:
+            deadline.cancel()
+        if not self._killed:
+            self._proc.wait(max(0.0, end - time.monotonic()))
         self._proc.kill()  # only if it has not ended; releases its output file
+
+    def _kill_writer(self) -> None:
+        """SIGKILL the writer (`close`'s deadline): a hand-over blocked on its full pipe then fails at once. The
+        connection stays open until `close` closes it, in its own thread."""
+        if self._proc.exitcode is None:
+            self._killed = True
+            try:
+                self._proc.proc.kill()
+            except ProcessLookupError:  # it ended just now
+                pass
 
     def __enter__(self) -> TrialLog:
         return self
@@ -426,16 +497,17 @@ def _convert(table: str, rows: list, dtype: np.dtype) -> tuple[np.ndarray, list[
 
 
 def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
-    """The writer process: create the file, then for each batch of rows it receives: open, append, close.
+    """The writer process: create the file, then for each batch of rows it receives: open, append, close, fsync
+    (batches already waiting behind it, when the disk is slower than the hand-overs, are written with it).
 
     The file is closed between batches (a batch takes about a millisecond), so a SIGKILL or crash almost
     always finds it closed: its superblock's status flags are clear and any HDF5 >= 1.10 opens it (MATLAB
     without `h5clear`). A kill during a batch leaves the SWMR flags set; `open_log` still opens it.
+    The file is fsynced after each batch's close, before the batch is reported written, and it and its folder after
+    the file is made, before "ready": what was reported written survives a power cut or an OS crash.
     Each table's rows are converted on their own: a row that does not fit its table is left out and counted lost,
     named in `error`, and everything else is written. Only an HDF5 error while writing stops the writing for good.
     """
-    import os
-
     import h5py
 
     dtypes = {"frames": FRAME_DTYPE, "locomotion": SAMPLE_DTYPE, **_text_dtypes(), "servosphere": SERVOSPHERE_DTYPE}
@@ -451,6 +523,8 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
             for table, dtype in dtypes.items():
                 f.create_dataset(table, shape=(0,), maxshape=(None,), dtype=dtype,
                                  chunks=(1024 if table in ("frames", "locomotion", "servosphere") else 64,))
+        _fsync(path)
+        _fsync(str(Path(path).parent))  # its directory entry: the file itself survives a power cut
     except (OSError, ValueError, TypeError) as exc:  # no half-made log is left behind
         Path(path).unlink(missing_ok=True)
         conn.send(("error", str(exc)))
@@ -459,14 +533,15 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
     written = dict.fromkeys(dtypes, 0)
     lost = number = 0
     error = None
-    failed = False
-    while True:
+    failed = ended = False
+    while not ended:
         try:
             kind, number, batch = conn.recv()
         except (EOFError, OSError):  # the server died: what is written stays, the file is closed
             break
         if kind == "close":
             break
+        ended, number = _take_waiting(conn, number, batch)
         if failed:
             lost += sum(len(rows) for rows in batch.values())
         else:
@@ -485,12 +560,15 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
                     ds.resize((n + len(data),))
                     ds[n:] = data
                 f.close()  # flushes: only now is the batch in the file
+                _fsync(path)  # and only now on the disk
                 for table, data in arrays.items():
                     written[table] += len(data)
             except (OSError, RuntimeError, ValueError, TypeError) as exc:  # `f` stays open and referenced until
                 # os._exit below: closing a file whose write failed (even by garbage collection) can crash HDF5
                 failed = True
-                error = f"writing trial log {path!r} failed: {exc}"
+                error = (f"writing trial log {path!r} failed: {exc}; what was written before stays, but the file "
+                         "stays marked open for writing: open_log() reads it, plain HDF5 readers (MATLAB) only after "
+                         f"`h5clear -s {path}` (package hdf5-tools)")
                 lost += sum(len(data) for data in arrays.values())
         try:
             conn.send(("written", {"batch": number, "rows_written": written, "rows_lost": lost, "error": error}))
@@ -500,6 +578,31 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
     if failed:  # HDF5 cannot shut down after a failed write without risking a crash: what is on disk stays
         # (readable as after a crash), the parent has been told, leave without HDF5's shutdown
         os._exit(0)
+
+
+def _take_waiting(conn, number: int, batch: dict[str, list]) -> tuple[bool, int]:
+    """Add the batches already waiting behind batch `number` (the disk, or fsync, slower than the hand-overs) to
+    `batch`, in order, so that one open, append, close and fsync writes them all. Returns (ended: a "close" or the
+    connection's end came, number: that of the last batch taken, or of the close)."""
+    try:
+        while conn.poll():
+            kind, number, rows = conn.recv()
+            if kind == "close":
+                return True, number
+            for table, table_rows in rows.items():
+                batch.setdefault(table, []).extend(table_rows)
+    except (EOFError, OSError):  # the server died: what it had handed over is written
+        return True, number
+    return False, number
+
+
+def _fsync(path: str) -> None:
+    """Make what was written to the file or folder `path` durable (fsync; a folder: its entries)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def _send_quietly(conn, message) -> None:
@@ -523,14 +626,28 @@ def check_log_dir(folder: str | Path) -> Path:
 
 
 def log_path(folder: str | Path, rig: str, name: str, when: _dt.datetime | None = None) -> Path:
-    """`<folder>/<rig>_<UTC yyyymmdd-hhmmss>_<name>.h5` (name reduced to [A-Za-z0-9_-]; a suffix if taken)."""
+    """`<folder>/<rig>_<UTC yyyymmdd-hhmmss>_<name>.h5` (name reduced to [A-Za-z0-9_-], at most TRIAL_NAME_MAX
+    characters; a suffix `-<k>` if taken). LogError naming the path when it cannot be used (a file name over
+    NAME_MAX_BYTES, a folder the system refuses)."""
     when = when or _dt.datetime.now(_dt.UTC)
-    safe = "".join(c if c.isascii() and c.isalnum() or c in "-_" else "_" for c in name)[:64] or "trial"
+    safe = "".join(c if c.isascii() and c.isalnum() or c in "-_" else "_" for c in name)[:TRIAL_NAME_MAX] or "trial"
     base = Path(folder) / f"{rig}_{when:%Y%m%d-%H%M%S}_{safe}"
     path, k = Path(f"{base}.h5"), 1  # appended: a rig name may hold a dot ("lab.1"), which with_suffix would cut
-    while path.exists():
+    size = len(path.name.encode())
+    if size > NAME_MAX_BYTES:
+        raise LogError(f"trial log {str(path)!r}: its file name is {size} bytes long; allowed: at most "
+                       f"{NAME_MAX_BYTES} bytes (a [rig] name of at most {RIG_NAME_MAX_BYTES} bytes)")
+    while _exists(path):
         path, k = Path(f"{base}-{k}.h5"), k + 1
     return path
+
+
+def _exists(path: Path) -> bool:
+    """Whether `path` exists; LogError naming it when the system cannot tell (a name too long, a folder refused)."""
+    try:
+        return path.exists()
+    except OSError as exc:
+        raise LogError(f"trial log path {str(path)!r} cannot be used: {exc.strerror or exc}") from None
 
 
 #: what HDF5 says of a file whose writer has not closed it (a running, crashed or killed server): read it as SWMR

@@ -15,6 +15,7 @@ from multiprocessing import Pipe
 import h5py
 import numpy as np
 import pytest
+from conftest import wait_for
 
 from antarium.core.childproc import ChildProcess
 from antarium.core.clock import SimulatedClock
@@ -222,8 +223,142 @@ def test_a_close_that_times_out_is_an_error_and_counts_the_rows(tmp_path):
     log.close(timeout_s=0.5)
     status = log.status()
     assert status["rows_written"]["frames"] == 3 and status["rows_lost"] == 2
-    assert status["error"] == (f"trial log writer for {str(path)!r} did not finish within 0.5 s; "
+    assert status["error"] == (f"trial log writer for {str(path)!r} did not finish within 0.5 s and was killed; "
                                "2 rows not confirmed written, counted lost")
+
+
+def test_a_writer_hung_behind_its_full_pipe_is_killed_at_the_deadline_of_close(tmp_path):
+    """A hung writer (a stalled network disk) let a hand-over block in send() holding the send lock: close() joined
+    the sender thread without a bound and trial_stop and the shutdown hung for ever."""
+    import threading
+
+    path = tmp_path / "h.h5"
+    log = TrialLog(path, {}, "hung", flush_s=0.05)
+    log.add_frame(frame_row(0))
+    log.flush(wait=True)
+    os.kill(log._proc.pid, signal.SIGSTOP)
+    try:
+        for frame in range(1, 200_001):  # megabytes: the sender's next hand-over blocks on the full pipe
+            log.add_frame(frame_row(frame))
+        assert wait_for(lambda: log.status()["unconfirmed_s"] > 0.3, 10.0)  # handed over (blocked), never confirmed
+        closing = threading.Thread(target=log.close, kwargs={"timeout_s": 1.0}, daemon=True)
+        t0 = time.monotonic()
+        closing.start()
+        closing.join(15.0)
+        took = time.monotonic() - t0
+        assert not closing.is_alive() and took < 6.0, took
+    finally:
+        if log._proc.exitcode is None:  # the code before the fix: let its close() end
+            os.kill(log._proc.pid, signal.SIGCONT)
+    status = log.status()
+    assert log._proc.exitcode is not None and status["unconfirmed_s"] == 0.0
+    assert status["rows_written"]["frames"] == 1 and status["rows_lost"] == 200_000
+    assert status["error"] == (f"trial log writer for {str(path)!r} did not finish within 1 s and was killed; "
+                               "200000 rows not confirmed written, counted lost")
+    assert list(read_table(path, "frames")["frame"]) == [0]  # what was confirmed is in the file
+
+
+def test_the_writer_fsyncs_the_file_and_folder_before_it_reports_them(tmp_path, monkeypatch):
+    """Without fsync a power cut or OS crash could lose batches already reported written (and the file's entry)."""
+    import threading
+
+    synced = []
+    real_fsync = os.fsync
+
+    def recording_fsync(fd: int) -> None:
+        synced.append(os.readlink(f"/proc/self/fd/{fd}"))
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", recording_fsync)
+    path = tmp_path / "f.h5"
+    ours, writers = Pipe()
+    writer = threading.Thread(target=_writer_main, args=(writers, str(path), {"format": "antarium-trial-log"}))
+    writer.start()
+    assert ours.recv() == ("ready", None)
+    assert synced == [str(path), str(tmp_path)]  # the new file, then its directory entry
+    for batch in (1, 2):
+        ours.send(("rows", batch, {"frames": [frame_row(batch)]}))
+        kind, report = ours.recv()
+        assert kind == "written" and report["batch"] == batch
+        assert synced[2:] == [str(path)] * batch  # each batch is on the disk before it is reported written
+    ours.send(("close", 3, {}))
+    assert ours.recv()[0] == "closed"
+    writer.join(10.0)
+
+
+_DISK_FULL = textwrap.dedent("""
+    import resource, signal, sys
+    import numpy as np
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))  # inherited by the writer: the 'disk' fills
+    from antarium.trial_log import TrialLog, FRAME_DTYPE
+    row = np.zeros((), FRAME_DTYPE).item()
+    log = TrialLog(sys.argv[1], {}, "full", flush_s=0.05)
+    for i in range(200):
+        for k in range(100):
+            log.add_frame((i * 100 + k, *row[1:]))
+        log.flush(wait=True)
+        if log.status()["error"]:
+            break
+    log.close()
+    print(log.error)
+""")
+
+
+def test_a_disk_full_error_says_how_plain_readers_open_the_file(tmp_path):
+    """After a failed write the file stays marked open for writing: MATLAB and plain h5py refuse it; the error said
+    nothing of it."""
+    path = tmp_path / "full.h5"
+    out = subprocess.run([sys.executable, "-c", _DISK_FULL, str(path)], capture_output=True, text=True, timeout=90)
+    assert out.returncode == 0, out.stderr
+    error = out.stdout.strip()  # HDF5's error text spans lines
+    assert error.startswith(f"writing trial log {str(path)!r} failed: ")
+    assert error.endswith("what was written before stays, but the file stays marked open for writing: open_log() "
+                          f"reads it, plain HDF5 readers (MATLAB) only after `h5clear -s {path}` (package hdf5-tools)")
+    assert path.read_bytes()[11] == 0x05  # superblock v3 status flags: write + SWMR write, as the error says
+    with pytest.raises(OSError, match="already open for write"):
+        h5py.File(path, "r")
+    with open_log(path) as f:
+        frames = f["frames"][:]
+    assert len(frames) > 0 and np.all(frames["frame"] == np.arange(len(frames)))
+
+
+def test_created_monotonic_anchors_the_tables_clock_to_created_utc(tmp_path):
+    """The tables' times are on the loop's clock; nothing tied them to wall time."""
+    before = datetime.datetime.now(datetime.UTC)
+    with TrialLog(tmp_path / "a.h5", {}, "anchor", clock=lambda: 1234.5):
+        pass
+    with open_log(tmp_path / "a.h5") as f:
+        assert f.attrs["format_version"] == 3
+        assert f.attrs["created_monotonic"] == 1234.5
+        created = datetime.datetime.fromisoformat(f.attrs["created_utc"])
+    assert before <= created <= datetime.datetime.now(datetime.UTC)
+
+
+def test_a_rig_name_too_long_for_the_file_name_is_a_log_error_naming_the_path(tmp_path):
+    """A 240-byte rig name made trial_start fail with a raw OSError (ENAMETOOLONG)."""
+    from antarium.trial_log import RIG_NAME_MAX_BYTES
+
+    with pytest.raises(LogError, match=re.escape(f"trial log '{tmp_path}/{'r' * 240}_") + r"\d{8}-\d{6}_ant7.h5': "
+                       r"its file name is 264 bytes long; allowed: at most 255 bytes \(a \[rig\] name of at most "
+                       r"166 bytes\)"):
+        log_path(tmp_path, "r" * 240, "ant7")
+    longest = log_path(tmp_path, "r" * RIG_NAME_MAX_BYTES, "t" * 100).name  # the trial name cut to 64 characters
+    assert len(longest.encode()) == 255 - len("-9999")
+    with pytest.raises(LogError, match=r"trial log path '.*' cannot be used: File name too long"):
+        TrialLog(tmp_path / ("d" * 300) / "x.h5", {})
+
+
+@pytest.mark.parametrize(("data", "stored"), [
+    ({1: 2, "translation": 1.0}, {"1": 2, "translation": 1.0}),  # keys of mixed types: sort_keys raised TypeError
+    ({("a", 1): float("nan")}, {"('a', 1)": None}),
+])
+def test_json_rows_take_keys_that_are_not_str(tmp_path, data, stored):
+    with TrialLog(tmp_path / "k.h5", {}, "keys") as log:
+        log.add_event(0.0, "edit", data)
+        log.add_command(0.0, "gains", data, {"error": "x"}, False)
+    events, commands = read_table(tmp_path / "k.h5", "events"), read_table(tmp_path / "k.h5", "commands")
+    assert json.loads(events["data"][0]) == stored and json.loads(commands["request"][0]) == stored
 
 
 class _ResumeOnSend:
@@ -258,7 +393,7 @@ def test_flush_wait_returns_once_its_own_rows_are_on_disk(tmp_path):
 
 
 _WRITER = textwrap.dedent("""
-    import sys, time
+    import sys, threading, time
     from antarium.core.clock import MonotonicClock
     from antarium.server.frame_loop import FrameLoop
     from antarium.locomotion import open_source
@@ -266,8 +401,14 @@ _WRITER = textwrap.dedent("""
     clock = MonotonicClock()
     log = TrialLog(sys.argv[1], {"rig": {"name": "k"}}, "killed", flush_s=0.05)
     loop = FrameLoop(clock=clock, source=open_source("scripted", clock=clock), log=log)
-    print("started", flush=True)
-    loop.run(until=clock.now() + 30)
+
+    def tell():  # once the writer has reported 100 frames written (however slow a loaded machine makes it)
+        while log.status()["rows_written"]["frames"] < 100:
+            time.sleep(0.01)
+        print("written", flush=True)
+
+    threading.Thread(target=tell, daemon=True).start()
+    loop.run(until=clock.now() + 60)
 """)
 
 
@@ -276,8 +417,8 @@ def test_log_survives_sigkill(tmp_path):
     proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(path)], stdout=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
-        assert proc.stdout.readline().strip() == "started"
-        time.sleep(1.0)
+        assert proc.stdout.readline().strip() == "written"
+        time.sleep(0.1)  # more batches on their way: the kill may fall in one
     finally:  # kill the server and its log writer at once, as a power cut or the OOM killer would
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(10)
@@ -286,7 +427,7 @@ def test_log_survives_sigkill(tmp_path):
     assert path.read_bytes()[11] in (0x00, 0x05)
     with open_log(path) as f:
         frames = f["frames"][:]
-        assert len(frames) >= 100  # ~0.9 s of frames at 190 Hz, flushed every 0.05 s
+        assert len(frames) >= 100  # what the writer reported written before the kill
         assert np.all(np.diff(frames["frame"]) == 1) and frames["frame"][0] == 0
         assert len(f["locomotion"]) > 0 and json.loads(f.attrs["config"])["rig"]["name"] == "k"
 

@@ -3,7 +3,10 @@ booleans where numbers belong, scene edits' arguments, polariser angles, metadat
 command changes nothing and is logged as refused (issue 20's rule: one line naming what was wrong and what is
 allowed)."""
 
+import json
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -121,3 +124,31 @@ def test_a_scene_parameter_too_large_for_a_float_fails_the_load_and_keeps_the_sc
         assert server.scene_name == "uniform"
     finally:
         server.stop()
+
+
+def test_a_refusal_during_a_trial_reaches_the_caller_and_is_logged_whatever_the_log_makes_of_it(tmp_path):
+    """The trial log's own errors replaced a command's refusal: params with keys of mixed types (sort_keys: a
+    TypeError) and a NUL in a command name (the commands table's text check: a ValueError), neither logged."""
+    config = resolve({"bus": {"enabled": False}, "log": {"dir": str(tmp_path)}, "link": {"interface": "virtual"}})
+    server = Server(config, renderer_factory=None).start_thread()
+    try:
+        path = server.command("trial_start", {"name": "refusals"})["path"]
+        with pytest.raises(CommandError, match=re.escape("gains: unknown parameter(s) [1]")):
+            server.command("gains", {1: 2, "translation": 1.0})
+        with pytest.raises(CommandError, match=re.escape("unknown command 'bad\\x00name'")):
+            server.command("bad\x00name", {})
+        reply = server.command("trial_stop")
+    finally:
+        server.stop()
+    assert reply["rows_lost"] == 0 and reply["error"] is None
+    commands = read_table(path, "commands")
+    assert list(zip(commands["name"], commands["ok"], strict=True)) == [
+        ("trial_start", 1), ("gains", 0), ("'bad\\x00name'", 0), ("trial_stop", 1)]
+    assert json.loads(commands["request"][1]) == {"1": 2, "translation": 1.0}
+
+
+def test_the_logs_doc_says_which_commands_the_commands_table_holds():
+    """docs/logs.md said every command is logged; an accepted status is not (docs/bus.md, `Server.command`)."""
+    doc = " ".join((Path(__file__).parents[1] / "docs" / "logs.md").read_text().split())
+    assert "every command received during the trial, accepted or refused" not in doc
+    assert "except an accepted `status`" in doc

@@ -82,6 +82,20 @@ def test_bad_values_name_the_key_and_what_is_allowed(raw, message):
         resolve(raw)
 
 
+def test_a_rig_name_too_long_for_the_trial_logs_file_names_is_refused_at_load():
+    """A 240-byte rig name passed the config and made every trial_start fail with a raw OSError (ENAMETOOLONG)."""
+    from antarium.trial_log import RIG_NAME_MAX_BYTES, log_path
+
+    with pytest.raises(ConfigError, match=re.escape(
+            "[rig] name must be at most 166 bytes in UTF-8 (it begins the trial logs' file names "
+            "<rig>_<yyyymmdd-hhmmss>_<trial>.h5, at most 255 bytes); this one has 167")):
+        resolve({"rig": {"name": "r" * (RIG_NAME_MAX_BYTES + 1)}})
+    with pytest.raises(ConfigError, match="this one has 168"):  # bytes, not characters
+        resolve({"rig": {"name": "é" * 84}})
+    name = resolve({"rig": {"name": "r" * RIG_NAME_MAX_BYTES}}).rig.name
+    assert len(log_path("/tmp", name, "t" * 200).name.encode()) <= 255 - len("-9999")
+
+
 @pytest.mark.parametrize("old, new, value", [(old, new, None) for old, new in LoopSection.RENAMED.items()])
 def test_old_key_names_are_read_with_a_deprecation_warning(old, new, value):
     value = 3 if new.endswith("_frames") else 0.02

@@ -290,3 +290,137 @@ def test_a_trial_stop_while_the_server_stops_keeps_the_last_frame(tmp_path):
     frames = read_table(path, "frames")["frame"]
     assert reply["path"] == path and reply["rows_lost"] == 0 and reply["error"] is None
     assert frames[-1] == server.loop.frame - 1  # the last frame the loop ran is in the log
+
+
+def _recording_server(tmp_path, rig: str, lines: list[str]) -> Server:
+    config = resolve({"rig": {"name": rig}, "bus": {"enabled": False},
+                      "log": {"dir": str(tmp_path), "flush_s": 0.05}, "loop": {"rate_hz": 200.0},
+                      "locomotion": {"source": "scripted", "rate_hz": 500.0}})
+    return Server(config, renderer_factory=None, link=False, echo=lines.append).start_thread()
+
+
+WRITER_ALARM = "TRIAL LOG WRITER NOT ANSWERING"
+
+
+def test_a_writer_that_stops_answering_is_an_alarm_until_it_answers_again(tmp_path):
+    """A hung writer (a stalled disk: SIGSTOP here) raised no alarm: rows piled up unconfirmed, nobody knew."""
+    lines: list[str] = []
+    server = _recording_server(tmp_path, "wstall", lines)
+    pid = None
+    try:
+        server.trial_start("stall", {})
+        assert wait_for(lambda: server.status()["log"]["rows_written"]["frames"] > 0, 10.0)
+        assert not any(a.startswith(WRITER_ALARM) for a in server.status()["alarms"])
+        pid = server.trial_log._proc.pid
+        os.kill(pid, signal.SIGSTOP)
+        assert wait_for(lambda: any(a.startswith(WRITER_ALARM) for a in server.status()["alarms"]), 10.0)
+        assert wait_for(lambda: any(f"ALARM: {WRITER_ALARM}" in line for line in lines), 5.0)  # on stderr
+        frames = server.loop.frame
+        os.kill(pid, signal.SIGCONT)
+        pid = None
+        assert wait_for(lambda: not any(a.startswith(WRITER_ALARM) for a in server.status()["alarms"]), 10.0)
+        assert wait_for(lambda: f"antarium serve: alarm cleared: {WRITER_ALARM}" in lines, 5.0)
+        assert server.loop.frame > frames  # the frames never waited for the writer
+        reply = server.trial_stop()
+        assert reply["rows_lost"] == 0 and reply["error"] is None
+    finally:
+        if pid is not None:
+            os.kill(pid, signal.SIGCONT)
+        server.stop()
+
+
+def test_a_hung_writer_ends_trial_stop_and_the_shutdown_within_the_close_timeout(tmp_path, monkeypatch):
+    """trial_stop and the shutdown waited for ever on a hung writer (close() joined the sender thread, blocked in
+    send() on the full pipe, without a bound); docs/logs.md promises at most 30 s, here 1 s."""
+    import threading
+    import time
+
+    monkeypatch.setattr("antarium.trial_log.CLOSE_TIMEOUT_S", 1.0, raising=False)
+    lines: list[str] = []
+    server = _recording_server(tmp_path, "whung", lines)
+    pids, replies = [], []
+    try:
+        for trial in ("stopped", "shut down"):
+            server.trial_start(trial, {"notes": "x" * 20000})
+            assert wait_for(lambda: server.status()["log"]["rows_written"]["frames"] > 0, 10.0)
+            pids.append(server.trial_log._proc.pid)
+            os.kill(pids[-1], signal.SIGSTOP)
+            assert wait_for(lambda: any(a.startswith(WRITER_ALARM) for a in server.status()["alarms"]), 10.0)
+            if trial == "stopped":
+                stopping = threading.Thread(target=lambda: replies.append(server.trial_stop()), daemon=True)
+                stopping.start()
+                stopping.join(20.0)
+                assert replies, "trial_stop still waits on the hung writer"
+                (reply,) = replies
+                assert reply["error"].startswith(f"trial log writer for {reply['path']!r} did not finish within 1 s "
+                                                 "and was killed; ")
+                assert reply["rows_lost"] > 0 and server.trial_log is None
+            else:
+                t0 = time.monotonic()
+                server.stop(timeout_s=20.0)
+                assert not server._thread.is_alive(), "the shutdown still waits on the hung writer"
+                assert time.monotonic() - t0 < 15.0
+    finally:
+        for pid in pids:
+            if not process_gone(pid):
+                os.kill(pid, signal.SIGCONT)
+        server.stop(timeout_s=60.0)
+
+
+def test_commands_arriving_while_trial_stop_closes_the_log_are_not_counted_lost(tmp_path):
+    """A command logged while trial_stop closed the log (the server still held it) was counted in rows_lost with
+    error None: a trial that lost nothing reported losses nobody could explain."""
+    lines: list[str] = []
+    server = _recording_server(tmp_path, "wclose", lines)
+    try:
+        path = server.trial_start("closing", {})["path"]
+        assert wait_for(lambda: server.loop.frame > 10, 10.0)
+        log, replies = server.trial_log, []
+        hand_over = log.flush
+
+        def flush_as_a_command_arrives(wait: bool = False) -> None:
+            if log._closed and not replies:  # close() has begun: the log takes no more rows
+                replies.append(server.command("gains", {"translation": 2.0}))
+            hand_over(wait)
+
+        log.flush = flush_as_a_command_arrives
+        reply = server.command("trial_stop")
+        assert replies and replies[0]["gains"]["translation"] == 2.0  # the command itself ran
+        assert reply["rows_lost"] == 0 and reply["error"] is None
+    finally:
+        server.stop()
+    commands = read_table(path, "commands")
+    assert list(commands["name"]) == ["trial_start", "trial_stop"]
+
+
+def test_the_trial_events_anchor_the_loop_clock_to_utc(tmp_path):
+    """Nothing tied the tables' times (loop clock) to wall time: trial_started and trial_stopped carry a (UTC, loop
+    clock) pair read together, the file its creation's pair."""
+    import datetime
+    import json
+
+    from antarium.trial_log import open_log
+
+    lines: list[str] = []
+    server = _recording_server(tmp_path, "wanchor", lines)
+    try:
+        before = datetime.datetime.now(datetime.UTC)
+        path = server.trial_start("anchor", {})["path"]
+        assert wait_for(lambda: server.loop.frame > 10, 10.0)
+        server.trial_stop()
+        after = datetime.datetime.now(datetime.UTC)
+    finally:
+        server.stop()
+    events, frames = read_table(path, "events"), read_table(path, "frames")
+    anchors = {kind: json.loads(data) for kind, data in zip(events["kind"], events["data"], strict=True)
+               if kind in ("trial_started", "trial_stopped")}
+    started, stopped = anchors["trial_started"], anchors["trial_stopped"]
+    assert before <= datetime.datetime.fromisoformat(started["utc"]) <= datetime.datetime.fromisoformat(
+        stopped["utc"]) <= after
+    assert started["monotonic"] <= frames["t_start"][0] and frames["t_start"][-1] <= stopped["monotonic"]
+    wall = (datetime.datetime.fromisoformat(stopped["utc"]) - datetime.datetime.fromisoformat(started["utc"]))
+    assert wall.total_seconds() == pytest.approx(stopped["monotonic"] - started["monotonic"], abs=0.05)
+    with open_log(path) as f:
+        assert f.attrs["created_monotonic"] <= started["monotonic"]
+        assert datetime.datetime.fromisoformat(f.attrs["created_utc"]) <= datetime.datetime.fromisoformat(
+            started["utc"])

@@ -11,6 +11,7 @@ virtual ant run it without hardware; by default it is built from the rig config 
 
 from __future__ import annotations
 
+import datetime as _dt
 import gc
 import json
 import math
@@ -337,12 +338,22 @@ class Server:
         self._log_command(name, request, {"result": result}, True)
         return result
 
-    def _log_command(self, name, request, reply, ok) -> None:
-        """A row in the running trial's commands table. Commands come from several threads: the time is read under
-        the lock that appends the rows, so that the table's `t` never steps back."""
+    def _log_command(self, name, request, reply, ok, *, last: bool = False) -> None:
+        """A row in the running trial's commands table; never raises, so that a command's own error always reaches
+        its caller: a name or request the table cannot hold (a NUL in the name) is logged as its ascii(). Commands
+        come from several threads: the time is read under the lock that appends the rows, so that the table's `t`
+        never steps back. `last`: the trial's last row (trial_stop); no command is logged into the trial after it."""
         with self._command_log_lock:
-            if self.trial_log is not None:
-                self.trial_log.add_command(self.clock.now(), name, request, reply, ok)
+            log = self.trial_log
+            if log is None:
+                return
+            t = self.clock.now()
+            try:
+                log.add_command(t, name, request, reply, ok)
+            except (ValueError, TypeError, RecursionError):
+                log.add_command(t, ascii(name), ascii(request), ascii(reply), ok)
+            if last:
+                self.trial_log, self.trial_name = None, None
 
     def state(self) -> dict[str, Any]:
         """What a command replies: pose, scene rotation, loop mode, gains, scene and trial."""
@@ -392,8 +403,9 @@ class Server:
         self.scene_name = scene if isinstance(scene, str) else json.dumps(scene, sort_keys=True)
         self._scene_digest = digest
         self.loop.renderer_changed()
-        if self.trial_log is not None:
-            self.trial_log.add_scene(self.clock.now(), self.scene_name, digest)
+        log = self.trial_log  # read once: trial_stop may end the trial in another thread
+        if log is not None:
+            log.add_scene(self.clock.now(), self.scene_name, digest)
         self.loop.event("scene_loaded", scene=scene, sha256=digest)
 
     def _scene_failed(self, scene: str | dict, exc: BaseException) -> RuntimeError:
@@ -420,7 +432,8 @@ class Server:
                 raise CommandError(f"trial_start: folder must be an absolute path, got {folder!r}")
             try:
                 path = log_path(check_log_dir(folder) if folder else self.log_dir, self.rig_name, name)
-                log = TrialLog(path, self.config.to_toml_dict(), name, metadata, flush_s=self.config.log.flush_s)
+                log = TrialLog(path, self.config.to_toml_dict(), name, metadata, flush_s=self.config.log.flush_s,
+                               clock=self.clock.now)
             except LogError as exc:
                 raise RuntimeError(f"trial_start: {exc}") from None
             if self.scene_name is not None:
@@ -472,7 +485,12 @@ class Server:
                 self.loop.log = None
                 raise
         self.trial_log, self.trial_name = log, name
-        self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path))
+        self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path), **self._clock_anchor())
+
+    def _clock_anchor(self) -> dict[str, Any]:
+        """`utc` (ISO 8601) and `monotonic` (s, on the loop's clock, the tables' clock) read at the same instant."""
+        monotonic, utc = self.clock.now(), _dt.datetime.now(_dt.UTC)
+        return {"utc": utc.isoformat(), "monotonic": monotonic}
 
     def trial_stop(self) -> dict[str, Any]:
         if self._stopping_elsewhere():  # detaching the log from here could lose the loop's last frame
@@ -483,16 +501,17 @@ class Server:
             return self._close_trial()
 
     def _close_trial(self) -> dict[str, Any]:
-        """End the running trial (holding `_trial_lock`): the loop stops writing into its log, which is closed."""
+        """End the running trial (holding `_trial_lock`): the loop stops writing into its log, the trial_stop row is
+        its last (the trial ends with it: a command arriving while the log closes is not logged into it, never
+        counted lost), and the log is closed (at most trial_log.CLOSE_TIMEOUT_S)."""
         log = self.trial_log
         if self.loop is not None:
             try:
                 self._in_loop("trial_stop", f"trial {self.trial_name!r} goes on", self._detach_log)
             except LoopClosed:  # the loop has run its last frame: nothing writes into the log any more
                 self._detach_log()
-        self._log_command("trial_stop", {}, {"path": str(log.path)}, True)
+        self._log_command("trial_stop", {}, {"path": str(log.path)}, True, last=True)
         log.close()
-        self.trial_log, self.trial_name = None, None
         return {"path": str(log.path), **log.status()}
 
     def _end_trial(self) -> None:
@@ -518,19 +537,21 @@ class Server:
     def _trial_closed_by_shutdown(self) -> dict[str, Any]:
         """trial_stop while the server stops: its shutdown closes the trial after the loop's last frame; wait for
         that (at most COMMAND_TIMEOUT_S) and reply as trial_stop does."""
-        log = self.trial_log
+        log, name = self.trial_log, self.trial_name
         if log is None:
             raise RuntimeError("trial_stop: no trial is running")
         deadline = time.monotonic() + COMMAND_TIMEOUT_S
         while self.trial_log is log and self._loop_thread.is_alive() and time.monotonic() < deadline:
             time.sleep(0.005)
-        if self.trial_log is log:
-            raise RuntimeError(f"trial_stop: the server is stopping and has not closed trial {self.trial_name!r} "
+        # the shutdown holds `_trial_lock` until the log is closed
+        if self.trial_log is log or not self._trial_lock.acquire(timeout=max(0.0, deadline - time.monotonic())):
+            raise RuntimeError(f"trial_stop: the server is stopping and has not closed trial {name!r} "
                                f"within {COMMAND_TIMEOUT_S:g} s; it closes it when the last frame is done")
+        self._trial_lock.release()
         return {"path": str(log.path), **log.status()}
 
     def _detach_log(self) -> None:
-        self.loop.event("trial_stopped", name=self.trial_name, path=str(self.trial_log.path))
+        self.loop.event("trial_stopped", name=self.trial_name, path=str(self.trial_log.path), **self._clock_anchor())
         self.loop.log = None
         if hasattr(self.source, "use_log"):
             self.source.use_log(None)

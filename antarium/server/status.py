@@ -9,6 +9,9 @@ from typing import TYPE_CHECKING, Any
 
 #: a renderer that failed within this many seconds (loop clock) is an alarm: the dome keeps its last frame
 RENDER_ALARM_S = 2.0
+#: rows handed to the trial-log writer and not confirmed written for longer than this are an alarm (s, wall clock;
+#: a batch takes milliseconds: this is a writer that stopped answering, a hung disk)
+LOG_STALL_ALARM_S = 2.0
 
 if TYPE_CHECKING:
     from antarium.server.frame_loop import FrameLoop
@@ -60,10 +63,17 @@ def rig_status(server: Server) -> dict[str, Any]:
         out["emulator_running"] = server.emulator.running
         if not out["emulator_running"]:
             alarms.append(f"the dome emulator process is not running ({_exit_status(server.emulator.exitcode)})")
-    if server.trial_log is not None:
-        out["log"] = server.trial_log.status()
+    log = server.trial_log  # read once: trial_stop may end the trial in another thread
+    if log is not None:
+        from antarium.trial_log import CLOSE_TIMEOUT_S
+
+        out["log"] = log.status()
         if out["log"]["error"]:
             alarms.append("TRIAL LOG NOT WRITTEN: " + out["log"]["error"])
+        if out["log"]["unconfirmed_s"] > LOG_STALL_ALARM_S:
+            alarms.append(f"TRIAL LOG WRITER NOT ANSWERING: rows handed over {out['log']['unconfirmed_s']:.1f} s ago "
+                          f"are not confirmed written (a hung disk?); ending the trial waits for it at most "
+                          f"{CLOSE_TIMEOUT_S:g} s, then kills it and counts them lost")
     return out
 
 
