@@ -4,7 +4,11 @@
     body  9 (one panel) or 55 * 9 (whole dome, panel-major) angle codes, uint16 big-endian
 
 Angle code a <-> angle theta = a * pi / 65536 rad, theta in [0, pi) (resolution 0.0027 deg). Angle j of a panel
-drives the actuator behind UV pixel local 361 + j, measured in the panel plane from the panel's local +x axis.
+drives the actuator behind UV pixel local 361 + j, measured in the panel plane from the panel's local +x axis
+towards its +y axis (the polariser axis cos theta * x + sin theta * y): counter-clockwise as seen from the dome
+centre, clockwise from outside the dome (docs/geometry.md). The real actuators and their firmware must turn the
+polariser in this sense, with code 0 along +x: the renderer's angles (`renderers.output.polariser_angles`) assume
+it and nothing on the wire can check it.
 """
 
 from __future__ import annotations

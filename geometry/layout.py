@@ -28,6 +28,10 @@ SHIPPED_LAYOUT = Path(__file__).parent / "data" / "layout.npz"
 LAYOUT_FORMAT = 1
 
 
+#: Every length of `LayoutParams` lies in (0, MAX_LENGTH) metres
+MAX_LENGTH = 0.1
+
+
 @dataclass(frozen=True)
 class LayoutParams:
     """Parameters of the layout search (metres)."""
@@ -44,8 +48,8 @@ class LayoutParams:
     def __post_init__(self) -> None:
         for name in ("margin", "gb_min_pitch", "uv_min_pitch", "uv_clearance"):
             v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0 and v < 0.1):
-                raise ValueError(f"{name} must be a length in metres in (0, 0.1), got {v!r}")
+            if not (np.isfinite(v) and 0 < v < MAX_LENGTH):
+                raise ValueError(f"{name} must be a length in metres in (0, {MAX_LENGTH:g}), got {v!r}")
         for name in ("grid_pitches", "grid_offsets", "refine_steps"):
             v = getattr(self, name)
             if not (isinstance(v, int) and 2 <= v <= 10_000):

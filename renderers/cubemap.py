@@ -56,24 +56,33 @@ def largest_texel_deg(face_size: int) -> float:
     return float(np.degrees(2.0 * np.arctan(1.0 / face_size)))
 
 
-def gl_cube_directions(face_size: int) -> np.ndarray:
-    """(6, N, N, 3) unit directions of OpenGL cube-map texels, in upload order (+X,-X,+Y,-Y,+Z,-Z; row t, col s).
+#: (forward, s axis, t axis) of each OpenGL cube-map face (+X, -X, +Y, -Y, +Z, -Z): a texel at face coordinates
+#: (sc, tc) looks along forward + sc * s + tc * t (spec table "Selection of cube map images": for +X, sc = -z, tc = -y)
+GL_FACES = np.array(
+    [
+        [[1, 0, 0], [0, 0, -1], [0, -1, 0]],
+        [[-1, 0, 0], [0, 0, 1], [0, -1, 0]],
+        [[0, 1, 0], [1, 0, 0], [0, 0, 1]],
+        [[0, -1, 0], [1, 0, 0], [0, 0, -1]],
+        [[0, 0, 1], [1, 0, 0], [0, -1, 0]],
+        [[0, 0, -1], [-1, 0, 0], [0, -1, 0]],
+    ],
+    dtype=np.float64,
+)
 
-    OpenGL's convention (spec table "Selection of cube map images"): for face +X, sc = -z, tc = -y; etc.
-    """
-    c = texel_coordinates(face_size)
-    tc, sc = np.meshgrid(c, c, indexing="ij")
-    one = np.ones_like(sc)
-    faces = [
-        (one, -tc, -sc),
-        (-one, -tc, sc),
-        (sc, one, tc),
-        (sc, -one, -tc),
-        (sc, -tc, one),
-        (-sc, -tc, -one),
-    ]
-    d = np.stack([np.stack(f, axis=-1) for f in faces])
+
+def gl_face_directions(face: np.ndarray, tc: np.ndarray, sc: np.ndarray) -> np.ndarray:
+    """(..., 3) unit directions at face coordinates (tc, sc) in [-1, 1] of OpenGL cube faces `face` (0..5 in
+    `GL_FACES` order); the three arrays broadcast together."""
+    f = GL_FACES[np.asarray(face)]
+    d = f[..., 0, :] + np.asarray(sc)[..., None] * f[..., 1, :] + np.asarray(tc)[..., None] * f[..., 2, :]
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def gl_cube_directions(face_size: int) -> np.ndarray:
+    """(6, N, N, 3) unit directions of OpenGL cube-map texels, in upload order (+X,-X,+Y,-Y,+Z,-Z; row t, col s)."""
+    c = texel_coordinates(face_size)
+    return gl_face_directions(np.arange(6)[:, None, None], c[None, :, None], c[None, None, :])
 
 
 def face_view_matrices(rotation: np.ndarray, eye: np.ndarray) -> np.ndarray:

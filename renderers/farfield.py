@@ -21,18 +21,20 @@ from antarium.geometry.constants import GB_PER_PANEL, PIXELS_PER_PANEL
 STEP = math.radians(0.25)
 
 
-def _grid_directions(el: np.ndarray, az: np.ndarray) -> np.ndarray:
-    """(rows * cols, 3) unit vectors of an (elevation, azimuth) grid that continues over the zenith (rows
-    above 90° are the rows below it turned by 180°)."""
+def _directions(el: np.ndarray, az: np.ndarray) -> np.ndarray:
+    """(..., 3) unit vectors at (elevation, azimuth) arrays (rad, broadcast together) of a grid that continues over
+    the zenith: an elevation above 90° is 180° minus it, with the azimuth turned by 180°."""
+    el, az = np.asarray(el), np.asarray(az)
     flip = el > math.pi / 2
     el_true = np.where(flip, math.pi - el, el)
-    az_grid = az[None, :] + np.where(flip, math.pi, 0.0)[:, None]
-    ce = np.cos(el_true)[:, None]
-    d = np.empty((len(el), len(az), 3))
-    d[..., 0] = ce * np.cos(az_grid)
-    d[..., 1] = ce * np.sin(az_grid)
-    d[..., 2] = np.sin(el_true)[:, None]
-    return d.reshape(-1, 3)
+    ce = np.where(flip, -1.0, 1.0) * np.cos(el_true)  # the azimuth turned by 180° negates x and y
+    x, y = ce * np.cos(az), ce * np.sin(az)
+    return np.stack([x, y, np.broadcast_to(np.sin(el_true), x.shape)], axis=-1)
+
+
+def _grid_directions(el: np.ndarray, az: np.ndarray) -> np.ndarray:
+    """(rows * cols, 3) unit vectors of the (elevation, azimuth) grid of rows `el` and columns `az` (`_directions`)."""
+    return _directions(el[:, None], az[None, :]).reshape(-1, 3)
 
 
 class TableGrid:
@@ -94,9 +96,7 @@ class TableGrid:
         would light LEDs that the footprint matrix (the GL path) leaves dark. Sources are the cells at or below the
         zenith (each sky cell once), weights g(angle) * cell solid angle over the footprint's integral.
         """
-        from scipy.spatial import cKDTree
-
-        from .footprint import gaussian_weight
+        from .footprint import gaussian_weight, pairs_within
 
         out = np.zeros(excess.shape, dtype=np.float32)
         el_true = np.where(self.el > math.pi / 2, math.pi - self.el, self.el)
@@ -109,19 +109,11 @@ class TableGrid:
         t_rows = np.flatnonzero(near)
         targets = _grid_directions(self.el[t_rows], self.az)
         sources = _grid_directions(self.el[rows], self.az)[np.arange(len(rows)) * self.n_cols + cols]
-        pairs = cKDTree(targets).sparse_distance_matrix(cKDTree(sources), 2.0 * math.sin(radius / 2.0),
-                                                        output_type="coo_matrix")
-        angle = 2.0 * np.arcsin(np.clip(pairs.data / 2.0, 0.0, 1.0))
+        t_idx, s_idx, angle = pairs_within(targets, sources, radius)
         area = STEP * (np.sin(el_true[rows] + STEP / 2) - np.sin(el_true[rows] - STEP / 2))  # cell solid angles
         theta = np.linspace(0.0, radius, 2001)
         norm = np.trapezoid(2.0 * math.pi * gaussian_weight(theta, self.fwhm) * np.sin(theta), theta)
-        w = gaussian_weight(angle, self.fwhm) * area[pairs.col] / norm
-        # a source exactly on a target (distance 0) is dropped by the sparse result: add those back
-        on = cKDTree(targets).query(sources, k=1)
-        hit = on[0] == 0.0
-        t_idx = np.concatenate([pairs.row, on[1][hit]])
-        s_idx = np.concatenate([pairs.col, np.flatnonzero(hit)])
-        w = np.concatenate([w, area[hit] / norm])
+        w = gaussian_weight(angle, self.fwhm) * area[s_idx] / norm
         flat = np.zeros((len(targets), excess.shape[2]))
         np.add.at(flat, t_idx, w[:, None] * excess[rows[s_idx], cols[s_idx]])
         out[t_rows] = flat.reshape(len(t_rows), self.n_cols, -1)
@@ -149,19 +141,32 @@ class FarFieldTable:
         """The far field of `scene` at time t (s) for LEDs at (20350, 3) dome-frame `directions`, footprint
         `fwhm` (rad)."""
         g = TableGrid(directions, fwhm)
-        # the field averaged over each grid cell (s x s sub-samples), so detail finer than the grid cannot alias
+        # The field averaged over each grid cell (s x s sub-samples, more where a sun's rim crosses it), so detail
+        # finer than the grid cannot alias; content up to 1 and above 1 (a sun above full drive, its footprint
+        # truncated as the matrix's) averaged apart, so that a cell the sun's rim crosses blurs what it would at
+        # radiance 1 and only the part above 1 is spread.
         sub = scene.supersample(STEP)
         offsets = (np.arange(sub) - (sub - 1) / 2) * (STEP / sub)
-        field = np.zeros((g.n_rows, g.n_cols, 4), dtype=np.float32)
+        centres = g.directions()
+        low = np.zeros((g.n_rows, g.n_cols, 4), dtype=np.float32)
+        high = np.zeros_like(low)
         for de in offsets:
             for da in offsets:
-                field += scene.evaluate_far(g.directions(de, da), t).reshape(g.n_rows, g.n_cols, 4)
-        field /= sub * sub
-        if field.max() > 1.0:  # content above 1 (a sun above full drive): its footprint truncated as the matrix's
-            excess = np.maximum(field - 1.0, 0.0)
-            blurred = g.blur(field - excess) + g.spread(excess)
-        else:
-            blurred = g.blur(field)
+                v = scene.evaluate_far(centres if sub == 1 else g.directions(de, da), t).reshape(low.shape)
+                low += np.minimum(v, 1.0)
+                high += np.maximum(v - 1.0, 0.0)
+        low /= sub * sub
+        high /= sub * sub
+
+        def cell_samples(idx: np.ndarray, n: int) -> np.ndarray:
+            r, c = np.divmod(idx, g.n_cols)
+            o = (np.arange(n) - (n - 1) / 2) * (STEP / n)
+            return _directions(g.el[r, None, None] + o[:, None], g.az[c, None, None] + o)
+
+        idx, v = scene.rim_samples(centres, STEP, cell_samples, t)
+        low.reshape(-1, 4)[idx] = np.minimum(v, 1.0).mean(axis=1)
+        high.reshape(-1, 4)[idx] = np.maximum(v - 1.0, 0.0).mean(axis=1)
+        blurred = g.blur(low) + g.spread(high) if high.max() > 0.0 else g.blur(low)
         table = g.quantise(blurred, np.empty((*g.shape, 4), dtype=np.uint16))
         return cls(g, np.ascontiguousarray(table[..., 0:2]), np.ascontiguousarray(table[..., 2:4]))
 

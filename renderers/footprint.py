@@ -65,6 +65,27 @@ def gaussian_weight(angle: np.ndarray, fwhm: float) -> np.ndarray:
     return np.exp(-4.0 * np.log(2.0) * (np.asarray(angle) / fwhm) ** 2)
 
 
+def pairs_within(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every pair of (N, 3) unit vectors `a` and (M, 3) unit vectors `b` at most `radius` (rad) apart, each once:
+    ((K,) int64 rows into a, (K,) int64 columns into b, (K,) float64 angles in radians).
+
+    A pair at distance 0 (a point exactly on another) is kept once whichever way the installed scipy's
+    `sparse_distance_matrix` treats zero distances (its sparse-matrix outputs drop them in some versions and keep
+    them in others): the pairs are taken from a nearest-neighbour query too and de-duplicated.
+    """
+    chord = 2.0 * math.sin(radius / 2.0)
+    tree_b = cKDTree(b)
+    found = cKDTree(a).sparse_distance_matrix(tree_b, chord, output_type="ndarray")
+    dist, nearest = tree_b.query(a, k=1)
+    on = np.flatnonzero(dist == 0.0)
+    rows = np.concatenate([found["i"], on]).astype(np.int64)
+    cols = np.concatenate([found["j"], nearest[on]]).astype(np.int64)
+    chords = np.concatenate([found["v"], np.zeros(len(on))])
+    _, first = np.unique(rows * len(b) + cols, return_index=True)
+    angle = 2.0 * np.arcsin(np.clip(chords[first] / 2.0, 0.0, 1.0))
+    return rows[first], cols[first], angle
+
+
 def _validate(directions: np.ndarray, face_size: int, fwhm: float, radius: float | None) -> tuple:
     d = np.asarray(directions, dtype=np.float64)
     if d.ndim != 2 or d.shape[1] != 3 or not np.all(np.isfinite(d)):
@@ -75,10 +96,11 @@ def _validate(directions: np.ndarray, face_size: int, fwhm: float, radius: float
     if not isinstance(face_size, (int, np.integer)) or face_size < 8:
         raise ValueError(f"face_size must be an integer >= 8, got {face_size!r}")
     if not (np.isfinite(fwhm) and 0 < fwhm < math.radians(MAX_FWHM_DEG)):
-        raise ValueError(f"footprint FWHM must be in (0, {MAX_FWHM_DEG:g}) degrees, got {np.degrees(fwhm)!r} degrees")
+        raise ValueError(f"footprint FWHM must be in (0, {MAX_FWHM_DEG:g}) degrees, "
+                         f"got {float(np.degrees(fwhm)):g} degrees")
     radius = fwhm if radius is None else float(radius)
     if not (np.isfinite(radius) and 0 < radius < np.pi / 2):
-        raise ValueError(f"footprint radius must be in (0, 90) degrees, got {np.degrees(radius)!r} degrees")
+        raise ValueError(f"footprint radius must be in (0, 90) degrees, got {float(np.degrees(radius)):g} degrees")
     return d, int(face_size), float(fwhm), radius
 
 
@@ -89,19 +111,8 @@ def build_matrix(directions: np.ndarray, face_size: int, fwhm: float, radius: fl
     atlas readback order of `cubemap.atlas_directions`.
     """
     d, n, fwhm, radius = _validate(directions, face_size, fwhm, radius)
-    texels = atlas_directions(n)
-    chord = 2.0 * np.sin(radius / 2.0)
-    pairs = cKDTree(d).sparse_distance_matrix(cKDTree(texels), chord, output_type="coo_matrix")
-    rows, cols = pairs.row, pairs.col
-    angle = 2.0 * np.arcsin(np.clip(pairs.data / 2.0, 0.0, 1.0))
+    rows, cols, angle = pairs_within(d, atlas_directions(n), radius)
     w = gaussian_weight(angle, fwhm) * atlas_solid_angles(n)[cols]
-    # An LED exactly on a texel centre has distance 0, which the sparse result drops: add those back.
-    exact = cKDTree(texels).query(d, k=1)
-    hit = exact[0] == 0.0
-    if np.any(hit):
-        rows = np.concatenate([rows, np.flatnonzero(hit)])
-        cols = np.concatenate([cols, exact[1][hit]])
-        w = np.concatenate([w, atlas_solid_angles(n)[exact[1][hit]]])
     m = sp.csr_matrix((w, (rows, cols)), shape=(len(d), 6 * n * n), dtype=np.float64)
     sums = np.asarray(m.sum(axis=1)).ravel()
     if np.any(sums <= 0):
@@ -117,26 +128,48 @@ def cache_dir() -> Path:
     return Path(os.environ.get("ANTARIUM_CACHE", Path.home() / ".cache" / "antarium"))
 
 
+def _load_cached(path: Path, n_rows: int, n_cols: int) -> sp.csr_matrix | None:
+    """The (n_rows, n_cols) float32 CSR matrix cached at `path`, or None when the file is missing, unreadable
+    (truncated, empty, not an npz: any exception numpy or zipfile raise) or holds arrays of other shapes or dtypes."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data, indices, indptr, shape = z["data"], z["indices"], z["indptr"], z["shape"]
+    except Exception:  # missing, or corrupt: it raises whatever its corruption trips (BadZipFile, EOFError, ...)
+        return None
+    if (shape.shape != (2,) or tuple(shape.tolist()) != (n_rows, n_cols) or data.dtype != np.float32
+            or data.ndim != 1 or indices.ndim != 1 or indptr.shape != (n_rows + 1,) or len(data) != len(indices)
+            or not np.issubdtype(indices.dtype, np.integer) or not np.issubdtype(indptr.dtype, np.integer)):
+        return None
+    m = sp.csr_matrix((data, indices, indptr), shape=(n_rows, n_cols))
+    try:
+        m.check_format(full_check=True)
+    except ValueError:
+        return None
+    return m
+
+
 def cached_matrix(directions: np.ndarray, face_size: int, fwhm: float, radius: float | None = None) -> sp.csr_matrix:
-    """`build_matrix`, memoised on disk by a hash of all inputs (a corrupt cache file is rebuilt)."""
+    """`build_matrix`, memoised on disk by a hash of all inputs. A cache file that cannot be read or does not hold
+    a (N_dirs, 6*face_size**2) float32 CSR matrix is rebuilt and replaced (written to a temporary file, flushed to
+    disk, then renamed over it)."""
     d, n, fwhm, radius = _validate(directions, face_size, fwhm, radius)
     h = hashlib.sha256(np.ascontiguousarray(d).tobytes())
     h.update(np.array([n, fwhm, radius, _CACHE_VERSION], dtype=np.float64).tobytes())
     path = cache_dir() / f"footprint-{h.hexdigest()[:24]}.npz"
-    if path.exists():
-        try:
-            with np.load(path) as z:
-                return sp.csr_matrix((z["data"], z["indices"], z["indptr"]), shape=tuple(z["shape"]))
-        except (OSError, ValueError, KeyError):
-            pass
+    m = _load_cached(path, len(d), 6 * n * n)
+    if m is not None:
+        return m
     m = build_matrix(d, n, fwhm, radius)
+    tmp = path.with_name(path.name + f".{os.getpid()}.tmp.npz")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + f".{os.getpid()}.tmp.npz")
-        np.savez(tmp, data=m.data, indices=m.indices, indptr=m.indptr, shape=np.array(m.shape))
+        with open(tmp, "wb") as f:
+            np.savez(f, data=m.data, indices=m.indices, indptr=m.indptr, shape=np.array(m.shape))
+            f.flush()
+            os.fsync(f.fileno())
         os.replace(tmp, path)
-    except OSError:
-        pass  # a read-only home only costs the rebuild next time
+    except OSError:  # a read-only home only costs the rebuild next time
+        tmp.unlink(missing_ok=True)
     return m
 
 

@@ -4,8 +4,14 @@ Sampled radiance per LED is a pair in [0, 1] (1 = full drive at gain 1): [green,
 [UV, polarised UV] for a UV pixel. GB pixel: (G, B) * 65535 * gain * brightness * channel gain; if G + B
 exceeds 65535 both are scaled by the same factor (hue kept; a pixel never draws more than one LED's current).
 UV pixel: total UV radiance I with polarised share P: plain LED = I - P, polarised LED = P, so their sum is
-I <= 65535 and the degree of polarisation is P / I. Channel gains and the green/blue swap act on the LED
-channels (a swapped frame's green LEDs show the scene's blue, scaled by the green gain).
+I <= 65535 and the degree of polarisation is P / I. This split assumes the polarised LED seen through its polariser
+emits the same UV radiance per drive unit as the plain LED; the polariser's transmission is not modelled. A real
+polariser passes at most half of unpolarised light (an ideal one: a requested degree 0.75 would come out as 0.60 and
+the pixel's UV at 62.5 % to 100 % of the request), so a rig must measure, per UV pixel, the ratio of the two LEDs'
+emitted radiance per drive unit (and the polariser's extinction ratio, which lowers the degree further) and equalise
+them, e.g. by lowering the plain LED's dot correction to that ratio (docs/rendering.md). Channel gains and the
+green/blue swap act on the LED channels (a swapped frame's green LEDs show the scene's blue, scaled by the green
+gain).
 """
 
 from __future__ import annotations
@@ -94,7 +100,8 @@ class FrameConverter:
 
 
 def polariser_angles(directions: np.ndarray, e_vectors: np.ndarray, panel_axes: np.ndarray) -> np.ndarray:
-    """Polariser angle (rad, [0, pi)) in the panel plane from the panel's +x axis, per UV pixel.
+    """Polariser angle (rad, [0, pi)) in the panel plane from the panel's +x axis towards its +y axis
+    (counter-clockwise seen from the dome centre), per UV pixel.
 
     directions, e_vectors: (M, 3) dome-frame view directions of the UV pixels and the wanted e-vectors;
     panel_axes: (M, 3, 3) rows x, y, inward normal of each pixel's panel. The polariser lies in the panel

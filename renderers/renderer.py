@@ -302,13 +302,25 @@ class Renderer:
 
     def _make_far_texture(self, scene: Scene, t: float = 0.0, supersample: int | None = None):
         """World-aligned float16 cube texture of the far field, each texel the mean of supersample^2 points
-        (default: as many as the scene's finest detail needs); its `extra` is its largest value."""
+        (default: as many as the scene's finest detail needs; more where a sun's rim crosses it,
+        `Scene.rim_samples`); its `extra` is its largest value."""
         nf = self.far_face_size
         if supersample is None:
             supersample = scene.supersample(2.0 / nf)
         m = nf * supersample
         d = cubemap.gl_cube_directions(m).reshape(-1, 3)
         v = scene.evaluate_far(d, t).reshape(6, nf, supersample, nf, supersample, 4).mean(axis=(2, 4))
+        c = cubemap.texel_coordinates(nf)
+
+        def texel_samples(idx: np.ndarray, n: int) -> np.ndarray:
+            face, row, col = np.unravel_index(idx, (6, nf, nf))
+            o = (np.arange(n) - (n - 1) / 2) * (2.0 / (nf * n))
+            return cubemap.gl_face_directions(face[:, None, None], c[row, None, None] + o[:, None],
+                                              c[col, None, None] + o)
+
+        centres = d if supersample == 1 else cubemap.gl_cube_directions(nf).reshape(-1, 3)
+        idx, fine = scene.rim_samples(centres, 2.0 / nf, texel_samples, t)
+        v.reshape(-1, 4)[idx] = fine.mean(axis=1)
         data = np.ascontiguousarray(v, dtype=np.float16)
         tex = self.ctx.texture_cube((nf, nf), 4, data.tobytes(), dtype="f2")
         tex.filter = (self._mgl.LINEAR, self._mgl.LINEAR)

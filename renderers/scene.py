@@ -178,6 +178,27 @@ class Scene:
         """Sub-samples per axis that averaging the far field over cells of `step` (rad) needs."""
         return max(layer.supersample(step) for layer in self.far)
 
+    def rim_samples(self, centres: np.ndarray, step: float, cell_samples, t: float = 0.0) -> tuple:
+        """The cells that a sky's sun rim crosses (`Sky.rim_cells`) and the far field sampled finely in them, for
+        averaging those cells apart: a sun about a cell wide, averaged with `supersample(step)` sub-samples, would be
+        over- or under-counted by up to a cell.
+
+        centres: (N, 3) unit cell-centre directions; step: the cells' largest width (rad); cell_samples(idx, sub):
+        (K, sub, sub, 3) unit directions of evenly spaced sub-samples (the cell split into sub x sub equal parts, one
+        at each part's centre) in the cells `idx` ((K,) int64). Returns ((K,) int64 indices into centres,
+        (K, sub * sub, 4) float32 `evaluate_far` at time t (s) at their sub-samples), sub = `Sky.rim_supersample`.
+        """
+        from .sky import Sky
+
+        skies = [layer for layer in self.far if isinstance(layer, Sky)]
+        hit = np.zeros(len(centres), dtype=bool)
+        for sky in skies:
+            hit |= sky.rim_cells(centres, step)
+        idx = np.flatnonzero(hit)
+        sub = max((sky.rim_supersample(step) for sky in skies), default=1)
+        d = cell_samples(idx, sub).reshape(-1, 3)
+        return idx, self.evaluate_far(d, t).reshape(len(idx), sub * sub, 4)
+
     def evaluate_far(self, d: np.ndarray, t: float = 0.0) -> np.ndarray:
         """(N, 4) float32 [G, B, UV, polarised UV] of the far field at (N, 3) world directions, time t (s).
 

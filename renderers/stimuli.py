@@ -117,11 +117,11 @@ class Bar:
         for name in ("azimuth", "width", "bottom", "top"):
             setattr(self, name, check_number(f"bar {name} (rad)", getattr(self, name)))
         if not 0 < self.width <= 2 * np.pi:
-            raise ValueError(f"bar width must be in (0, 360] degrees, got {np.degrees(self.width)!r}")
+            raise ValueError(f"bar width must be in (0, 360] degrees, got {math.degrees(self.width):g}")
         if not -np.pi / 2 <= self.bottom < self.top <= np.pi / 2:
             raise ValueError(
                 f"bar elevations must satisfy -90 <= bottom < top <= 90 degrees, "
-                f"got bottom={np.degrees(self.bottom)!r}, top={np.degrees(self.top)!r}"
+                f"got bottom={math.degrees(self.bottom):g}, top={math.degrees(self.top):g}"
             )
 
     def covers(self, d: np.ndarray) -> np.ndarray:
@@ -188,7 +188,7 @@ class Grating:
         self.contrast = check_number("grating contrast", self.contrast, 0.0, 1.0)
         self.mean = check_number("grating mean", self.mean, 0.0)
         if not 0 < self.period <= 2 * np.pi:
-            raise ValueError(f"grating period must be in (0, 360] degrees, got {np.degrees(self.period)!r}")
+            raise ValueError(f"grating period must be in (0, 360] degrees, got {math.degrees(self.period):g}")
         self.colour = parse_colour(self.colour, "grating colour", showable=False)
         peak = self.mean * (1.0 + self.contrast)
         check_showable(peak * self.colour, f"grating peak, mean {self.mean:g} * (1 + contrast {self.contrast:g}) "

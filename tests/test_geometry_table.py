@@ -36,3 +36,12 @@ def test_layout_command_prints_summary_and_writes_pictures(tmp_path, capsys):
 def test_layout_command_rejects_options_without_regenerate(capsys):
     assert main(["layout", "--no-pictures", "--margin-mm", "3"]) == 2
     assert "only with --regenerate" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option, value", [("--margin-mm", "-1"), ("--margin-mm", "0"), ("--min-pitch-mm", "150")])
+def test_layout_command_reports_a_bad_length_in_mm_as_given(tmp_path, capsys, option, value):
+    out = tmp_path / "layout.npz"
+    assert main(["layout", "--no-pictures", "--regenerate", "--layout-out", str(out), option, value]) == 2
+    err = capsys.readouterr().err
+    assert f"{option} must be in (0, 100) mm, got {value} mm" in err
+    assert not out.exists()

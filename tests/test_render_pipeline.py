@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -268,3 +270,20 @@ def test_two_renderers_in_one_thread_each_draw_their_own_scene(dome):
     finally:
         a.release()
         b.release()
+
+
+def test_the_python_block_of_docs_rendering_runs_as_written():
+    """docs/rendering.md's Python block, run as written: one frame of the habitat, into the buffer it makes."""
+    text = (Path(__file__).resolve().parent.parent / "docs" / "rendering.md").read_text()
+    block = re.search(r"```python\n(.*?)```", text, re.S)
+    assert block, "docs/rendering.md: no python block"
+    namespace = {}
+    exec(block.group(1), namespace)  # noqa: S102 - the doc's own code
+    renderer = namespace["renderer"]
+    try:
+        frame = namespace["frame"]
+        assert frame is namespace["frame_buffer"] and frame.shape == (20350, 2) and frame.dtype == np.uint16
+        assert frame.any() and namespace["angles"].shape == (55, 9)
+        assert {"render", "sample", "convert"} <= set(renderer.last_timings)
+    finally:
+        renderer.release()

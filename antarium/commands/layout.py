@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import time
 
 HELP = "print the LED layout summary, draw it, export the per-LED table, or regenerate the layout"
@@ -26,6 +27,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="LED centre to board edge, mm (with --regenerate; default: the search's own)")
     parser.add_argument("--min-pitch-mm", type=float, default=None,
                         help="minimum GB pitch, mm (with --regenerate; default: the search's own)")
+
+
+def _metres(value_mm: float, option: str) -> float:
+    """A length option given in mm, in metres; ValueError naming the option and the value as given (mm) outside
+    (0, `MAX_LENGTH`)."""
+    from antarium.geometry.layout import MAX_LENGTH
+
+    high_mm = MAX_LENGTH * 1e3
+    if not (math.isfinite(value_mm) and 0 < value_mm < high_mm):
+        raise ValueError(f"{option} must be in (0, {high_mm:g}) mm, got {value_mm:g} mm")
+    return value_mm / 1e3
 
 
 def print_summary(summary: dict) -> None:
@@ -56,6 +68,11 @@ def run(args: argparse.Namespace) -> int:
     if args.layout_out is not None and not args.regenerate:
         raise ValueError("--layout-out applies only with --regenerate")
     if args.regenerate:
+        kw = {}
+        if args.margin_mm is not None:
+            kw["margin"] = _metres(args.margin_mm, "--margin-mm")
+        if args.min_pitch_mm is not None:
+            kw["gb_min_pitch"] = _metres(args.min_pitch_mm, "--min-pitch-mm")
         if args.layout_out is None:
             raise ValueError("--regenerate needs --layout-out FILE.npz (to replace the shipped layout, name it: "
                              f"--layout-out {SHIPPED_LAYOUT})")
@@ -66,11 +83,6 @@ def run(args: argparse.Namespace) -> int:
     if pictures:
         out = check_output(args.out or ".", "--out", folder=True)
     if args.regenerate:
-        kw = {}
-        if args.margin_mm is not None:
-            kw["margin"] = args.margin_mm / 1e3
-        if args.min_pitch_mm is not None:
-            kw["gb_min_pitch"] = args.min_pitch_mm / 1e3
         layout = generate_layout(LayoutParams(**kw), progress=True)
         layout_path.parent.mkdir(parents=True, exist_ok=True)
         save_layout(layout, layout_path)
