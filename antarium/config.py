@@ -69,7 +69,7 @@ class RigSection(Section):
     @field_validator("name")
     @classmethod
     def _one_key_chunk(cls, v: str) -> str:
-        from antarium.trial_log import RIG_NAME_MAX_BYTES
+        from antarium.core.log_names import RIG_NAME_MAX_BYTES
 
         if not v or any(c in v for c in "/*?$# "):
             raise ValueError("must be a non-empty key chunk without '/', wildcards or spaces")

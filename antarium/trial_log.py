@@ -29,20 +29,13 @@ from typing import Any
 import numpy as np
 
 from antarium.core.childproc import ChildProcess, connection_from_arg
+from antarium.core.log_names import NAME_MAX_BYTES, RIG_NAME_MAX_BYTES, TRIAL_NAME_MAX
 
 #: 2: the frames table has `full_render`; 3: the root attribute `created_monotonic`
 FORMAT_VERSION = 3
 
 #: the longest the end of a trial (`TrialLog.close`) waits for the writer before killing it (s)
 CLOSE_TIMEOUT_S = 30.0
-
-#: the longest file name the file systems a log goes to take (bytes; NAME_MAX of Linux, macOS and Windows' NTFS)
-NAME_MAX_BYTES = 255
-#: a trial name is cut to this many characters in the file name (`log_path`)
-TRIAL_NAME_MAX = 64
-#: the longest rig name whose log file names fit NAME_MAX_BYTES: `<rig>_<yyyymmdd-hhmmss>_<trial>-<k>.h5` with
-#: the trial name at its longest and a suffix `-<k>` of up to 4 digits (`log_path`)
-RIG_NAME_MAX_BYTES = NAME_MAX_BYTES - len("_yyyymmdd-hhmmss_") - TRIAL_NAME_MAX - len("-9999.h5")
 
 #: HDF5 format bounds: 1.10 is the oldest format with SWMR and the newest that HDF5 1.10 libraries (MATLAB's,
 #: Debian 12's tools) read; h5py's "latest" (HDF5 2.0 here) writes datatype messages that 1.10 cannot decode
