@@ -54,6 +54,22 @@ def _plain(value: Any) -> Any:
     return tolist()
 
 
+def _payload(command: str, params: dict[str, Any]) -> str:
+    """`params` as the command's JSON payload; RigError naming the first parameter that cannot be sent (a set, a
+    circular list, nesting deeper than JSON's writer goes) and what can."""
+    try:
+        return json.dumps(params, default=_plain)
+    except (TypeError, ValueError, RecursionError):
+        for name, value in params.items():
+            try:
+                json.dumps(value, default=_plain)
+            except (TypeError, ValueError, RecursionError) as exc:
+                why = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
+                raise RigError(f"{command}: parameter {name!r} cannot be sent ({why}); allowed: numbers, strings, "
+                               "booleans, lists and objects (numpy arrays and numbers too)") from None
+        raise
+
+
 @dataclass(frozen=True, slots=True)
 class PoseUpdate:
     """One pose from the server's stream: frame number, server time (s), pose, scene rotation (rad), mode."""
@@ -171,15 +187,11 @@ class Rig:
         """Send `command` with JSON `params`; return the server's result or raise `RigError` with its message."""
         from antarium.server.commands import COMMANDS
 
-        if command not in COMMANDS:
-            raise RigError(f"unknown command {command!r}; allowed: {', '.join(COMMANDS)}")
+        if not isinstance(command, str) or command not in COMMANDS:
+            raise RigError(f"unknown command {_shown(command)}; allowed: {', '.join(COMMANDS)}")
         if self._session is None:
             raise RigError("the rig is not connected; use `with Rig(...) as rig:` or `rig.connect()`")
-        try:
-            payload = json.dumps(params, default=_plain)
-        except (TypeError, ValueError) as exc:
-            raise RigError(f"{command}: a parameter cannot be sent: {exc}; allowed: numbers, strings, booleans, "
-                           "lists and objects (numpy arrays and numbers too)") from None
+        payload = _payload(command, params)
         key = bus.command_key(self.name, command)
         wait_s = self.reply_s(command)
         replies = self._session.get(key, payload=payload, timeout=wait_s)
@@ -299,7 +311,10 @@ class Rig:
         rig is not connected."""
         if self._session is None:
             raise RigError("the rig is not connected; use `with Rig(...) as rig:` or `rig.connect()`")
-        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
+        wait = self.timeout_s if timeout_s is None else as_real(timeout_s)
+        if not 0 <= wait < math.inf:
+            raise RigError(f"pose: timeout_s must be a finite number of seconds >= 0, got {_shown(timeout_s)}")
+        deadline = time.monotonic() + wait
         while True:
             with self._latest_lock:
                 latest = self._latest
@@ -465,8 +480,10 @@ def script_rig_name(args, config=None) -> str:
 @contextlib.contextmanager
 def script_rig(args, out: str | Path | None = None) -> Iterator[Rig]:
     """A connected `Rig` for parsed `add_script_arguments` options (starting the server here if asked); `out`:
-    the script's output folder, where its trial logs go too (on this computer's server; see `Rig` log_dir).
-    The rig is --rig, or the [rig] name of --config when --rig is not given."""
+    the script's output folder, where its trial logs go too (on this computer's server; see `Rig` log_dir),
+    made only once the rig answers: a refused option, config or server leaves nothing behind.
+    The rig is --rig, or the [rig] name of --config when --rig is not given. With --start-server the config is
+    checked as `antarium serve` checks it (`check_config`: a bus port in use is one ConfigError line)."""
     from antarium.config import load_config
 
     check_script_arguments(args)
@@ -474,12 +491,24 @@ def script_rig(args, out: str | Path | None = None) -> Iterator[Rig]:
     name = script_rig_name(args, config)
     server = None
     if args.start_server:
-        from antarium.server import Server
+        from antarium.server import Server, ServerError
+        from antarium.server.config_check import check_config
 
         config.rig.name = name
-        server = Server(config).start_thread(timeout_s=args.timeout)
+        server = Server(check_config(config))
+        try:
+            server.start_thread(timeout_s=args.timeout)
+        except ServerError:
+            server.stop()  # waits until the failed start-up has closed what it opened (the renderer's shared memory)
+            raise
     try:
         with Rig(name, config=config, timeout_s=args.timeout, log_dir=out) as rig:
+            if out is not None:
+                try:
+                    Path(out).mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    raise ScriptArgumentError(f"--out {str(out)!r}: cannot make the folder ({exc.strerror}); give "
+                                              "a folder this user can write in") from None
             yield rig
     finally:
         if server is not None:

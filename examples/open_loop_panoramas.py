@@ -66,10 +66,9 @@ def main(argv: list[str] | None = None) -> int:
     missing = [p for p in args.panorama if not Path(p).is_file()]
     if missing:
         raise ScriptArgumentError(f"--panorama {missing[0]}: no such file (give an image file: PNG, JPEG or EXR)")
-    out = Path(args.out).resolve()
-    out.mkdir(parents=True, exist_ok=True)
-    panoramas = [Path(p).resolve() for p in args.panorama] or write_panoramas(out.resolve())
+    out = Path(args.out).resolve()  # made by script_rig once the rig answers
     with script_rig(args, out) as rig:
+        panoramas = [Path(p).resolve() for p in args.panorama] or write_panoramas(out)
         rig.closed_loop(False)  # open loop: the ball is recorded, the scene does not follow it
         rig.set_pose(0.0, 0.0, heading_deg=0.0)
         with rig.trial("open-loop-panoramas", panoramas=[p.name for p in panoramas], seconds=args.seconds) as log:

@@ -131,8 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.short:
         args.duration, args.window = 1.2, 0.4
     check_script_arguments(args, seconds=("duration", "window"))  # before anything is written or connected
-    out = Path(args.out).resolve()
-    out.mkdir(parents=True, exist_ok=True)
+    out = Path(args.out).resolve()  # made by script_rig once the rig answers
     rng = random.Random(args.seed)
     results, logs = {}, []
     with script_rig(args, out) as rig:

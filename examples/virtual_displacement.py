@@ -58,8 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.short:
         args.before = args.after = 1.0
     check_script_arguments(args, seconds=("before", "after"), numbers=("to_x", "to_y"))  # before connecting
-    out = Path(args.out).resolve()
-    out.mkdir(parents=True, exist_ok=True)
+    out = Path(args.out).resolve()  # made by script_rig once the rig answers
     updates, lock = [], threading.Lock()
 
     def keep(update):

@@ -173,6 +173,30 @@ def test_real_time_refused_and_a_full_disk_fail(tmp_path, monkeypatch, capsys):
     assert _lines(out)["disk"] == "FAIL" and "GB wanted" in out
 
 
+@pytest.mark.parametrize("host, shown", [
+    ("192.168.55.256", "[link] host '192.168.55.256' is not an IP address; allowed: the distributor's IP address"),
+    ("no-such-board.invalid", "[link] host 'no-such-board.invalid' is not an IP address and does not resolve"),
+])
+def test_a_bad_distributor_host_fails_its_line_and_the_other_checks_run(tmp_path, capsys, host, shown):
+    rig = _rig(tmp_path, f'host = "{host}"\nport = 19055\nspawn_emulator = false')
+    assert main(["check", "--config", rig, "--auto", "--min-free-gb", "0.01"]) == 1
+    out = capsys.readouterr().out
+    assert _lines(out) == {"distributor": "FAIL", "panels": "FAIL", "trackball": "SKIP", "real time": "SKIP",
+                           "disk": "PASS", "panel mapping": "FAIL"}
+    assert f"FAIL distributor: {shown}" in out and "fix [link] host" in out
+
+
+def test_a_log_folder_not_made_yet_is_measured_at_its_existing_parent_and_said_so(tmp_path, capsys):
+    rig = _rig(tmp_path, 'interface = "virtual"')
+    Path(rig).write_text(Path(rig).read_text().replace(str(tmp_path / "trials"), str(tmp_path / "data" / "trials")))
+    assert main(["check", "--config", rig, "--auto", "--min-free-gb", "0.01"]) == 0
+    disk = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("PASS disk: "))
+    missing = tmp_path / "data" / "trials"
+    assert f"free for trial logs at {tmp_path}, the nearest existing folder of [log] dir {missing}, which does not "\
+           "exist yet (`antarium serve` makes it at start)" in disk
+    assert not (tmp_path / "data").exists()  # the check makes nothing
+
+
 def test_bad_panels_are_refused(capsys):
     assert main(["check", "--panels", "3,55"]) == 2
     assert "--panels must be 'all' or comma-separated numbers 0..54, got '3,55'" in capsys.readouterr().err

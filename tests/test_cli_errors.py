@@ -125,6 +125,13 @@ def test_an_output_folder_that_is_a_file_is_refused_before_the_work(command, fak
     assert "is a file, not a folder" in _one_line(capsys, command[0])
 
 
+def test_demo_out_the_system_refuses_is_named_before_the_work(monkeypatch, capsys):
+    """/proc/x passes a permission check as root, and no folder can be made there: said first, naming --out."""
+    monkeypatch.setattr("antarium.commands.layout.run", lambda args: pytest.fail("the demo's work began"))
+    assert main(["demo", "--out", "/proc/antarium-demo-out"]) == 2
+    assert "--out '/proc/antarium-demo-out': " in _one_line(capsys, "demo")
+
+
 def test_layout_export_below_a_file_says_so(fake_png, capsys):
     assert main(["layout", "--export", str(fake_png / "leds.csv")]) == 2
     line = _one_line(capsys, "layout")
@@ -152,7 +159,7 @@ CONFIGS = {
     "garbage endpoint": ('[bus]\nlisten = ["garbage"]\n', "[bus] listen 'garbage' is not a zenoh endpoint"),
     "endpoint port": ('[bus]\nconnect = ["tcp/127.0.0.1:70000"]\n', "[bus] connect"),
     "trackball key": ("[trackball]\nvendr_id = 5\n", "['vendr_id'] in [trackball]"),
-    "scene parameter": ('[render]\nscene = {scene = "grating", period_deg = -20}\n', "got -20.0"),
+    "scene parameter": ('[render]\nscene = {scene = "grating", period_deg = -20}\n', "degrees, got -20"),
 }
 
 
@@ -214,7 +221,7 @@ def test_servosphere_plot_without_png_is_refused_before_the_run(tmp_path, capsys
     (["servosphere", "--simulate", "--seed", "-1"], "--seed must be an integer >= 0, got -1"),
     (["servosphere", "--simulate", "--slip", "0.9"], "--slip: "),
     (["render", "habitat", "--heading", "inf"], "--heading (degrees) must be a finite number, got inf"),
-    (["render", "grating", "--set", "period_deg=-20"], "got -20.0"),
+    (["render", "grating", "--set", "period_deg=-20"], "got -20 (scene"),
     (["render", "uniform", "--face-size", "20"], "--face-size (cube face_size, texels) must be an integer >= "),
 ])
 def test_messages_name_the_option_and_show_plain_numbers(args, shown, tmp_path, monkeypatch, capsys):

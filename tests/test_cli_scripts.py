@@ -5,6 +5,7 @@ such, help texts that show their defaults."""
 import argparse
 import importlib.util
 import json
+import socket
 import subprocess
 import sys
 import threading
@@ -17,7 +18,7 @@ import antarium
 from antarium import bus, client
 from antarium.client import RigError, RigTimeout, add_script_arguments, script_rig
 from antarium.config import load_config, resolve
-from antarium.server import Server
+from antarium.server import Server, ServerError
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 SCRIPTS = sorted(p.stem for p in EXAMPLES.glob("*.py"))
@@ -64,6 +65,61 @@ def test_no_server_is_one_line_naming_the_configs_rig(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1
     assert ": error: no antarium server for rig 'tclinobody' answered within 0.3 s" in err[0]
+    assert not (tmp_path / "out").exists()  # made only once the rig answers
+
+
+def _quick_server_toml(tmp_path, rig: str) -> tuple[Path, str]:
+    """A rig config quick to serve here (virtual dome, small faces, a plain scene) and its bus endpoint."""
+    toml = _toml(tmp_path, rig)
+    toml.write_text(toml.read_text() + '[link]\ninterface = "virtual"\n[render]\nscene = "horizon"\n'
+                                       "face_size_px = 64\n")
+    return toml, load_config(toml).bus.listen[0]
+
+
+def _hold(endpoint: str) -> socket.socket:
+    """Another server's listener on the TCP `endpoint` ("tcp/HOST:PORT")."""
+    host, _, port = endpoint.removeprefix("tcp/").rpartition(":")
+    other = socket.socket()
+    other.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    other.bind((host, int(port)))
+    other.listen()
+    return other
+
+
+def test_start_server_on_a_bus_port_in_use_is_the_line_serve_prints(tmp_path, capsys):
+    """--start-server checks the config as `antarium serve` does: one line naming [bus] listen, no zenoh dump,
+    and no --out folder left behind."""
+    toml, endpoint = _quick_server_toml(tmp_path, "tclibusy")
+    out = tmp_path / "out"
+    with _hold(endpoint):
+        code = client.run_script(_load("proof_of_concept").main,
+                                 ["--config", str(toml), "--start-server", "--short", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert f": error: [bus] listen endpoint {endpoint} is in use (another antarium serve?)" in err[0]
+    assert not out.exists()
+
+
+def test_a_start_that_fails_has_closed_the_server_when_the_error_comes(tmp_path, monkeypatch):
+    """The port taken between the check and the start: the ServerError comes once the server's thread has closed
+    what it opened (the renderer and its shared memory), not while it still closes it."""
+    toml, endpoint = _quick_server_toml(tmp_path, "tclirace")
+    toml.write_text(toml.read_text().replace('scene = "horizon"', 'scene = "habitat"'))  # far layer: shared memory
+    monkeypatch.setattr("antarium.server.config_check.port_in_use", lambda *args: False)  # free when checked
+    with _hold(endpoint), pytest.raises(ServerError, match="cannot open the zenoh session"):
+        with script_rig(_script_args(["--config", str(toml), "--start-server"])):
+            pytest.fail("no rig without a server")
+    assert not [t.name for t in threading.enumerate() if t.name == "antarium-server tclirace"]
+
+
+@pytest.mark.parametrize("script", ["proof_of_concept", "open_loop_panoramas", "virtual_displacement"])
+def test_a_missing_config_is_refused_before_the_out_folder_is_made(tmp_path, capsys, script):
+    out = tmp_path / "out"
+    code = client.run_script(_load(script).main, ["--config", str(tmp_path / "rig.tom"), "--start-server", "--short",
+                                                  "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "rig config" in err[0] and "rig.tom' not found" in err[0], err
+    assert not out.exists()
 
 
 # -- 2: a slow reply ------------------------------------------------------------------------------------------
@@ -117,6 +173,37 @@ def test_a_scene_load_waits_for_its_reply_longer_than_other_commands():
         for entity in entities:
             entity.undeclare()
         session.close()
+
+
+_SLOW_COMMAND = """
+import dataclasses, sys, time
+import antarium
+from antarium import bus, client
+from antarium.config import resolve
+from antarium.server import Server, commands
+
+# a command whose slow part (run beside the loop) is still running when the script ends
+commands.COMMANDS["gains"] = dataclasses.replace(commands.COMMANDS["gains"], prepare=lambda server, p: time.sleep(2.0))
+config = resolve({"rig": {"name": "tabort"}, "bus": {"listen": [bus.free_tcp_endpoint()]},
+                  "locomotion": {"source": "scripted"}})
+server = Server(config, renderer_factory=None, link=False).start_thread()
+try:
+    with antarium.Rig("tabort", config=config, timeout_s=0.5) as rig:
+        rig.gains(translation=2.0)
+except client.RigTimeout:
+    print("timed out", flush=True)
+finally:
+    server.stop()
+sys.exit(2)
+"""
+
+
+def test_a_script_that_ends_while_its_server_answers_a_command_exits_cleanly():
+    """A script whose command timed out (its server still answering it in zenoh's thread) and that then stopped its
+    in-process server was killed by SIGABRT at exit (status 134, 'Fatal Python error: Aborted'): the shutdown
+    returned while the query's thread still ran Python. The shutdown now waits for the queries being answered."""
+    proc = subprocess.run([sys.executable, "-c", _SLOW_COMMAND], capture_output=True, text=True, timeout=120)
+    assert (proc.returncode, proc.stdout) == (2, "timed out\n"), proc.stderr[-2000:]
 
 
 def test_a_rig_refuses_a_timeout_that_is_not_positive():

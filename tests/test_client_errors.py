@@ -16,6 +16,14 @@ def _config(tmp_path, rig, **extra):
                     "log": {"dir": str(tmp_path / "logs")}, **extra})
 
 
+def _deep(n: int) -> list:
+    """A list nested `n` deep."""
+    value: list = []
+    for _ in range(n):
+        value = [value]
+    return value
+
+
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
     config = _config(tmp_path_factory.mktemp("client"), "terr")
@@ -31,7 +39,17 @@ def rig(tmp_path_factory):
     (lambda rig: rig.gains(translation=np.float32(500.0)), "must be in [-100, 100], got 500.0"),
     (lambda rig: rig.set_pose(np.float64(1.0), np.int64(2), heading_deg=np.float64(1e5)), "got 100000.0"),
     (lambda rig: rig.wait(np.float64(-5.0)), "seconds in [0, 86400], got -5.0"),
-    (lambda rig: rig.rotate_scene(object()), "a parameter cannot be sent"),
+    (lambda rig: rig.rotate_scene(object()), "rotate_scene: parameter 'deg' cannot be sent (object is not a number"),
+    # nesting deeper than JSON's writer goes was a RecursionError; a set did not say which parameter it was
+    (lambda rig: rig.set_pose(_deep(3000), 0), "set_pose: parameter 'x' cannot be sent (nested too deeply)"),
+    (lambda rig: rig.call("trial_start", name="t", metadata={"a": _deep(5000)}),
+     "trial_start: parameter 'metadata' cannot be sent (nested too deeply)"),
+    (lambda rig: rig.set_pose(0, {1, 2}), "set_pose: parameter 'y' cannot be sent (set is not a number"),
+    # a command name that is not a string was a TypeError (unhashable); a pose timeout that is not a duration a
+    # TypeError, and NaN waited for ever
+    (lambda rig: rig.call(["status"]), "unknown command ['status']; allowed: load_scene"),
+    (lambda rig: rig.pose(timeout_s="x"), "pose: timeout_s must be a finite number of seconds >= 0, got 'x'"),
+    (lambda rig: rig.pose(timeout_s=float("nan")), "pose: timeout_s must be a finite number of seconds >= 0, got nan"),
 ])
 def test_every_refusal_is_a_rig_error_with_plain_numbers(rig, call, message):
     with pytest.raises(RigError) as info:

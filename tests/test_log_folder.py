@@ -37,7 +37,7 @@ def test_trial_paths_are_absolute_and_under_the_folder_the_script_names(served):
         assert Path(path).parent == here / "run1"
     assert Path(path).stat().st_size > 0
     with Rig("tfolder", config=config) as rig:
-        with pytest.raises(RigError, match="folder must be an absolute path, got 'run2'"):
+        with pytest.raises(RigError, match="trial_start: parameter 'folder' must be an absolute path, got 'run2'"):
             rig.call("trial_start", name="bad", folder="run2")
     assert not (here / "run2").exists()
 

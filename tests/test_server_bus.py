@@ -82,6 +82,28 @@ def test_unknown_command_and_bad_json_are_refused(served):
     assert "not JSON" in json.loads(replies[0].err.payload.to_bytes())["error"]
 
 
+def test_payloads_that_are_not_json_are_refused_with_a_reply_and_logged(served):
+    """A payload nested too deeply for the JSON reader got no reply at all (a RecursionError in zenoh's callback:
+    the client waited for its timeout), and no refusal of a payload that is not JSON reached the trial's commands
+    table (docs/logs.md: every command received during the trial, refused ones too)."""
+    server, rig = served
+    cases = [(b"[" * 100_000 + b"]" * 100_000, "(nested too deeply)"),
+             (b"hello", "(Expecting value: line 1 column 1 (char 0))"),
+             (b'{"x": ' + b"1" * 5000 + b"}", "(a number too long to read)"),
+             (b'{"x": "\xc3\x28"}', "('utf-8' codec can't decode byte 0xc3 in position 7: invalid continuation byte)")]
+    with rig.trial("raw") as path:
+        for payload, why in cases:
+            replies = list(rig.session.get(bus.command_key("tb", "set_pose"), payload=payload, timeout=5))
+            assert json.loads(replies[0].err.payload.to_bytes())["error"] == (
+                f"set_pose: the payload must be a JSON object of parameters; it is not JSON {why}")
+        assert rig.status()["trial"] == "raw"  # and the server still answers
+    commands = read_table(path, "commands")
+    refused = [(n, json.loads(r)) for n, r, ok in zip(commands["name"], commands["request"], commands["ok"],
+                                                     strict=True) if not ok]
+    assert [n for n, _ in refused] == ["set_pose"] * 4
+    assert refused[1][1] == {"payload": "hello"} and len(refused[0][1]["payload"]) == 203  # cut to 200 + "..."
+
+
 def test_trial_records_frames_commands_and_metadata(served, tmp_path):
     server, rig = served
     with rig.trial("homing one", ant=3, colony="M. croslandi") as path:

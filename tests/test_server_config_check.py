@@ -35,6 +35,10 @@ def _write(tmp_path, text: str) -> str:
      "finite number > 0"),
     ('[loop]\ntether = "fixed"\n[locomotion]\nsource = "scripted"\nheading_deg = 90.0\n',
      "[locomotion] scripted source heading_deg applies to the free_yaw tether only"),
+    ('[link]\nhost = "192.168.55.256"\nport = 19055\nspawn_emulator = false\n',
+     "[link] host '192.168.55.256' is not an IP address; allowed: the distributor's IP address"),
+    ('[link]\nhost = "no-such-board.invalid"\nport = 19055\nspawn_emulator = false\n',
+     "[link] host 'no-such-board.invalid' is not an IP address and does not resolve as a host name"),
 ])
 @pytest.mark.parametrize("print_config", [True, False])
 def test_serve_refuses_a_config_it_could_not_run_before_anything_starts(tmp_path, capsys, toml, message,
@@ -57,6 +61,16 @@ def test_a_bus_port_in_use_is_named_with_what_to_do(tmp_path, capsys):
         assert main(["serve", "--config", _write(tmp_path, f'[bus]\nlisten = ["tcp/127.0.0.1:{port}"]\n')]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1 and "is in use" in err
+
+
+def test_print_config_checks_the_file_not_the_ports_a_running_server_holds(tmp_path, capsys):
+    with socket.socket() as other:  # the rig's own server, running
+        other.bind(("127.0.0.1", 0))
+        other.listen()
+        endpoint = f"tcp/127.0.0.1:{other.getsockname()[1]}"
+        assert main(["serve", "--config", _write(tmp_path, f'[bus]\nlisten = ["{endpoint}"]\n'), "--print-config"]) == 0
+    out, err = capsys.readouterr()
+    assert err == "" and f'listen = [\n    "{endpoint}",\n]' in out
 
 
 def test_the_locomotion_options_are_checked_without_starting_the_source(tmp_path):

@@ -212,3 +212,14 @@ def test_cli_calibrate_emulate_never_writes_a_rig_config(tmp_path, capsys):
     assert main(["trackball", "calibrate", "--emulate", "--dry-run", "--config", str(rig), "--turns", "0.25"]) == 0
     assert "dry run: rig config not changed" in capsys.readouterr().out
     assert rig.read_text() == COMMENTED and not (tmp_path / "rig.toml.bak").exists()
+
+
+@pytest.mark.parametrize("args", [["calibrate", "--emulate", "--dry-run", "--turns", "0.25"], ["calibrate"],
+                                  ["--emulate", "--seconds", "0.1", "--no-bus"]])
+def test_every_trackball_action_refuses_a_config_that_does_not_exist(tmp_path, capsys, args):
+    """A typo (rig.tml) is named, not read as 'no file: the default USB ids' (nor created by a calibration)."""
+    typo = tmp_path / "rig.tml"
+    assert main(["trackball", *args, "--config", str(typo)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.strip() == f"antarium trackball: error: rig config '{typo}' not found"
+    assert not typo.exists()

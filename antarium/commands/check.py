@@ -66,9 +66,13 @@ class Report:
 
 
 @contextmanager
-def _dome_link(config, timeout_s: float) -> Iterator[tuple[object, str]]:
-    """The link the server would open (starting the emulator where the config spawns one) and its address."""
+def _dome_link(config, timeout_s: float) -> Iterator[tuple[object | None, str]]:
+    """The link the server would open (starting the emulator where the config spawns one) and its address; or
+    (None, why not) when no link can be opened to [link] host/port: the distributor's check fails on that, the
+    checks that do not need it still run."""
+    from antarium.config import ConfigError
     from antarium.firmware_proto.link import open_link
+    from antarium.server.config_check import check_link_host
     from antarium.server.emulator_process import EmulatorProcess
 
     link_cfg = config.link
@@ -76,18 +80,29 @@ def _dome_link(config, timeout_s: float) -> Iterator[tuple[object, str]]:
         with open_link("virtual") as link:
             yield link, "the in-process virtual dome ([link] interface = \"virtual\")"
         return
-    emulator = None
     host, port = link_cfg.host, link_cfg.port
-    if link_cfg.spawn_emulator:
-        emulator = EmulatorProcess(host, port)
-        emulator.start()
-        port = emulator.port
-    if port == 0:
-        raise ValueError("[link] port = 0 needs spawn_emulator = true; give the distributor's port (19055)")
+    if port == 0 and not link_cfg.spawn_emulator:
+        yield None, "[link] port = 0 needs spawn_emulator = true; give the distributor's port (19055)"
+        return
     try:
-        with open_link("udp", host=host, port=port) as link:
-            where = f"{host}:{port}" + (" (emulator spawned: [link] spawn_emulator = true)" if emulator else "")
-            yield link, where
+        check_link_host(host)
+    except ConfigError as exc:
+        yield None, f"{exc}: fix [link] host in the rig config"
+        return
+    emulator = None
+    try:
+        if link_cfg.spawn_emulator:
+            emulator = EmulatorProcess(host, port)
+            emulator.start()
+            port = emulator.port
+        try:
+            link = open_link("udp", host=host, port=port)
+        except OSError as exc:
+            yield None, (f"cannot open the UDP link to [link] host {host!r} port {port} ({exc}): check that this "
+                         "computer has an address on the distributor's network (`ip addr`)")
+            return
+        with link:
+            yield link, f"{host}:{port}" + (" (emulator spawned: [link] spawn_emulator = true)" if emulator else "")
     finally:
         if emulator is not None:
             emulator.stop()
@@ -189,16 +204,19 @@ def check_realtime(report: Report, config) -> bool:
 
 
 def check_disk(report: Report, config, min_free_gb: float) -> bool:
-    """Free space at [log] dir (or its nearest existing parent, which must be writable)."""
+    """Free space at [log] dir, or, while it does not exist yet, at its nearest existing parent, which must be a
+    writable folder: `antarium serve` makes the missing folders when it starts (`check_log_dir`)."""
     folder = Path(config.log.dir).expanduser().resolve()
     existing = next(p for p in (folder, *folder.parents) if p.exists())
     free_gb = shutil.disk_usage(existing).free / 1e9
     if not existing.is_dir() or not _writable(existing):
         return report.fail("disk", f"{existing} is not a writable folder: fix [log] dir ({folder})")
+    where = str(folder) if existing == folder else (f"{existing}, the nearest existing folder of [log] dir {folder}, "
+                                                     "which does not exist yet (`antarium serve` makes it at start)")
     if free_gb < min_free_gb:
-        return report.fail("disk", f"{free_gb:.1f} GB free at {folder}, {min_free_gb:g} GB wanted: free space or "
+        return report.fail("disk", f"{free_gb:.1f} GB free at {where}; {min_free_gb:g} GB wanted: free space or "
                                    "point [log] dir at a larger disk")
-    return report.passed("disk", f"{free_gb:.1f} GB free for trial logs at {folder}")
+    return report.passed("disk", f"{free_gb:.1f} GB free for trial logs at {where}")
 
 
 def _writable(folder: Path) -> bool:
@@ -306,7 +324,11 @@ def run(args: argparse.Namespace) -> int:
     report = Report()
     print(f"antarium check: rig {config.rig.name!r} ({args.config or 'embedded default'})", flush=True)
     with _dome_link(config, args.timeout_s) as (link, where):
-        telemetry = check_distributor(report, link, where, args.timeout_s)
+        if link is None:
+            telemetry = None
+            report.fail("distributor", where)
+        else:
+            telemetry = check_distributor(report, link, where, args.timeout_s)
         if telemetry is None:
             report.fail("panels", "no telemetry: fix the distributor first")
         else:

@@ -15,13 +15,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=float, default=None, help="stop after this many seconds (default: never)")
     parser.add_argument("--record", default=None, metavar="NAME",
                         help="record a trial named NAME from the start (stopped cleanly on exit)")
-    parser.add_argument("--print-config", action="store_true", help="print the resolved config (TOML) and exit")
+    parser.add_argument("--print-config", action="store_true",
+                        help="check the config and print it resolved (TOML), then exit (ports in use not checked)")
     parser.add_argument("--status-every", type=float, default=10.0, metavar="S",
                         help="print a status line every S seconds (default 10; 0: never)")
 
 
 def link_line(server) -> str:
-    """Where the frames go: the UDP address in use (the spawned emulator's port is chosen by the OS)."""
+    """Where the frames go: the UDP address in use (a spawned emulator's port is the OS's choice when [link] port
+    is 0, else that port)."""
     from antarium.firmware_proto import DEFAULT_PORT
 
     address = getattr(server.link, "address", None)
@@ -29,8 +31,11 @@ def link_line(server) -> str:
         return "antarium serve: no dome link"
     if address is None:
         return "antarium serve: dome link: virtual (emulator in this process)"
-    spawned = f" (spawned emulator, OS-chosen port; a distributor listens on {DEFAULT_PORT})" \
-        if getattr(server, "emulator", None) is not None else ""
+    spawned = ""
+    if getattr(server, "emulator", None) is not None:
+        port = (f"OS-chosen port ([link] port = 0); a distributor listens on {DEFAULT_PORT}"
+                if server.config.link.port == 0 else "[link] port")
+        spawned = f" (spawned emulator, {port})"
     return f"antarium serve: dome link: udp {address[0]}:{address[1]}{spawned}"
 
 
@@ -80,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
 
     require_seconds(args, "seconds")  # before the config's checks, which look at this machine's ports
     _check_arguments(args)
-    config = check_config(load_config(args.config))
+    # --print-config checks what the file says, not this machine (a bus port held by a running server)
+    config = check_config(load_config(args.config), ports=not args.print_config)
     if args.print_config:
         import tomli_w
 

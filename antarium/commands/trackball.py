@@ -17,9 +17,12 @@ import json
 import math
 import sys
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from antarium.commands import require_seconds
+
+if TYPE_CHECKING:
+    from antarium.config import RigConfig
 
 HELP = "run the USB trackball or FicTrac input and publish it on the bus; `calibrate` the ball's sensors"
 
@@ -45,13 +48,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dry-run", action="store_true", help="calibrate: print the result, do not write it")
 
 
-def _rig(config_path: str | None) -> dict[str, Any]:
+def _rig(config_path: str | None) -> RigConfig:
+    """The rig config at `config_path` (the embedded default for None); ConfigError when it is missing or bad."""
     from antarium.config import load_config
 
     return load_config(config_path)
 
 
-def _open_source(args: argparse.Namespace, rig: dict[str, Any], on_sample=None, on_event=None):
+def _open_source(args: argparse.Namespace, rig: RigConfig, on_sample=None, on_event=None):
     from antarium.locomotion import open_source
 
     if args.source == "usb":
@@ -104,8 +108,7 @@ class _Publisher:
             self.session.put(self.status_key, json.dumps(status))
 
 
-def _run(args: argparse.Namespace) -> int:
-    rig = _rig(args.config)
+def _run(args: argparse.Namespace, rig: RigConfig) -> int:
     session = None
     if not args.no_bus and rig.bus.enabled:
         from antarium.bus import open_session
@@ -194,10 +197,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         raise ValueError(f"--axes must list some of {', '.join(calibration.AXES)}, got {args.axes!r}")
     if not args.turns > 0:
         raise ValueError(f"--turns must be > 0, got {args.turns}")
-    from pathlib import Path
-
-    known = args.config is not None and Path(args.config).exists()
-    config = tbconfig.load(args.config) if known else tbconfig.TrackballConfig()
+    config = tbconfig.load(args.config)  # an existing file (`run` refused a missing one); None: the defaults
     backend = calibration.miscalibrated_emulator(config) if args.emulate else None
     driver = UsbTrackball(trackball=config, backend=backend)
     with driver:
@@ -216,11 +216,8 @@ def _calibrate(args: argparse.Namespace) -> int:
     if args.dry_run:
         print("dry run: rig config not changed")
     else:
-        existed = Path(args.config).exists()
         backup = tbconfig.write_section(args.config, result.config)
-        if not existed:
-            print(f"wrote [trackball] to {args.config} (a new file)")
-        elif backup is None:
+        if backup is None:
             print(f"wrote [trackball] counts_per_mm and signs to {args.config}; every other line is unchanged")
         else:
             print(f"wrote [trackball] to {args.config}, rewriting the whole file (its comments are not kept); "
@@ -240,6 +237,7 @@ def _turn_by_hand(driver, axis: str, turns: float) -> list[int]:
 
 def run(args: argparse.Namespace) -> int:
     require_seconds(args, "seconds", "unplug_at", "replug_after")
+    rig = _rig(args.config)  # every action: a --config that is missing or unreadable is refused before anything runs
     if args.action == "calibrate":
         return _calibrate(args)
-    return _run(args)
+    return _run(args, rig)

@@ -168,7 +168,7 @@ def _scene_edit(server: Server, p: dict[str, Any]) -> None:
     kwargs = _edit_kwargs(op, args)
     try:
         getattr(renderer, SCENE_EDITS[op][0])(**kwargs)
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:  # the renderer's own check of the value (its range): name the edit
         raise CommandError(f"scene_edit {op}: {exc}") from None
     server.loop.renderer_changed()
     server.loop.event("scene_edit", op=op, args=args)

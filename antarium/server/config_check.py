@@ -1,7 +1,8 @@
 """`check_config(config)`: everything `antarium serve` would find wrong only once it runs, found before anything
-starts (scene names and files, the locomotion back-end and its options, face sizes, ports in use). One line per
-problem: `ConfigError` naming the key, what was wrong and what is allowed. `serve` and `serve --print-config` run
-it.
+starts (scene names and files, the locomotion back-end and its options, face sizes, the dome's address, ports in
+use). One line per problem: `ConfigError` naming the key, what was wrong and what is allowed. `serve`, the example
+scripts' --start-server and `serve --print-config` (without the ports in use: what the file says, not this
+machine's state) run it.
 """
 
 from __future__ import annotations
@@ -19,17 +20,42 @@ SCENE_FILE_KEYS = ("path", "panorama", "uv")
 CHEAP_SCENES = ("uniform", "horizon", "bars", "bar", "grating", "checkerboard", "sky")
 
 
-def check_config(config: RigConfig) -> RigConfig:
-    """Raise `ConfigError` for the first thing in `config` that `serve` could not use; return `config`."""
+def check_config(config: RigConfig, *, ports: bool = True) -> RigConfig:
+    """Raise `ConfigError` for the first thing in `config` that `serve` could not use; return `config`. ports:
+    also refuse a bus endpoint or emulator port that something on this computer holds now."""
     _check_scene(config.render.scene)
     _check_face_size(config.render.face_size_px)
     _check_rate(config.loop.rate_hz)
     _check_dot_correction(config.link.dot_correction)
+    if config.link.interface == "udp":
+        check_link_host(config.link.host)
     _check_locomotion(config)
     _check_trackball(config)
     _check_monitor(config)
-    _check_ports(config)
+    if ports:
+        _check_ports(config)
     return config
+
+
+def check_link_host(host: str) -> None:
+    """`[link] host` is an IP address, or a host name this computer resolves (a dotted quad out of range, such
+    as 192.168.55.256, is no name: refused without a name lookup)."""
+    import ipaddress
+
+    allowed = ("allowed: the distributor's IP address (e.g. \"192.168.55.2\"; \"127.0.0.1\" for a spawned emulator) "
+               "or a host name this computer resolves")
+    try:
+        ipaddress.ip_address(host)
+        return
+    except ValueError:
+        pass
+    if not host or host.replace(".", "").isdigit() or ":" in host:
+        raise ConfigError(f"[link] host {host!r} is not an IP address; {allowed}")
+    try:
+        socket.getaddrinfo(host, None, type=socket.SOCK_DGRAM)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise ConfigError(f"[link] host {host!r} is not an IP address and does not resolve as a host name "
+                          f"({getattr(exc, 'strerror', None) or exc}); {allowed}") from None
 
 
 def _check_dot_correction(value: int | str) -> None:

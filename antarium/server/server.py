@@ -26,7 +26,7 @@ import numpy as np
 
 from antarium import bus
 from antarium.core.clock import Clock, MonotonicClock
-from antarium.server.commands import COMMANDS, CommandError, parse_command
+from antarium.server.commands import COMMANDS, CommandError, _shown, parse_command
 from antarium.server.emulator_process import EmulatorProcess
 from antarium.server.frame_loop import FrameLoop, FrameRecord, LoopClosed
 from antarium.server.placement import LoopPlacement
@@ -130,6 +130,8 @@ class Server:
         self._start_lock = threading.RLock()
         self._shut_down = False  # `_shutdown` has begun: it runs once
         self._command_log_lock = threading.Lock()  # orders the commands table's rows by their time
+        self._in_flight = 0  # bus queries being answered (zenoh's threads): the shutdown waits for them
+        self._in_flight_done = threading.Condition()
         self._thread: threading.Thread | None = None
         self._status_thread: threading.Thread | None = None
         self._start_error: BaseException | None = None
@@ -193,13 +195,37 @@ class Server:
 
     # -- bus traffic -----------------------------------------------------------------------------------
     def _on_query(self, query) -> None:
-        """A command query (zenoh thread): JSON in, JSON reply or an error reply naming what was wrong."""
-        name = str(query.key_expr).rsplit("/", 1)[-1]
+        """A command query (zenoh thread): JSON in, JSON reply or an error reply naming what was wrong. Counted in
+        flight until it returns, so that the shutdown does not end (and the interpreter exit) under it."""
+        with self._in_flight_done:
+            self._in_flight += 1
         try:
-            raw = query.payload.to_bytes() if query.payload is not None else b""
+            self._answer(query)
+        finally:
+            with self._in_flight_done:
+                self._in_flight -= 1
+                self._in_flight_done.notify_all()
+
+    def _await_queries(self) -> None:
+        """Wait (at most COMMAND_TIMEOUT_S) until no bus query is being answered; RuntimeError naming how many are
+        still running after that. Called once the queryable is undeclared: no new query comes."""
+        with self._in_flight_done:
+            if not self._in_flight_done.wait_for(lambda: self._in_flight == 0, COMMAND_TIMEOUT_S):
+                raise RuntimeError(f"{self._in_flight} bus command(s) still running after {COMMAND_TIMEOUT_S:g} s")
+
+    def _answer(self, query) -> None:
+        name = str(query.key_expr).rsplit("/", 1)[-1]
+        raw = query.payload.to_bytes() if query.payload is not None else b""
+        try:
             params = json.loads(raw) if raw.strip() else {}
-        except (ValueError, UnicodeDecodeError) as exc:
-            query.reply_err(json.dumps({"error": f"{name}: payload is not JSON: {exc}"}))
+        except (ValueError, RecursionError) as exc:  # (UnicodeDecodeError is a ValueError)
+            why = ("nested too deeply" if isinstance(exc, RecursionError) else str(exc)
+                   if isinstance(exc, json.JSONDecodeError | UnicodeDecodeError) else "a number too long to read")
+            message = f"{name}: the payload must be a JSON object of parameters; it is not JSON ({why})"
+            text = raw.decode(errors="replace")
+            self._log_command(name, {"payload": text if len(text) <= 200 else text[:200] + "..."},
+                              {"error": message}, False)
+            query.reply_err(json.dumps({"error": message}))
             return
         try:
             result = self.command(name, params)
@@ -411,7 +437,8 @@ class Server:
     def _scene_failed(self, scene: str | dict, exc: BaseException) -> RuntimeError:
         kept = "no scene was loaded before" if self.scene_name is None else \
             f"the current scene {self.scene_name!r} stays on the dome"
-        return RuntimeError(f"load_scene: scene {scene!r} failed to load ({exc}); {kept}")
+        why = str(exc) if len(str(exc)) <= 300 else str(exc)[:297] + "..."  # a long name may be echoed in it
+        return RuntimeError(f"load_scene: scene {_shown(scene)} failed to load ({why}); {kept}")
 
     def trial_start(self, name: str, metadata: dict, folder: str = "") -> dict[str, Any]:
         """Open the trial log `<folder or [log] dir>/<rig>_<time>_<name>.h5` and have the frame loop write into it;
@@ -429,7 +456,7 @@ class Server:
             except (TypeError, ValueError) as exc:
                 raise CommandError(f"trial_start: metadata must be JSON-serialisable: {exc}") from None
             if folder and not Path(folder).is_absolute():
-                raise CommandError(f"trial_start: folder must be an absolute path, got {folder!r}")
+                raise CommandError(f"trial_start: parameter 'folder' must be an absolute path, got {_shown(folder)}")
             try:
                 path = log_path(check_log_dir(folder) if folder else self.log_dir, self.rig_name, name)
                 log = TrialLog(path, self.config.to_toml_dict(), name, metadata, flush_s=self.config.log.flush_s,
@@ -723,6 +750,7 @@ class Server:
             except Exception:  # noqa: BLE001 - a closed session has undeclared them already
                 pass
         self._entities = []
+        step("waiting for the bus commands being answered", self._await_queries)
         if self._own_session and self.session is not None:
             step("closing the bus session", self.session.close)
             self.session = None
