@@ -79,6 +79,8 @@ def test_params_are_converted_by_the_type_of_the_models_field():
      "model parameter compass='ideal' differs from the task's compass 'sky'; choose the compass with --compass"),
     (["arena", "--compass", "ideal", "--param", "compass=sky", "--seeds", "1", "--steps", "2", "--inbound", "1"],
      "choose the compass with --compass"),
+    (["homing", "--tether", "fixed", "--cue-wait-frames", "-1", "--seeds", "1", "--steps", "2"],
+     "tether must be free_yaw or fixed and cue_wait_frames an integer >= 0, got 'fixed' and -1"),
 ])
 def test_bad_values_are_refused_in_one_line(tmp_path, capsys, argv, message):
     out = ["--out", str(tmp_path / ("m.npz" if argv[0] == "learn" else "out"))]
@@ -86,3 +88,18 @@ def test_bad_values_are_refused_in_one_line(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_homing_in_the_fixed_tether_waits_for_its_sky_compass(tmp_path, capsys):
+    """`ant homing --tether fixed`: the scene and its polarised sky turn with the ant, and the ant waits (up to
+    `--cue-wait-frames`, default 60) for its compass while the polarisers turn; with 0 the trip ends at once."""
+    for wait, lost in ((None, None), ("0", "outbound, decision 0: the sky compass has no cue")):
+        out = tmp_path / f"wait{wait}"
+        argv = ["ant", "homing", "--tether", "fixed", "--compass", "sky", "--seeds", "1", "--steps", "20",
+                "--inbound", "10", "--out", str(out)] + ([] if wait is None else ["--cue-wait-frames", wait])
+        assert main(argv) == 0
+        record = json.loads((out / "pi_homing_sky.json").read_text())
+        assert record["tether"] == "fixed" and record["cue_wait_frames"] == (60 if wait is None else 0)
+        why = record["outcomes"][0]["lost_cue"]
+        assert why is None if lost is None else why.startswith(lost)
+    capsys.readouterr()

@@ -59,6 +59,10 @@ def write_json(path: Path, record: Any) -> None:
     path.write_text(json.dumps(strict(record), indent=2, allow_nan=False, default=float))
 
 
+#: frames an ant of the foraging task stands still at most waiting for its sky compass cue (`VirtualAnt`): in the
+#: fixed tether the polarisers settle within about 16 frames of a 57 deg turn; in free_yaw the dome never turns
+CUE_WAIT_FRAMES = 60
+
 #: frames the polarisers get to come to rest before an experiment (they reach it in about 150, at 190 Hz)
 SETTLE_FRAMES = 400
 
@@ -234,14 +238,19 @@ def pi_trial(ant, seed: int, n_outbound: int, n_inbound: int) -> tuple[dict[str,
 
 def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 1500, n_inbound: int | None = None,
               compass: str = "sky", model_params: dict | None = None, scene: Any = PI_SCENE,
-              echo=None) -> dict[str, Any]:
+              echo=None, tether: str = "free_yaw", cue_wait_frames: int = CUE_WAIT_FRAMES) -> dict[str, Any]:
     """Stone 2017's foraging task for each seed, in the emulated dome; returns (and writes to `out_dir`:
-    `pi_homing_<compass>.json`, `_paths.png`, `_distance.png`) the outcomes and their medians."""
+    `pi_homing_<compass>.json`, `_paths.png`, `_distance.png`) the outcomes and their medians. tether: the
+    loop's ("fixed": the scene and its sky turn with the ant); cue_wait_frames: see `VirtualAnt`."""
     from antarium.ant.models import make_model
     from antarium.ant.world import virtual_rig
 
     n_outbound, n_inbound = trip_decisions(n_outbound, n_inbound)
     _check_compass(model_params, compass)
+    if tether not in ("free_yaw", "fixed") or isinstance(cue_wait_frames, bool) \
+            or not isinstance(cue_wait_frames, int) or cue_wait_frames < 0:
+        raise ValueError(f"tether must be free_yaw or fixed and cue_wait_frames an integer >= 0, got {tether!r} "
+                         f"and {cue_wait_frames!r}")
     model = make_model("cx", EyeParams().n_pn, **{"compass": compass, **(model_params or {})})
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:  # an unwritable folder is found before the run, not after it
@@ -249,7 +258,7 @@ def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 150
     outcomes: list[HomingOutcome] = []
     trips: dict[str, tuple[Trip, Trip]] = {}
     with virtual_rig(model, scene=scene, eye_params=None, renderer_kwargs={"face_size": FACE_SIZE},
-                     compass=compass) as ant:
+                     compass=compass, tether=tether, cue_wait_frames=cue_wait_frames) as ant:
         settle(ant)
         for seed in seeds:
             t0 = time.perf_counter()
@@ -265,8 +274,10 @@ def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 150
     if out is not None:
         write_json(out / f"pi_homing_{compass}.json",
                    {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
-                    "n_inbound": n_inbound, "scene": str(scene)})
-        title = f"CX path integration, {compass} compass ({len(outcomes)} routes of {n_outbound} steps)"
+                    "n_inbound": n_inbound, "scene": str(scene), "tether": tether,
+                    "cue_wait_frames": cue_wait_frames})
+        title = (f"CX path integration, {compass} compass, {tether.replace('_', ' ')} tether ({len(outcomes)} "
+                 f"routes of {n_outbound} steps)")
         summary["paths_png"] = str(plot_trips(out / f"pi_homing_{compass}_paths.png", trips, title))
         summary["distance_png"] = str(plot_distance(out / f"pi_homing_{compass}_distance.png", trips, title,
                                                     model.params.step))

@@ -93,6 +93,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("homing", help="Stone 2017's foraging task: random outbound routes, home by CX path "
                                       "integration; pictures and pi_homing_<compass>.json")
     _trips(p)
+    p.add_argument("--tether", choices=("free_yaw", "fixed"), default="free_yaw",
+                   help="free_yaw: the ant turns on its pin, the dome stands (default); fixed: the scene and its "
+                        "polarised sky turn with the ant")
+    p.add_argument("--cue-wait-frames", type=int, default=None,
+                   help="frames the ant stands still waiting for a sky compass cue, e.g. while the polarisers turn "
+                        "after a turn of the scene (default 60; 0: a trip ends at the first decision without one)")
     p = sub.add_parser("arena", help="the cluttered arena: outbound with optic-flow avoidance, home by CX, then "
                                      "by CXMB with the vector memory restored; collisions counted")
     _trips(p)
@@ -129,8 +135,9 @@ def _run_trips(args: argparse.Namespace) -> int:
     compasses = ("sky", "ideal") if args.compass == "both" else (args.compass,)
     for compass in compasses:
         if args.action == "homing":
+            wait = {} if args.cue_wait_frames is None else {"cue_wait_frames": args.cue_wait_frames}
             summary = pi_homing(args.out, range(args.seeds), args.steps, args.inbound, compass,
-                                _params(args.param, "cx"), echo=print)
+                                _params(args.param, "cx"), echo=print, tether=args.tether, **wait)
         else:
             summary = cluttered_arena(args.out, range(args.seeds), args.steps, args.inbound, compass, args.model,
                                       _params(args.param, args.model), echo=print)
