@@ -108,47 +108,43 @@ def test_wait_refuses_what_is_not_a_duration_with_a_rig_error(seconds, shown):
     assert str(info.value).startswith(f"wait needs a number of seconds in [0, {WAIT_MAX_S:g}], got {shown}")
 
 
-def test_a_renderer_refusing_a_value_is_named_by_the_command_and_shows_plain_numbers():
+@pytest.fixture
+def uniform_server():
+    """A server with a small renderer (face 55) showing "uniform", on the virtual link, no bus."""
+    def small_renderer(render_cfg, clock=None):
+        from antarium.renderers import Renderer
+
+        return Renderer(face_size=55, clock=clock)
+
+    config = resolve({"bus": {"enabled": False}, "link": {"interface": "virtual"}, "render": {"scene": "uniform"}})
+    server = Server(config, renderer_factory=small_renderer).start_thread()
+    yield server
+    server.stop()
+
+
+def test_a_renderer_refusing_a_value_is_named_by_the_command_and_shows_plain_numbers(uniform_server):
     """The renderer's own range checks: its ValueError reached the caller without the command's name (scene_edit
     scale_channel factor = -1 said only "green channel gain must be ..."), and a grating's period as np.float64(...)."""
-    def small_renderer(render_cfg, clock=None):
-        from antarium.renderers import Renderer
-
-        return Renderer(face_size=55, clock=clock)
-
-    config = resolve({"bus": {"enabled": False}, "link": {"interface": "virtual"}, "render": {"scene": "uniform"}})
-    server = Server(config, renderer_factory=small_renderer).start_thread()
-    try:
-        with pytest.raises(CommandError) as info:
-            server.command("scene_edit", {"op": "scale_channel", "args": {"channel": "green", "factor": -1}})
-        assert str(info.value).startswith("scene_edit scale_channel: green channel gain must be")
-        with pytest.raises(RuntimeError) as info:
-            server.command("load_scene", {"scene": {"scene": "grating", "period_deg": -5}})
-        assert "(grating period must be in (0, 360] degrees, got -5); the current scene" in str(info.value)
-        assert "np." not in str(info.value) and server.scene_name == "uniform"
-        with pytest.raises(RuntimeError) as info:  # a long name is not echoed whole (it was, twice: 200 kB)
-            server.command("load_scene", {"scene": "x" * 100_000})
-        assert str(info.value).startswith("load_scene: scene 'xxxxxxxxx") and len(str(info.value)) < 600
-    finally:
-        server.stop()
+    server = uniform_server
+    with pytest.raises(CommandError) as info:
+        server.command("scene_edit", {"op": "scale_channel", "args": {"channel": "green", "factor": -1}})
+    assert str(info.value).startswith("scene_edit scale_channel: green channel gain must be")
+    with pytest.raises(RuntimeError) as info:
+        server.command("load_scene", {"scene": {"scene": "grating", "period_deg": -5}})
+    assert "(grating period must be in (0, 360] degrees, got -5); the current scene" in str(info.value)
+    assert "np." not in str(info.value) and server.scene_name == "uniform"
+    with pytest.raises(RuntimeError) as info:  # a long name is not echoed whole (it was, twice: 200 kB)
+        server.command("load_scene", {"scene": "x" * 100_000})
+    assert str(info.value).startswith("load_scene: scene 'xxxxxxxxx") and len(str(info.value)) < 600
 
 
-def test_a_scene_parameter_too_large_for_a_float_fails_the_load_and_keeps_the_scene():
-    def small_renderer(render_cfg, clock=None):
-        from antarium.renderers import Renderer
-
-        return Renderer(face_size=55, clock=clock)
-
-    config = resolve({"bus": {"enabled": False}, "link": {"interface": "virtual"}, "render": {"scene": "uniform"}})
-    server = Server(config, renderer_factory=small_renderer).start_thread()
-    try:
-        with pytest.raises(RuntimeError) as info:
-            server.command("load_scene", {"scene": {"scene": "grating", "period_deg": 10 ** 400}})
-        assert "period_deg must be a finite number, got 1000000" in str(info.value)
-        assert "the current scene 'uniform' stays on the dome" in str(info.value)
-        assert server.scene_name == "uniform"
-    finally:
-        server.stop()
+def test_a_scene_parameter_too_large_for_a_float_fails_the_load_and_keeps_the_scene(uniform_server):
+    server = uniform_server
+    with pytest.raises(RuntimeError) as info:
+        server.command("load_scene", {"scene": {"scene": "grating", "period_deg": 10 ** 400}})
+    assert "period_deg must be a finite number, got 1000000" in str(info.value)
+    assert "the current scene 'uniform' stays on the dome" in str(info.value)
+    assert server.scene_name == "uniform"
 
 
 def test_a_refusal_during_a_trial_reaches_the_caller_and_is_logged_whatever_the_log_makes_of_it(tmp_path):
