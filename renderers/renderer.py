@@ -711,7 +711,7 @@ class Renderer:
 
         scene = self._require_scene()
         if channel not in CHANNELS:
-            raise ValueError(f"unknown channel {channel!r}; allowed: {', '.join(CHANNELS)}")
+            raise ValueError(f"unknown channel {repr(channel)[:60]}; allowed: {', '.join(CHANNELS)}")
         gains = list(scene.channel_gain)
         gains[CHANNELS.index(channel)] = factor
         scene.channel_gain = check_channel_gain(gains)
@@ -756,7 +756,7 @@ class Renderer:
         scene = self._require_scene()
         if name not in scene.objects:
             known = ", ".join(sorted(scene.objects)) or "none"
-            raise ValueError(f"no object named {name!r} in scene {scene.name!r}; objects: {known}")
+            raise ValueError(f"no object named {repr(name)[:60]} in scene {scene.name!r}; objects: {known}")
         return scene.objects[name]
 
     # ------------------------------------------------------------------------------------------ frames

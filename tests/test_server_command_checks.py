@@ -136,6 +136,12 @@ def test_a_renderer_refusing_a_value_is_named_by_the_command_and_shows_plain_num
     with pytest.raises(RuntimeError) as info:  # a long name is not echoed whole (it was, twice: 200 kB)
         server.command("load_scene", {"scene": "x" * 100_000})
     assert str(info.value).startswith("load_scene: scene 'xxxxxxxxx") and len(str(info.value)) < 600
+    for op, args in (("scale_channel", {"channel": "c" * 100_000, "factor": 1}),
+                     ("remove_object", {"name": "n" * 100_000})):
+        with pytest.raises(CommandError) as info:  # the renderer's refusal echoed the 100 kB name
+            server.command("scene_edit", {"op": op, "args": args})
+        assert str(info.value).startswith(f"scene_edit {op}: ") and len(str(info.value)) < 200
+        assert str(info.value).endswith(("allowed: green, blue, uv", "objects: none"))
 
 
 def test_a_scene_parameter_too_large_for_a_float_fails_the_load_and_keeps_the_scene(uniform_server):

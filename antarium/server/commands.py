@@ -169,7 +169,7 @@ def _scene_edit(server: Server, p: dict[str, Any]) -> None:
     try:
         getattr(renderer, SCENE_EDITS[op][0])(**kwargs)
     except (TypeError, ValueError) as exc:  # the renderer's own check of the value (its range): name the edit
-        raise CommandError(f"scene_edit {op}: {exc}") from None
+        raise CommandError(f"scene_edit {op}: {_brief(str(exc))}") from None
     server.loop.renderer_changed()
     server.loop.event("scene_edit", op=op, args=args)
 
@@ -291,8 +291,12 @@ COMMANDS: dict[str, Command] = {
 
 def _shown(value: Any) -> str:
     """`value` as a refusal shows it: its repr, cut to 60 characters."""
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+    return _brief(repr(value), 60)
+
+
+def _brief(text: str, limit: int = 300) -> str:
+    """`text` cut to `limit` characters (a refusal that echoes a long name from its input is not sent whole)."""
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _check(command: str, name: str, p: Param, value: Any) -> Any:

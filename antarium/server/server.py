@@ -26,7 +26,7 @@ import numpy as np
 
 from antarium import bus
 from antarium.core.clock import Clock, MonotonicClock
-from antarium.server.commands import COMMANDS, CommandError, _shown, parse_command
+from antarium.server.commands import COMMANDS, CommandError, _brief, _shown, parse_command
 from antarium.server.emulator_process import EmulatorProcess
 from antarium.server.frame_loop import FrameLoop, FrameRecord, LoopClosed
 from antarium.server.placement import LoopPlacement
@@ -437,8 +437,7 @@ class Server:
     def _scene_failed(self, scene: str | dict, exc: BaseException) -> RuntimeError:
         kept = "no scene was loaded before" if self.scene_name is None else \
             f"the current scene {self.scene_name!r} stays on the dome"
-        why = str(exc) if len(str(exc)) <= 300 else str(exc)[:297] + "..."  # a long name may be echoed in it
-        return RuntimeError(f"load_scene: scene {_shown(scene)} failed to load ({why}); {kept}")
+        return RuntimeError(f"load_scene: scene {_shown(scene)} failed to load ({_brief(str(exc))}); {kept}")
 
     def trial_start(self, name: str, metadata: dict, folder: str = "") -> dict[str, Any]:
         """Open the trial log `<folder or [log] dir>/<rig>_<time>_<name>.h5` and have the frame loop write into it;
