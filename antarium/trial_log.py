@@ -8,6 +8,10 @@ which `open_log` (SWMR read) still opens. The writer fsyncs the file after each 
 batch written, so a power cut keeps what was reported. A write error (disk full) does not stop the stimulus: the
 log keeps counting what it could not write and reports it in `status()`, and the server makes that loud; so does
 a writer that stops answering (a hung disk), which the end of the trial kills after at most `CLOSE_TIMEOUT_S`.
+A writer that dies (the OOM killer, a crash in HDF5) is replaced, at most `MAX_WRITER_RESTARTS` times a trial: the
+file is closed between batches, so a new writer opens it, cuts each table back to the rows the dead one confirmed
+and is handed again every batch that was not confirmed (kept in memory until confirmed, at most `RESEND_MAX_ROWS`
+rows); each restart is reported in `status()["restarts"]` and raises an alarm.
 Every dataset and its units are listed in `docs/logs.md`.
 """
 
@@ -36,6 +40,18 @@ FORMAT_VERSION = 3
 
 #: the longest the end of a trial (`TrialLog.close`) waits for the writer before killing it (s)
 CLOSE_TIMEOUT_S = 30.0
+
+#: writers that die during a trial are replaced this many times; the next death ends the writing as before (its rows
+#: and every later row counted lost, `error` says why)
+MAX_WRITER_RESTARTS = 3
+
+#: rows handed over and not yet confirmed written that are kept for a new writer should the writer die; beyond this
+#: (a writer that stopped answering for minutes) the oldest batches are no longer kept, and a writer that dies before
+#: confirming them is not replaced (about 200 MB of frame rows: minutes of a 1 kHz loop and a 1 kHz ball)
+RESEND_MAX_ROWS = 250_000
+
+#: how long a writer whose connection broke is given to be seen ended before a new one may take its file (s)
+WRITER_EXIT_WAIT_S = 5.0
 
 #: HDF5 format bounds: 1.10 is the oldest format with SWMR and the newest that HDF5 1.10 libraries (MATLAB's,
 #: Debian 12's tools) read; h5py's "latest" (HDF5 2.0 here) writes datatype messages that 1.10 cannot decode
@@ -158,6 +174,9 @@ class TrialLog:
     The writer is a process of its own so that HDF5 never holds the frame loop's GIL and a failing disk
     cannot take the stimulus down: a write error is reported in `status()["error"]`, the loop goes on.
     If this process dies (even SIGKILL) the writer sees its pipe close and ends; the file is closed between batches.
+    If the writer dies (its connection breaks, in the sender thread: never in the frame loop), a new one takes the
+    file over (`_restart`), at most `MAX_WRITER_RESTARTS` times; not after `close()`'s deadline killed it, nor after a
+    write error (a full disk), which ends the writing for good.
     """
 
     def __init__(self, path: str | Path, config: dict[str, Any], name: str = "", metadata: dict | None = None,
@@ -176,20 +195,10 @@ class TrialLog:
         attrs = {"format": "antarium-trial-log", "format_version": FORMAT_VERSION, "software_version": __version__,
                  "created_utc": created_utc.isoformat(), "created_monotonic": float(created), "trial_name": name,
                  "metadata": metadata_json, "config": _json(config)}
-        self._proc = _take_writer()
-        self._conn = self._proc.conn
-        try:
-            self._conn.send(("open", str(self.path), attrs))
-            if not self._conn.poll(start_timeout_s):
-                raise LogError(f"trial log writer for {str(self.path)!r} did not answer within {start_timeout_s} s")
-            kind, detail = self._conn.recv()
-        except (OSError, EOFError) as exc:
-            output = self._proc.output()  # what it printed (a traceback), read before kill() releases it
-            self._proc.kill()
-            raise LogError(f"trial log writer for {str(self.path)!r} failed to start: {exc}; {output}") from None
-        except LogError:
-            self._proc.kill()
-            raise
+        self._start_timeout_s = float(start_timeout_s)
+        self._expired = False  # close()'s deadline has passed: no new writer
+        self._proc = None
+        kind, detail = self._start(("open", str(self.path), attrs))
         if kind != "ready":
             self._proc.stop(5)
             raise LogError(f"cannot create trial log {str(self.path)!r}: {detail}")
@@ -205,8 +214,14 @@ class TrialLog:
         self._batch = 0  # number of the last batch (or close) handed to the writer
         self._confirmed = 0  # number of the last one it reported on
         self._rows_sent = 0
-        #: (batch number, monotonic time its hand-over began) of each batch the writer has not reported on yet
-        self._handed: collections.deque[tuple[int, float]] = collections.deque()
+        #: [batch number, monotonic time its hand-over began, kind, its rows (None once no longer kept, see
+        #: RESEND_MAX_ROWS)] of each batch the writer has not reported on yet
+        self._handed: collections.deque[list] = collections.deque()
+        self._kept = 0  # rows kept in `_handed` for a new writer
+        self._write_failed = False  # the writer reported an HDF5 write error (disk full): no new writer
+        self._gave_up = False  # a writer died and was not replaced: nothing more is handed over
+        #: one line for each writer that died and was replaced (status()["restarts"])
+        self.restarts: list[str] = []
         self._killed = False  # by close() at its deadline
         self.error: str | None = None
         self._closed = False
@@ -271,9 +286,11 @@ class TrialLog:
             self.rows_written.update(report["rows_written"])
             self._writer_lost = report["rows_lost"]
             self.error = report["error"] or self.error
+            self._write_failed = self._write_failed or report["failed"]
             self._confirmed = report["batch"]
             while self._handed and self._handed[0][0] <= self._confirmed:
-                self._handed.popleft()
+                rows = self._handed.popleft()[3]
+                self._kept -= 0 if rows is None else _count(rows)
             if kind == "closed":  # its last word: the pipe's end follows
                 break
         return self._confirmed >= batch
@@ -283,13 +300,101 @@ class TrialLog:
         on it, so that a writer that stops answering shows in `status()["unconfirmed_s"]` even while the hand-over
         itself is blocked (its pipe full)."""
         number = self._batch + 1
-        self._handed.append((number, time.monotonic()))
+        self._handed.append([number, time.monotonic(), kind, rows])
         try:
             self._conn.send((kind, number, rows))
         except BaseException:
             self._handed.pop()
             raise
         self._batch = number
+        self._kept += _count(rows)
+        for entry in self._handed:  # beyond the bound, the oldest batches are no longer kept for a new writer
+            if self._kept <= RESEND_MAX_ROWS:
+                break
+            if entry[3] is not None:
+                self._kept -= _count(entry[3])
+                entry[3] = None
+
+    def _start(self, message: tuple) -> tuple[str, Any]:
+        """Start a writer (the prepared spare) with `message` (("open", path, attrs) or ("resume", path, state))
+        and return its answer (("ready", None) or ("error", reason)); LogError when it dies or does not answer
+        within the start timeout. It is `_proc` from the start, so that close()'s deadline kills it."""
+        self._proc = _take_writer()
+        self._conn = self._proc.conn
+        if self._expired:
+            self._proc.kill()
+        try:
+            self._conn.send(message)
+            if not self._conn.poll(self._start_timeout_s):
+                raise LogError(f"trial log writer for {str(self.path)!r} did not answer within "
+                               f"{self._start_timeout_s:g} s")
+            return self._conn.recv()
+        except (OSError, EOFError) as exc:
+            output = self._proc.output()  # what it printed (a traceback), read before kill() releases it
+            self._proc.kill()
+            raise LogError(f"trial log writer for {str(self.path)!r} failed to start: {exc}; {output}") from None
+        except LogError:
+            self._proc.kill()
+            raise
+
+    def _restart(self, exc: BaseException) -> bool:
+        """After the connection to the writer failed with `exc` (holding `_send_lock`): if the writer has ended,
+        start a new one that opens the file, cuts each table back to the rows confirmed written and is handed again
+        every batch not confirmed; True when it has them. False, with `error` saying why, when none may be started:
+        close()'s deadline passed, the writer had reported a write error (disk full), rows not confirmed were no
+        longer kept (RESEND_MAX_ROWS), MAX_WRITER_RESTARTS reached, the writer has not ended, or the new one cannot
+        take the file (it was left marked open by a death within a batch)."""
+        if self._gave_up:
+            return False
+        self._gave_up = True  # until a new writer has the rows
+        if not self._proc.wait(WRITER_EXIT_WAIT_S):  # never two writers on one file
+            self.error = self.error or (f"trial log writer for {str(self.path)!r} failed ({exc}) and has not "
+                                        "ended: no new writer; its unconfirmed rows and every later row counted lost")
+            return False
+        try:  # its last reports, up to the end of the connection
+            self._collect_replies()
+        except (OSError, EOFError):
+            pass
+        output = self._proc.output().strip().splitlines()
+        died = (f"trial log writer for {str(self.path)!r} died (exit {self._proc.exitcode}): {exc}"
+                + (f"; it printed: {output[-1]}" if output else ""))
+        self._proc.close()
+        unsent = [entry for entry in self._handed if entry[2] == "rows"]
+        rows = sum(_count(entry[3]) for entry in unsent if entry[3] is not None)
+        if self._expired:
+            why = "the end of the trial's deadline had passed (no new writer then)"
+        elif self._write_failed:
+            why = "it had failed to write (no new writer after a write error)"
+        elif any(entry[3] is None for entry in unsent):
+            why = (f"more than {RESEND_MAX_ROWS} rows were not confirmed and the oldest were no longer kept to hand "
+                   "over again")
+        elif len(self.restarts) >= MAX_WRITER_RESTARTS:
+            why = f"no new writer: {MAX_WRITER_RESTARTS} restarts is the most a trial gets"
+        else:
+            why = None
+        if why is None:
+            state = {"rows_written": dict(self.rows_written), "rows_lost": self._writer_lost}
+            try:
+                kind, detail = self._start(("resume", str(self.path), state))
+            except (LogError, OSError) as start_error:  # OSError: no process could be started
+                kind, detail = "error", str(start_error)
+            if kind != "ready":
+                why = f"a new writer could not take the file over: {detail}"
+        if why is not None:
+            self.error = self.error or f"{died}; {why}; its unconfirmed rows and every later row counted lost"
+            return False
+        self._handed = collections.deque(unsent)  # a "close" not answered is handed over again by close()
+        self._gave_up = False
+        self.restarts.append(f"{died}; a new writer took the file over at {sum(self.rows_written.values())} rows "
+                             f"confirmed written and was handed the {len(unsent)} unconfirmed batches ({rows} rows) "
+                             "again")
+        try:
+            for entry in unsent:
+                entry[1] = time.monotonic()
+                self._conn.send(("rows", entry[0], entry[3]))
+        except (OSError, EOFError) as resend_error:  # the new writer died too
+            return self._restart(resend_error)
+        return True
 
     def flush(self, wait: bool = False) -> None:
         """Hand every pending row to the writer (which appends them, closes and fsyncs the file); with `wait`, wait
@@ -299,32 +404,32 @@ class TrialLog:
         rows = {table: table_rows for table, table_rows in pending.items() if table_rows}
         n = sum(len(table_rows) for table_rows in rows.values())
         with self._send_lock:
-            if self._conn is None:  # closed meanwhile: rows taken just before, never handed over
-                self._lost_here += n
-                self._unsent += n
-                return
-            try:
-                if n:
-                    self._hand_over("rows", rows)
-                    self._rows_sent, n = self._rows_sent + n, 0
-                self._collect_replies(self._batch if wait else 0, 30.0)
-            except (OSError, EOFError, ValueError) as exc:
-                code = self._proc.exitcode
-                self.error = self.error or f"trial log writer for {str(self.path)!r} died (exit {code}): {exc}"
-                self._lost_here += n  # rows it never got; those it got but never reported on count at close()
-                self._unsent += n
+            while True:
+                if self._conn is None or self._gave_up:  # closed meanwhile (rows taken just before), or no writer
+                    self._lost_here += n  # rows it never got; those it got but never reported on count at close()
+                    self._unsent += n
+                    return
+                try:
+                    if n:
+                        self._hand_over("rows", rows)
+                        self._rows_sent, n = self._rows_sent + n, 0
+                    self._collect_replies(self._batch if wait else 0, 30.0)
+                    return
+                except (OSError, EOFError, ValueError) as exc:
+                    self._restart(exc)  # a new writer, or `_gave_up` and the error set
 
     def status(self) -> dict[str, Any]:
-        """Path, rows written and lost so far, the error, if any, and `unconfirmed_s`: seconds since the hand-over
+        """Path, rows written and lost so far, the error, if any, `unconfirmed_s`: seconds since the hand-over
         of the oldest batch the writer has not reported on began (0.0 when there is none; a writer that has stopped
-        answering, a hung disk, makes it grow). Never waits: while a batch is being handed over (a slow disk can
-        hold that up), it answers with what the writer had reported before."""
+        answering, a hung disk, makes it grow), and `restarts`: one line for each writer that died and was replaced.
+        Never waits: while a batch is being handed over (a slow disk can hold that up), it answers with what the
+        writer had reported before. A writer found dead here is replaced by the next hand-over (sender thread)."""
         if self._send_lock.acquire(blocking=False):
             try:
-                if self._conn is not None:
+                if self._conn is not None and not self._gave_up:
                     self._collect_replies()
             except (OSError, EOFError):
-                self.error = self.error or f"trial log writer for {str(self.path)!r} died"
+                pass  # its reports up to its death are taken; the sender replaces it within flush_s
             finally:
                 self._send_lock.release()
         try:
@@ -332,7 +437,7 @@ class TrialLog:
         except IndexError:  # none outstanding (or the last one confirmed just now, in another thread)
             unconfirmed_s = 0.0
         return {"path": str(self.path), "rows_written": dict(self.rows_written), "rows_lost": self.rows_lost,
-                "error": self.error, "unconfirmed_s": unconfirmed_s}
+                "error": self.error, "unconfirmed_s": unconfirmed_s, "restarts": list(self.restarts)}
 
     def close(self, timeout_s: float | None = None) -> None:
         """Hand over what is pending and end the writer, returning within `timeout_s` seconds (None:
@@ -355,12 +460,16 @@ class TrialLog:
                 self._thread.join()  # by the deadline at the latest: the kill fails a blocked hand-over
             self.flush()
             with self._send_lock:
-                try:
-                    self._hand_over("close", {})
-                    if not self._collect_replies(self._batch, max(0.0, end - time.monotonic())):
-                        self._kill_writer()
-                except (OSError, EOFError) as exc:
-                    self.error = self.error or f"trial log writer for {str(self.path)!r} died before closing: {exc}"
+                while not self._gave_up:
+                    try:
+                        self._hand_over("close", {})
+                        if not self._collect_replies(self._batch, max(0.0, end - time.monotonic())):
+                            self._kill_writer()
+                        break
+                    except (OSError, EOFError) as exc:
+                        if not self._restart(exc):
+                            self.error = self.error or (f"trial log writer for {str(self.path)!r} died before "
+                                                        f"closing: {exc}")
                 unconfirmed = self._rows_sent - sum(self.rows_written.values()) - self._writer_lost
                 self._lost_here += unconfirmed  # 0 once the writer has reported on every row
                 if self._killed:
@@ -369,6 +478,7 @@ class TrialLog:
                                   f"and was killed; {lost} rows not confirmed written, counted lost"
                                   + (f"; before that: {earlier_error}" if earlier_error else ""))
                 self._handed.clear()
+                self._kept = 0
                 self._conn.close()
                 self._conn = None
         finally:
@@ -379,7 +489,8 @@ class TrialLog:
 
     def _kill_writer(self) -> None:
         """SIGKILL the writer (`close`'s deadline): a hand-over blocked on its full pipe then fails at once. The
-        connection stays open until `close` closes it, in its own thread."""
+        connection stays open until `close` closes it, in its own thread. No new writer is started after it."""
+        self._expired = True
         if self._proc.exitcode is None:
             self._killed = True
             try:
@@ -392,6 +503,11 @@ class TrialLog:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _count(rows: dict[str, list]) -> int:
+    """Rows in a batch (table name -> rows)."""
+    return sum(len(table_rows) for table_rows in rows.values())
 
 
 _spare_lock = threading.Lock()
@@ -439,11 +555,13 @@ def _writer_process_main(conn_arg: str) -> None:
 
     conn = connection_from_arg(conn_arg)
     try:
-        kind, path, attrs = conn.recv()
+        kind, path, detail = conn.recv()
     except (EOFError, OSError):  # a spare that was never used: the server has ended
         return
     if kind == "open":
-        _writer_main(conn, path, attrs)
+        _writer_main(conn, path, detail)
+    elif kind == "resume":
+        _writer_main(conn, path, None, resume=detail)
 
 
 def _open_for_append(path: str):
@@ -489,8 +607,9 @@ def _convert(table: str, rows: list, dtype: np.dtype) -> tuple[np.ndarray, list[
     return _table_array(table, good, dtype), bad
 
 
-def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
-    """The writer process: create the file, then for each batch of rows it receives: open, append, close, fsync
+def _writer_main(conn, path: str, attrs: dict[str, Any] | None, resume: dict[str, Any] | None = None) -> None:
+    """The writer process: create the file with root attributes `attrs` (or, with `resume`, take over the file of a
+    writer that died: see `_resume`), then for each batch of rows it receives: open, append, close, fsync
     (batches already waiting behind it, when the disk is slower than the hand-overs, are written with it).
 
     The file is closed between batches (a batch takes about a millisecond), so a SIGKILL or crash almost
@@ -501,9 +620,17 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
     Each table's rows are converted on their own: a row that does not fit its table is left out and counted lost,
     named in `error`, and everything else is written. Only an HDF5 error while writing stops the writing for good.
     """
+    dtypes = {"frames": FRAME_DTYPE, "locomotion": SAMPLE_DTYPE, **_text_dtypes(), "servosphere": SERVOSPHERE_DTYPE}
+    if resume is not None:
+        _resume(conn, path, resume, dtypes)
+        return
+    _create(conn, path, attrs, dtypes)
+
+
+def _create(conn, path: str, attrs: dict[str, Any], dtypes: dict[str, np.dtype]) -> None:
+    """Make the file (fsynced with its folder entry), answer "ready" (or "error", reason) and write (`_write`)."""
     import h5py
 
-    dtypes = {"frames": FRAME_DTYPE, "locomotion": SAMPLE_DTYPE, **_text_dtypes(), "servosphere": SERVOSPHERE_DTYPE}
     try:
         f = h5py.File(path, "w-", libver=LIBVER, locking=False)
     except (OSError, ValueError) as exc:  # it exists, or its folder is missing or not writable
@@ -523,8 +650,44 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
         conn.send(("error", str(exc)))
         return
     conn.send(("ready", None))
-    written = dict.fromkeys(dtypes, 0)
-    lost = number = 0
+    _write(conn, path, dtypes, dict.fromkeys(dtypes, 0), 0)
+
+
+def _resume(conn, path: str, state: dict[str, Any], dtypes: dict[str, np.dtype]) -> None:
+    """Take over the file of a writer that died: open it (refused when that writer died within a batch and left it
+    marked open), cut each table back to `state["rows_written"]` (the rows it confirmed; a batch it wrote but never
+    confirmed is handed over again), close and fsync it, answer "ready" (or "error", reason) and write (`_write`),
+    counting on from `state`'s rows written and lost."""
+    import h5py
+
+    written = dict(state["rows_written"])
+    try:
+        f = h5py.File(path, "r+", libver=LIBVER, locking=False)  # not SWMR: SWMR writing only appends
+    except OSError as exc:
+        conn.send(("error", f"{exc}; the file stays as it is (open_log() reads it)"))
+        return
+    short = [f"{table!r} holds {f[table].shape[0]} rows, {count} were confirmed written"
+             for table, count in written.items() if f[table].shape[0] < count]
+    if short:  # never expected (fsync before each report): the file is not what the writer reported
+        f.close()
+        conn.send(("error", "; ".join(short)))
+        return
+    try:
+        for table, count in written.items():
+            f[table].resize((count,))
+        f.close()
+        _fsync(path)
+    except (OSError, RuntimeError, ValueError) as exc:  # `f` stays open until os._exit, as after a failed write
+        conn.send(("error", f"cutting the tables back to the confirmed rows failed: {exc}"))
+        os._exit(0)
+    conn.send(("ready", None))
+    _write(conn, path, dtypes, written, state["rows_lost"])
+
+
+def _write(conn, path: str, dtypes: dict[str, np.dtype], written: dict[str, int], lost: int) -> None:
+    """Write each batch received until a "close" or the connection's end (see `_writer_main`), counting on from
+    `written` rows per table and `lost` rows; each report holds the totals."""
+    number = 0
     error = None
     failed = ended = False
     while not ended:
@@ -564,10 +727,12 @@ def _writer_main(conn, path: str, attrs: dict[str, Any]) -> None:
                          f"`h5clear -s {path}` (package hdf5-tools)")
                 lost += sum(len(data) for data in arrays.values())
         try:
-            conn.send(("written", {"batch": number, "rows_written": written, "rows_lost": lost, "error": error}))
+            conn.send(("written", {"batch": number, "rows_written": written, "rows_lost": lost, "error": error,
+                                   "failed": failed}))
         except (OSError, EOFError):
             break
-    _send_quietly(conn, ("closed", {"batch": number, "rows_written": written, "rows_lost": lost, "error": error}))
+    _send_quietly(conn, ("closed", {"batch": number, "rows_written": written, "rows_lost": lost, "error": error,
+                                    "failed": failed}))
     if failed:  # HDF5 cannot shut down after a failed write without risking a crash: what is on disk stays
         # (readable as after a crash), the parent has been told, leave without HDF5's shutdown
         os._exit(0)

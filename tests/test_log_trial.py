@@ -538,3 +538,175 @@ def test_a_log_its_writer_holds_open_is_read_through_swmr(tmp_path):
     finally:
         holder.kill()
         holder.wait(10)
+
+
+def kill_writer(log: TrialLog) -> int:
+    """SIGKILL the log's writer (the OOM killer) and wait until it has ended; its pid."""
+    pid = log._proc.pid
+    os.kill(pid, signal.SIGKILL)
+    log._proc.proc.wait(10)
+    return pid
+
+
+def add_frames(log: TrialLog, first: int, count: int) -> None:
+    for frame in range(first, first + count):
+        log.add_frame(frame_row(frame))
+
+
+def test_a_writer_killed_between_batches_is_replaced_and_loses_nothing(tmp_path):
+    """A writer killed mid-trial (the OOM killer) cost every later row ('rows_lost: 789') though its file was closed
+    and intact: a new writer takes the file over."""
+    path = tmp_path / "k.h5"
+    log = quiet_log(path, "killed")
+    add_frames(log, 0, 100)
+    log.flush(wait=True)  # reported written: the writer waits for its next batch
+    dead = kill_writer(log)
+    add_frames(log, 100, 100)
+    log.flush(wait=True)
+    assert log.status()["rows_written"]["frames"] == 200 and log._proc.pid != dead  # a new writer wrote them
+    add_frames(log, 200, 100)
+    log.close()
+    status = log.status()
+    assert status["rows_lost"] == 0 and status["error"] is None and status["rows_written"]["frames"] == 300
+    assert status["restarts"] == [f"trial log writer for {str(path)!r} died (exit -9): [Errno 32] Broken pipe; a new "
+                                  "writer took the file over at 100 rows confirmed written and was handed the 0 "
+                                  "unconfirmed batches (0 rows) again"]
+    assert path.read_bytes()[11] == 0x00  # closed and clean: plain readers (MATLAB) open it
+    with h5py.File(path, "r") as f:
+        assert np.array_equal(f["frames"]["frame"], np.arange(300))
+
+
+def test_unconfirmed_batches_of_a_killed_writer_are_handed_again_and_written_once(tmp_path):
+    """Batches piled up behind a stopped writer, one of them written to the file but never confirmed, then the writer
+    is killed: the new writer cuts the file back to the confirmed rows and gets every unconfirmed batch again."""
+    path = tmp_path / "u.h5"
+    log = quiet_log(path, "unconfirmed")
+    add_frames(log, 0, 10)
+    log.add_event(0.0, "first", {"n": 1})
+    log.flush(wait=True)
+    os.kill(log._proc.pid, signal.SIGSTOP)  # between batches: waiting for the next
+    for first in (10, 20, 30):  # three batches handed over, none confirmed
+        add_frames(log, first, 10)
+        log.flush()
+    with h5py.File(path, "r+", libver=("v110", "v110"), locking=False) as f:  # as the writer would have: batch 10..19
+        frames = f["frames"]  # appended, closed, then killed before its report
+        frames.resize((20,))
+        frames[10:] = np.array([frame_row(frame) for frame in range(10, 20)], FRAME_DTYPE)
+    assert log.status()["rows_written"]["frames"] == 10
+    kill_writer(log)
+    add_frames(log, 40, 10)
+    log.flush(wait=True)
+    log.close()
+    status = log.status()
+    assert status["rows_lost"] == 0 and status["error"] is None
+    assert status["rows_written"] == {"frames": 50, "locomotion": 0, "events": 1, "commands": 0, "scenes": 0,
+                                      "servosphere": 0}
+    assert status["restarts"][0].endswith("a new writer took the file over at 11 rows confirmed written and was "
+                                          "handed the 3 unconfirmed batches (30 rows) again")
+    assert np.array_equal(read_table(path, "frames")["frame"], np.arange(50))  # each frame once, in order
+    assert list(read_table(path, "events")["kind"]) == ["first"]
+
+
+def test_a_writer_killed_more_often_than_the_restart_limit_ends_the_writing_counting_rows_lost(tmp_path):
+    limit = 3  # restarts a trial gets (docs/logs.md)
+    path = tmp_path / "r.h5"
+    log = quiet_log(path, "again")
+    for restart in range(limit + 1):
+        add_frames(log, restart * 10, 10)
+        log.flush(wait=True)
+        assert log.status()["rows_written"]["frames"] == (restart + 1) * 10  # by a new writer after each death
+        kill_writer(log)
+    first = (limit + 1) * 10
+    add_frames(log, first, 10)  # handed to no writer: the last death was one too many
+    log.flush(wait=True)
+    add_frames(log, first + 10, 5)
+    log.close()
+    status = log.status()
+    assert len(status["restarts"]) == limit
+    assert status["rows_written"]["frames"] == first and status["rows_lost"] == 15
+    assert status["error"] == (f"trial log writer for {str(path)!r} died (exit -9): [Errno 32] Broken pipe; no new "
+                               f"writer: {limit} restarts is the most a trial gets; its unconfirmed rows "
+                               "and every later row counted lost")
+    assert np.array_equal(read_table(path, "frames")["frame"], np.arange(first))
+
+
+def test_a_writer_that_died_within_a_batch_is_not_replaced_and_the_error_says_why(tmp_path):
+    """A death within a batch leaves the file marked open for writing: no new writer may take it (as before)."""
+    path = tmp_path / "b.h5"
+    log = quiet_log(path, "in batch")
+    add_frames(log, 0, 10)
+    log.flush(wait=True)
+    kill_writer(log)
+    subprocess.run([sys.executable, "-c", textwrap.dedent("""
+        import os, sys, h5py
+        f = h5py.File(sys.argv[1], "r+", libver=("v110", "v110"), locking=False)
+        f.swmr_mode = True  # as the writer does for each batch
+        os._exit(0)  # killed before it closed the file
+    """), str(path)], check=True, timeout=60)
+    add_frames(log, 10, 10)
+    log.flush(wait=True)
+    log.close()
+    status = log.status()
+    assert status["error"].startswith(f"trial log writer for {str(path)!r} died (exit -9): [Errno 32] Broken pipe; "
+                                      "a new writer could not take the file over: ")
+    assert "already open for write" in status["error"]
+    assert status["error"].endswith("the file stays as it is (open_log() reads it); its unconfirmed rows and every "
+                                    "later row counted lost")
+    assert status["restarts"] == [] and status["rows_written"]["frames"] == 10 and status["rows_lost"] == 10
+    assert np.array_equal(read_table(path, "frames")["frame"], np.arange(10))
+
+
+def test_a_server_whose_log_writer_is_killed_raises_an_alarm_and_keeps_every_frame(tmp_path):
+    from antarium.config import resolve
+    from antarium.server import Server
+
+    config = resolve({"rig": {"name": "oom"}, "bus": {"enabled": False}, "log": {"dir": str(tmp_path), "flush_s": 1.0},
+                      "loop": {"rate_hz": 200.0}, "locomotion": {"source": "scripted", "rate_hz": 400.0}})
+    echoed = []
+    server = Server(config, renderer_factory=None, link=False, echo=echoed.append).start_thread()
+    try:
+        assert wait_for(lambda: server.loop is not None and server.loop.frame > 5, 30.0)
+        path = server.command("trial_start", {"name": "oom", "metadata": {}})["path"]
+        log = server.trial_log
+        confirmed = log.status()["rows_written"]["frames"]
+        assert wait_for(lambda: log.status()["rows_written"]["frames"] > confirmed, 10.0)
+        kill_writer(log)  # just after a report: a second before the next batch (flush_s 1 s)
+        assert wait_for(lambda: any("RESTARTED" in a for a in server.status()["alarms"]), 10.0)
+        alarms = server.status()["alarms"]
+        assert [a for a in alarms if a.startswith("TRIAL LOG")] == [
+            f"TRIAL LOG WRITER RESTARTED, 1 OF 3: {log.status()['restarts'][0]}"]
+        assert wait_for(lambda: any(line.startswith("antarium serve: ALARM: TRIAL LOG WRITER RESTARTED, 1 OF 3: ")
+                                    for line in echoed), 10.0)  # the status thread prints it for the operator
+        frame = server.loop.frame
+        assert wait_for(lambda: server.loop.frame > frame + 50, 20.0)  # the frames go on
+        stopped = server.command("trial_stop")
+    finally:
+        server.stop()
+    assert stopped["rows_lost"] == 0 and stopped["error"] is None and len(stopped["restarts"]) == 1
+    frames = read_table(path, "frames")["frame"]
+    assert len(frames) == stopped["rows_written"]["frames"] > 100
+    assert np.array_equal(frames, np.arange(frames[0], frames[0] + len(frames)))  # each once, none missing
+
+
+def test_a_writer_that_dies_holding_more_unconfirmed_rows_than_are_kept_is_not_replaced(tmp_path, monkeypatch):
+    """Rows not confirmed are kept for a new writer up to RESEND_MAX_ROWS; beyond it the oldest are let go, and a
+    writer that dies before confirming them is not replaced (the file would miss them): the rows count lost."""
+    monkeypatch.setattr("antarium.trial_log.RESEND_MAX_ROWS", 15, raising=False)  # the code before had none
+    path = tmp_path / "m.h5"
+    log = quiet_log(path, "many")
+    add_frames(log, 0, 10)
+    log.flush(wait=True)
+    os.kill(log._proc.pid, signal.SIGSTOP)  # a writer that stopped answering
+    for first in (10, 20, 30):  # 30 rows not confirmed: the two oldest batches are no longer kept
+        add_frames(log, first, 10)
+        log.flush()
+    kill_writer(log)
+    add_frames(log, 40, 10)
+    log.flush(wait=True)
+    log.close()
+    status = log.status()
+    assert status["error"] == (f"trial log writer for {str(path)!r} died (exit -9): [Errno 32] Broken pipe; more than "
+                               "15 rows were not confirmed and the oldest were no longer kept to hand over again; its "
+                               "unconfirmed rows and every later row counted lost")
+    assert status["restarts"] == [] and status["rows_written"]["frames"] == 10 and status["rows_lost"] == 40
+    assert np.array_equal(read_table(path, "frames")["frame"], np.arange(10))

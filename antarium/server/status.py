@@ -65,11 +65,14 @@ def rig_status(server: Server) -> dict[str, Any]:
             alarms.append(f"the dome emulator process is not running ({_exit_status(server.emulator.exitcode)})")
     log = server.trial_log  # read once: trial_stop may end the trial in another thread
     if log is not None:
-        from antarium.trial_log import CLOSE_TIMEOUT_S
+        from antarium.trial_log import CLOSE_TIMEOUT_S, MAX_WRITER_RESTARTS
 
         out["log"] = log.status()
         if out["log"]["error"]:
             alarms.append("TRIAL LOG NOT WRITTEN: " + out["log"]["error"])
+        if out["log"]["restarts"]:  # for the rest of the trial; each restart is echoed (its count is in the key)
+            alarms.append(f"TRIAL LOG WRITER RESTARTED, {len(out['log']['restarts'])} OF {MAX_WRITER_RESTARTS}: "
+                          f"{out['log']['restarts'][-1]}")
         if out["log"]["unconfirmed_s"] > LOG_STALL_ALARM_S:
             alarms.append(f"TRIAL LOG WRITER NOT ANSWERING: rows handed over {out['log']['unconfirmed_s']:.1f} s ago "
                           f"are not confirmed written (a hung disk?); ending the trial waits for it at most "
