@@ -191,6 +191,8 @@ class Scene:
         from .sky import Sky
 
         skies = [layer for layer in self.far if isinstance(layer, Sky)]
+        if not skies:  # no sun: nothing to refine (the per-frame far texture of a sky-less scene pays nothing)
+            return np.empty(0, dtype=np.int64), np.empty((0, 1, 4), dtype=np.float32)
         hit = np.zeros(len(centres), dtype=bool)
         for sky in skies:
             hit |= sky.rim_cells(centres, step)

@@ -23,6 +23,17 @@ def _rig(scene, tether="free_yaw", model=None):
                        renderer_kwargs={"face_size": FACE})
 
 
+def _readings(ant, headings):
+    """After 40 frames, the compass reading one frame after the ant is put down at each of `headings` (rad), in
+    turn (a generator: the ant faces that heading while its reading is looked at)."""
+    for _ in range(40):
+        ant.frame()
+    for heading in headings:
+        ant.place(0.0, 0.0, heading)
+        ant.frame()
+        yield ant.sense().compass
+
+
 def _error_deg(ant, reading, sun_deg):
     return math.degrees(math.remainder(reading.heading + math.radians(sun_deg) - ant.heading, math.tau))
 
@@ -72,12 +83,7 @@ def test_in_the_fixed_tether_an_ant_that_waits_for_its_cue_walks_on_a_true_compa
 @pytest.mark.parametrize("elevation_deg", [5.0, -5.0, 89.5])
 def test_settled_skies_keep_their_cue_at_every_heading(elevation_deg):
     with _rig({"scene": "sky", "sun_azimuth_deg": SUN_DEG, "sun_elevation_deg": elevation_deg}) as ant:
-        for _ in range(40):
-            ant.frame()
-        for heading in (-2.0, 0.0, 1.0, 2.5):
-            ant.place(0.0, 0.0, heading)
-            ant.frame()
-            reading = ant.sense().compass
+        for reading in _readings(ant, (-2.0, 0.0, 1.0, 2.5)):
             assert reading.cue, reading.why
             assert abs(_error_deg(ant, reading, SUN_DEG)) < 0.5
 
@@ -85,12 +91,7 @@ def test_settled_skies_keep_their_cue_at_every_heading(elevation_deg):
 def test_a_sun_at_the_zenith_gives_no_cue():
     """No solar azimuth: the fit's horizontal part is rounding, and the heading was +-45 deg off with a cue."""
     with _rig({"scene": "sky", "sun_azimuth_deg": SUN_DEG, "sun_elevation_deg": 90.0}) as ant:
-        for _ in range(40):
-            ant.frame()
-        for heading in (0.0, 1.0):
-            ant.place(0.0, 0.0, heading)
-            ant.frame()
-            reading = ant.sense().compass
+        for reading in _readings(ant, (0.0, 1.0)):
             assert not reading.cue and "zenith" in reading.why
 
 
@@ -100,12 +101,7 @@ def test_a_cylinder_towards_the_sun_does_not_flip_the_heading():
     cylinder = Clutter(np.array([[0.06, 0.0]]), np.array([0.05]), 0.1)
     with _rig(clutter_scene(cylinder, {"sun_azimuth_deg": 0.0})) as ant:
         ant.place(0.0, 0.0, 0.0)
-        for _ in range(40):
-            ant.frame()
-        for heading in (0.0, 1.5):
-            ant.place(0.0, 0.0, heading)
-            ant.frame()
-            reading = ant.sense().compass
+        for reading in _readings(ant, (0.0, 1.5)):
             assert reading.cue, reading.why
             assert abs(_error_deg(ant, reading, 0.0)) < 0.5
 
