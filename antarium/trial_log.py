@@ -44,6 +44,8 @@ CLOSE_TIMEOUT_S = 30.0
 #: writers that die during a trial are replaced this many times; the next death ends the writing as before (its rows
 #: and every later row counted lost, `error` says why)
 MAX_WRITER_RESTARTS = 3
+#: the event each restart writes into the trial's `events` table (data: `restart` k, `of`, `detail`: the restart's line)
+RESTART_EVENT = "log_writer_restarted"
 
 #: rows handed over and not yet confirmed written that are kept for a new writer should the writer die; beyond this
 #: (a writer that stopped answering for minutes) the oldest batches are no longer kept, and a writer that dies before
@@ -191,6 +193,7 @@ class TrialLog:
         self.path = Path(path)
         if _exists(self.path):
             raise LogError(f"trial log {str(self.path)!r} already exists; a recording never overwrites one")
+        self._clock = clock
         created, created_utc = clock(), _dt.datetime.now(_dt.UTC)  # the anchor of the tables' times to UTC
         attrs = {"format": "antarium-trial-log", "format_version": FORMAT_VERSION, "software_version": __version__,
                  "created_utc": created_utc.isoformat(), "created_monotonic": float(created), "trial_name": name,
@@ -388,8 +391,14 @@ class TrialLog:
         self.restarts.append(f"{died}; a new writer took the file over at {sum(self.rows_written.values())} rows "
                              f"confirmed written and was handed the {len(unsent)} unconfirmed batches ({rows} rows) "
                              "again")
+        event = (self._clock(), RESTART_EVENT, _json({"restart": len(self.restarts), "of": MAX_WRITER_RESTARTS,
+                                                      "detail": self.restarts[-1]}))
+        self._batch += 1  # a batch of its own, after the rows handed again; kept like them until confirmed
+        self._handed.append([self._batch, 0.0, "rows", {"events": [event]}])
+        self._kept += 1
+        self._rows_sent += 1
         try:
-            for entry in unsent:
+            for entry in self._handed:
                 entry[1] = time.monotonic()
                 self._conn.send(("rows", entry[0], entry[3]))
         except (OSError, EOFError) as resend_error:  # the new writer died too

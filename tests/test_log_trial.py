@@ -560,6 +560,7 @@ def test_a_writer_killed_between_batches_is_replaced_and_loses_nothing(tmp_path)
     log = quiet_log(path, "killed")
     add_frames(log, 0, 100)
     log.flush(wait=True)  # reported written: the writer waits for its next batch
+    before_kill = time.monotonic()
     dead = kill_writer(log)
     add_frames(log, 100, 100)
     log.flush(wait=True)
@@ -574,6 +575,10 @@ def test_a_writer_killed_between_batches_is_replaced_and_loses_nothing(tmp_path)
     assert path.read_bytes()[11] == 0x00  # closed and clean: plain readers (MATLAB) open it
     with h5py.File(path, "r") as f:
         assert np.array_equal(f["frames"]["frame"], np.arange(300))
+    events = read_table(path, "events")  # the file itself says that its writer was replaced, and when
+    assert list(events["kind"]) == ["log_writer_restarted"]
+    assert json.loads(events["data"][0]) == {"restart": 1, "of": 3, "detail": status["restarts"][0]}
+    assert before_kill < events["t"][0] < time.monotonic()  # on the log's clock (time.monotonic here)
 
 
 def test_unconfirmed_batches_of_a_killed_writer_are_handed_again_and_written_once(tmp_path):
@@ -599,12 +604,12 @@ def test_unconfirmed_batches_of_a_killed_writer_are_handed_again_and_written_onc
     log.close()
     status = log.status()
     assert status["rows_lost"] == 0 and status["error"] is None
-    assert status["rows_written"] == {"frames": 50, "locomotion": 0, "events": 1, "commands": 0, "scenes": 0,
+    assert status["rows_written"] == {"frames": 50, "locomotion": 0, "events": 2, "commands": 0, "scenes": 0,
                                       "servosphere": 0}
     assert status["restarts"][0].endswith("a new writer took the file over at 11 rows confirmed written and was "
                                           "handed the 3 unconfirmed batches (30 rows) again")
     assert np.array_equal(read_table(path, "frames")["frame"], np.arange(50))  # each frame once, in order
-    assert list(read_table(path, "events")["kind"]) == ["first"]
+    assert list(read_table(path, "events")["kind"]) == ["first", "log_writer_restarted"]
 
 
 def test_a_writer_killed_more_often_than_the_restart_limit_ends_the_writing_counting_rows_lost(tmp_path):
@@ -628,6 +633,8 @@ def test_a_writer_killed_more_often_than_the_restart_limit_ends_the_writing_coun
                                f"writer: {limit} restarts is the most a trial gets; its unconfirmed rows "
                                "and every later row counted lost")
     assert np.array_equal(read_table(path, "frames")["frame"], np.arange(first))
+    restarts = [json.loads(data) for data in read_table(path, "events")["data"]]  # one event each, in order
+    assert [(event["restart"], event["detail"]) for event in restarts] == list(enumerate(status["restarts"], 1))
 
 
 def test_a_writer_that_died_within_a_batch_is_not_replaced_and_the_error_says_why(tmp_path):
