@@ -235,3 +235,17 @@ def test_bus_source_counts_malformed_payloads_and_reports_silence():
         time.sleep(0.3)
         assert src.status()["connected"] is False
         src.stop()
+
+
+@pytest.mark.parametrize(("name", "options", "hint"), [
+    ("usb", {"trackball": {"vendor_id": 0x1209, "product_id": 0x0001}},
+     "plug it in and check `lsusb`, the udev rule of docs/trackball_usb.md and [trackball] vendor_id/product_id"),
+    ("fictrac", {"transport": "udp", "host": "127.0.0.1", "port": 2001},
+     "is FicTrac running and sending to udp 127.0.0.1:2001 (its sock_port)?"),
+    ("bus", {"rig": "r7"},
+     "is `antarium trackball` (or a simulated ant) running for rig 'r7' and publishing on antarium/r7/locomotion?"),
+    ("scripted", {}, ""),  # never lost: nothing to check
+])
+def test_each_source_says_what_to_check_when_it_delivers_nothing(name, options, hint):
+    """What serve prints with locomotion_lost (built, not started: no device, socket or session is opened)."""
+    assert open_source(name, **options).lost_hint() == hint

@@ -13,7 +13,8 @@ def test_unplugged_trackball_holds_the_pose_and_resumes(tmp_path):
     config = resolve({"rig": {"name": "ttb"}, "bus": {"enabled": False},
                       "locomotion": {"source": "usb", "emulate": True},
                       "log": {"dir": str(tmp_path), "flush_s": 0.1}})
-    server = Server(config, renderer_factory=None, link=False, record="unplug", echo=lambda line: None)
+    lines = []
+    server = Server(config, renderer_factory=None, link=False, record="unplug", echo=lines.append)
     server.start_thread()
     try:
         loop, device = server.loop, server.source.backend
@@ -35,3 +36,10 @@ def test_unplugged_trackball_holds_the_pose_and_resumes(tmp_path):
     assert kinds.index("locomotion_lost") < kinds.index("locomotion_back")
     x_while_lost = frames["x"][frames["locomotion_connected"] == 0]
     assert x_while_lost == pytest.approx(x_while_lost[0])
+    # stderr names the device and what to check, not the source's ~30 status counters (those are on the bus)
+    lost = next(line for line in lines if line.startswith("antarium serve: locomotion_lost"))
+    assert lost == ("antarium serve: locomotion_lost: usb 1209:0001 delivers nothing (USB error: [Errno 19] No such "
+                    "device (it may have been disconnected)); the pose is held (losses so far: 1); plug it in and "
+                    "check `lsusb`, the udev rule of docs/trackball_usb.md and [trackball] "
+                    "vendor_id/product_id")
+    assert "antarium serve: locomotion_back: usb 1209:0001 delivers again (losses so far: 1)" in lines

@@ -140,8 +140,8 @@ def _run(args: argparse.Namespace, rig: RigConfig) -> int:
                     next_status += 1.0
                     if not warned and now - t0 >= 1.0 and not _ever_read(status):
                         # once, while it keeps looking: what is missing, not only `"connected": false`
-                        print(f"antarium trackball: {_nothing_read(args, status)}; still waiting", file=sys.stderr,
-                              flush=True)
+                        print(f"antarium trackball: {_nothing_read(args, source, status)}; still waiting",
+                              file=sys.stderr, flush=True)
                         warned = True
                 time.sleep(0.002)
             final = source.status()
@@ -150,7 +150,7 @@ def _run(args: argparse.Namespace, rig: RigConfig) -> int:
         if session is not None:
             session.close()
     if not _ever_read(final):
-        raise RuntimeError(_nothing_read(args, final))
+        raise RuntimeError(_nothing_read(args, source, final))
     return 0
 
 
@@ -159,15 +159,14 @@ def _ever_read(status: dict[str, Any]) -> bool:
     return bool(status.get("reports") or status.get("connects") or status.get("frames"))
 
 
-def _nothing_read(args: argparse.Namespace, status: dict[str, Any]) -> str:
-    """One line naming what was missing when a source delivered nothing."""
+def _nothing_read(args: argparse.Namespace, source, status: dict[str, Any]) -> str:
+    """One line naming what was missing when `source` delivered nothing."""
     error = f" (last error: {status['last_error']})" if status.get("last_error") else ""
     if args.source == "usb":
-        return (f"no USB trackball {status.get('device', '?')} found{error}: plug it in and check `lsusb`, the "
-                "udev rule of docs/trackball_usb.md and [trackball] vendor_id/product_id (--emulate: no hardware)")
+        return (f"no USB trackball {status.get('device', '?')} found{error}: {source.lost_hint()} "
+                "(--emulate: no hardware)")
     if args.source == "fictrac":
-        return (f"no FicTrac frame arrived on {args.transport} {args.host}:{args.port}{error}: is FicTrac running "
-                "and sending there (its sock_port)?")
+        return f"no FicTrac frame arrived{error}: {source.lost_hint()}"
     return f"--path {args.path}: no FicTrac frame was replayed{error}"
 
 

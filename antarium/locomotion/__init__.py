@@ -61,6 +61,11 @@ class LocomotionSource(ABC):
         """Counters and state for the server's status message (JSON-serialisable)."""
         return {"connected": True}
 
+    def lost_hint(self) -> str:
+        """What the operator should check when this source delivers nothing: one clause ("" when its status's
+        error says it all)."""
+        return ""
+
     def __enter__(self) -> LocomotionSource:
         self.start()
         return self

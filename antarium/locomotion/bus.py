@@ -122,6 +122,12 @@ class BusSource(BufferedSource):
                 self._device_lost = False
                 self._straggler_seq = None
 
+    def lost_hint(self) -> str:
+        from antarium.bus import locomotion_key
+
+        return (f"is `antarium trackball` (or a simulated ant) running for rig {self.rig_name!r} and publishing on "
+                f"{locomotion_key(self.rig_name)}?")
+
     def status(self) -> dict[str, Any]:
         with self._lock:
             last = self._last_t

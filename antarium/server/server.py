@@ -238,7 +238,9 @@ class Server:
         query.reply(query.key_expr, json.dumps({"ok": True, "result": result}, default=_json_default))
 
     def _publish_event(self, t: float, kind: str, data: dict) -> None:
-        if kind in ALARM_EVENTS or kind in RECOVERY_EVENTS:
+        if kind in ("locomotion_lost", "locomotion_back"):
+            self.echo(f"antarium serve: {kind}: {self._locomotion_line(kind, data)}")
+        elif kind in ALARM_EVENTS or kind in RECOVERY_EVENTS:
             self.echo(f"antarium serve: {kind}: {json.dumps(data, default=_json_default)}")
         if self.session is not None:
             try:
@@ -246,6 +248,21 @@ class Server:
                                  json.dumps({"t": t, "kind": kind, "data": data}, default=_json_default))
             except Exception as exc:  # zenoh errors must never stop the frame loop  # noqa: BLE001
                 self.echo(f"antarium serve: publishing event {kind} failed: {exc}")
+
+    def _locomotion_line(self, kind: str, data: dict) -> str:
+        """A locomotion_lost / locomotion_back event for the operator: the source, where it reads from, its error and
+        what to check (the source's `lost_hint`); the event itself, with the source's whole status, is on the bus."""
+        status = data.get("status") or {}
+        where = status.get("device") or status.get("address") or status.get("path")
+        where = " ".join(str(part) for part in where) if isinstance(where, list) else where
+        name = f"{status.get('source') or self.config.locomotion.source}" + (f" {where}" if where else "")
+        losses = f"losses so far: {data.get('losses')}"
+        if kind == "locomotion_back":
+            return f"{name} delivers again ({losses})"
+        error = status.get("last_error") or status.get("error")
+        hint = getattr(self.source, "lost_hint", str)()  # a source not built on LocomotionSource has none
+        return (f"{name} delivers nothing{f' ({error})' if error else ''}; the pose is held ({losses})"
+                + (f"; {hint}" if hint else ""))
 
     def _on_frame(self, rec: FrameRecord) -> None:
         loop_cfg = self.config.loop

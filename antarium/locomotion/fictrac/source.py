@@ -133,6 +133,9 @@ class FicTracSource(ReaderSource):
             self._sock.close()
             self._sock = None
 
+    def lost_hint(self) -> str:
+        return f"is FicTrac running and sending to {self.transport} {self.host}:{self.port} (its sock_port)?"
+
     def status(self) -> dict[str, Any]:
         now = self.clock.now()
         fresh = self._last_frame is not None and now - self._last_frame <= self.timeout_s

@@ -104,6 +104,10 @@ class UsbTrackball(ReaderSource):
                                    f"({self.last_error or 'no such device'})")
             time.sleep(0.01)
 
+    def lost_hint(self) -> str:
+        return ("plug it in and check `lsusb`, the udev rule of docs/trackball_usb.md and [trackball] "
+                "vendor_id/product_id")
+
     def status(self) -> dict[str, Any]:
         age = None if self._last_report is None else self.clock.now() - self._last_report
         return {"connected": self._connected, "source": "usb",
