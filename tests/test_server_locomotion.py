@@ -43,10 +43,16 @@ def backend(request, tmp_path):
     if request.param == "bus":
         section = {"listen": [bus.free_tcp_endpoint()]}
         server = bus.open_session(section, "server")
-        src = open_source("bus", rig="tloco", session=server, clock=MonotonicClock())
+        # silence that long is no loss here (a loaded machine); the silence test is below
+        src = open_source("bus", rig="tloco", session=server, clock=MonotonicClock(), timeout_s=60.0)
         src.start()
         feeder = Feeder(section, "tloco")
-        time.sleep(0.3)
+        deadline = time.monotonic() + 20.0  # until the route is up: samples put before it are not delivered
+        while src.received == 0 and time.monotonic() < deadline:
+            feeder.push(1)
+            time.sleep(0.05)
+        assert src.received > 0, "the feeder's samples never reached the bus source"
+        src.read()
 
         def advance(seconds):
             feeder.push(int(seconds * 100))
