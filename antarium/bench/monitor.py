@@ -69,6 +69,34 @@ def page_figures(m: dict[str, Any], seconds: float, cpu_s: float) -> dict[str, A
     return out
 
 
+def page_lines(page: dict[str, Any] | None) -> list[str]:
+    """The report's lines for the page's figures (`page_figures`); what the page never measured (no paint, no LED
+    frame drawn: e.g. the rig config's `[monitor] leds_every_frames = 0`) is said as such."""
+    if not page:
+        return ["  the page reported nothing (it did not open)"]
+
+    def ms(v: float | None) -> str:
+        return "none" if v is None else f"{v:.0f} ms"
+
+    lines = [f"  first contentful paint {ms(page['first_contentful_paint_ms'])}, first LED frame drawn "
+             f"{ms(page['first_led_frame_drawn_ms'])} after navigation",
+             f"  updates drawn   {page['updates_per_s']:.1f} /s over {page['seconds']:.1f} s"]
+    if page["browser_cpu_ms_per_update"]:
+        lines.append(f"  browser CPU     {page['browser_cpu_ms_per_update']:.1f} ms per update drawn (all its "
+                     f"processes, {page['browser_cpu_per_s']:.2f} of a core): with a core to itself, up to "
+                     f"{1e3 / page['browser_cpu_ms_per_update']:.0f} updates/s")
+    f2s = page["frame_to_screen_ms"]
+    if f2s:
+        lines.append(f"  frame -> screen p50 {f2s['p50']:.1f}  p99 {f2s['p99']:.1f}  max {f2s['max']:.1f} ms "
+                     f"({f2s['n']} frames)")
+    else:
+        lines.append("  frame -> screen: no LED frame drawn (is the LED stream on? [monitor] leds_every_frames)")
+    if "draw_ms_p50" in page:
+        d = page["draw_ms_p50"]
+        lines.append(f"  page's drawing of one frame, p50: map {d['map']:.1f} ms, 3D view {d['3d']:.1f} ms")
+    return lines
+
+
 class PageWatcher(threading.Thread):
     """Opens `url` in headless chromium once it answers and measures the page from a warm-up after it opened until
     `stop_event` (set when the loop's frames end: `bench loop`'s `on_frames_end`)."""
@@ -153,23 +181,9 @@ def run(args: argparse.Namespace) -> int:
             with open(loop_json) as fh:
                 loop = json.load(fh)
             results[mode] = {"loop": loop, "page": watcher.result if watcher is not None else None}
-    page = results["page"]["page"]
     print(f"--- the page (browser {'SCHED_IDLE' if idle else 'at normal priority'}) ---")
-    if page:
-        f2s = page["frame_to_screen_ms"]
-        print(f"  first contentful paint {page['first_contentful_paint_ms']:.0f} ms, first LED frame drawn "
-              f"{page['first_led_frame_drawn_ms']:.0f} ms after navigation")
-        print(f"  updates drawn   {page['updates_per_s']:.1f} /s over {page['seconds']:.1f} s")
-        if page["browser_cpu_ms_per_update"]:
-            print(f"  browser CPU     {page['browser_cpu_ms_per_update']:.1f} ms per update drawn (all its "
-                  f"processes, {page['browser_cpu_per_s']:.2f} of a core): with a core to itself, up to "
-                  f"{1e3 / page['browser_cpu_ms_per_update']:.0f} updates/s")
-        if f2s:
-            print(f"  frame -> screen p50 {f2s['p50']:.1f}  p99 {f2s['p99']:.1f}  max {f2s['max']:.1f} ms "
-                  f"({f2s['n']} frames)")
-        if "draw_ms_p50" in page:
-            d = page["draw_ms_p50"]
-            print(f"  page's drawing of one frame, p50: map {d['map']:.1f} ms, 3D view {d['3d']:.1f} ms")
+    for line in page_lines(results["page"]["page"]):
+        print(line)
     for mode in ("off", "monitor", "page"):
         r = results[mode]["loop"]
         lat = r["latency"]

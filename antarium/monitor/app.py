@@ -279,6 +279,22 @@ def _call(session, rig: str, name: str, params: dict[str, Any], timeout_s: float
                             "was refused by the bus's access control)"}
 
 
+def bind_error(exc: OSError) -> str:
+    """Why the page's socket could not be bound, and which setting to change: the port when it is taken, else the
+    address (a name that does not resolve, an address not this computer's)."""
+    if exc.errno in (errno.EADDRINUSE, errno.EACCES):
+        why = "in use (another monitor?)" if exc.errno == errno.EADDRINUSE else \
+            f"refused: {exc.strerror} (ports below 1024 need privileges)"
+        return f"{why}; set [monitor] port (or --port; 0: any free port)"
+    return (f"refused: {exc.strerror or exc}; set [monitor] host (or --host) to an address of this computer "
+            "(\"127.0.0.1\", \"0.0.0.0\" for the lab network)")
+
+
+def page_url(host: str, port: int) -> str:
+    """The page's address for a bound socket's `host` and `port`: an IPv6 address in brackets (RFC 3986)."""
+    return f"http://[{host}]:{port}/" if ":" in host else f"http://{host}:{port}/"
+
+
 def serve(session, rig: str, settings: MonitorSection, echo=print) -> None:
     """Run the web server until interrupted; prints its address once it listens."""
     from aiohttp import web
@@ -291,11 +307,10 @@ def serve(session, rig: str, settings: MonitorSection, echo=print) -> None:
             await site.start()
         except OSError as exc:
             await runner.cleanup()
-            why = "in use (another monitor?)" if exc.errno == errno.EADDRINUSE else f"refused: {exc.strerror or exc}"
-            raise RuntimeError(f"the page cannot be served on {settings.host} port {settings.port}: {why}; set "
-                               "[monitor] port (or --port; 0: any free port)") from None
+            raise RuntimeError(f"the page cannot be served on {settings.host} port {settings.port}: "
+                               f"{bind_error(exc)}") from None
         host, port = site._server.sockets[0].getsockname()[:2]
-        echo(f"antarium monitor: rig {rig!r} at http://{host}:{port}/ "
+        echo(f"antarium monitor: rig {rig!r} at {page_url(host, port)} "
              f"(commands {'on' if settings.commands else 'off'})")
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()

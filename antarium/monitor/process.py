@@ -62,7 +62,9 @@ class MonitorProcess:
 
     def report(self, echo: Callable[[str], None], timeout_s: float = 60.0) -> threading.Thread:
         """A thread that echoes the monitor's address once it listens, or why it stopped if it ends before (e.g.
-        its port in use), or that it said neither within `timeout_s`. Never holds up the server."""
+        its port in use), or that it said neither within `timeout_s`; then, if the monitor ends while the server
+        runs (killed, crashed), one line with its exit code and last output (checked twice a second). Never
+        holds up the server."""
         def run() -> None:
             ok, line = self.started(timeout_s)
             if self._closed.is_set():
@@ -71,6 +73,16 @@ class MonitorProcess:
                 line = (f"antarium serve: the monitor has not said where it serves its page within {timeout_s:g} s; "
                         f"its output so far: {self.output().strip()[-500:] or '(none)'}")
             echo(line)
+            if ok is False:
+                return
+            while not self._closed.wait(0.5):
+                code = self.child.exitcode
+                if code is not None and not self._closed.is_set():  # close() sets _closed before it stops the child
+                    after = [ln.strip() for ln in self.output().split(line, 1)[-1].splitlines() if ln.strip()]
+                    echo(f"antarium serve: the monitor stopped while the server runs (exit code {code}): "
+                         f"{after[-1] if after else 'it printed nothing more'}; the server goes on without it (its "
+                         "page is gone)")
+                    return
 
         thread = threading.Thread(target=run, name="monitor-report", daemon=True)
         thread.start()
