@@ -113,3 +113,30 @@ def test_time_going_backwards_starts_a_new_path():
     assert after["path_reset"] and _xs(after) == [0.0] * 4
     ts = [p[0] for p in hub.since({})[1]["path"]]
     assert ts == sorted(ts)
+
+
+def _json_sample(obj) -> _Sample:
+    import json
+
+    return _Sample(json.dumps(obj).encode())
+
+
+def test_a_monitor_opened_during_a_trial_shows_its_start_and_metadata_from_the_status():
+    """A monitor that subscribed after `trial_started` showed '(started before the monitor)' and no elapsed time for
+    the whole trial: the status carries the trial's start and metadata."""
+    hub, _ = _hub()
+    hub._on_status(_json_sample({"trial": "late", "trial_started": {"t": 12.5, "metadata": {"ant": 7}}}))
+    assert hub.trial == {"name": "late", "metadata": {"ant": 7}, "t_start": 12.5}
+    hub._on_status(_json_sample({"trial": None, "trial_started": None}))
+    assert hub.trial is None
+    hub._on_status(_json_sample({"trial": "old server"}))  # a status without the key: shown as unknown, as before
+    assert hub.trial == {"name": "old server", "metadata": None, "t_start": None}
+
+
+def test_the_trial_start_from_the_event_and_from_the_status_is_the_same_instant():
+    hub, _ = _hub()
+    hub._on_event(_json_sample({"t": 12.5001, "kind": "trial_started",
+                                "data": {"name": "a", "metadata": {}, "monotonic": 12.5, "utc": "x", "path": "p"}}))
+    assert hub.trial == {"name": "a", "metadata": {}, "t_start": 12.5}
+    hub._on_status(_json_sample({"trial": "a", "trial_started": {"t": 12.5, "metadata": {}}}))
+    assert hub.trial == {"name": "a", "metadata": {}, "t_start": 12.5}

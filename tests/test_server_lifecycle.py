@@ -3,6 +3,7 @@ loop that dies, a shutdown step that fails, a renderer failing every frame, a fl
 and what a stopped server leaves behind (nothing: its objects can be collected)."""
 
 import gc
+import json
 import os
 import signal
 import sys
@@ -424,3 +425,20 @@ def test_the_trial_events_anchor_the_loop_clock_to_utc(tmp_path):
         assert f.attrs["created_monotonic"] <= started["monotonic"]
         assert datetime.datetime.fromisoformat(f.attrs["created_utc"]) <= datetime.datetime.fromisoformat(
             started["utc"])
+
+
+def test_the_status_says_when_the_running_trial_started_and_its_metadata(tmp_path):
+    """For a client that subscribed after trial_started (the monitor opened mid-trial): the instant of the event's
+    `monotonic` and the metadata, in every status while the trial runs; None without a trial."""
+    server = _recording_server(tmp_path, "tstarted", [])
+    try:
+        assert server.status()["trial_started"] is None
+        path = server.trial_start("t1", {"ant": 7, "colony": "C3"})["path"]
+        started = server.status()["trial_started"]
+        server.trial_stop()
+        assert server.status()["trial_started"] is None
+    finally:
+        server.stop()
+    events = read_table(path, "events")
+    data = json.loads(events["data"][list(events["kind"]).index("trial_started")])
+    assert started == {"t": data["monotonic"], "metadata": {"ant": 7, "colony": "C3"}}

@@ -114,7 +114,8 @@ class Hub:
             if name is None:
                 self.trial = None
             elif self.trial is None or self.trial["name"] != name:  # started before the monitor subscribed
-                self.trial = {"name": name, "metadata": None, "t_start": None}
+                started = status.get("trial_started") if isinstance(status.get("trial_started"), dict) else {}
+                self.trial = {"name": name, "metadata": started.get("metadata"), "t_start": started.get("t")}
 
     def _on_event(self, sample) -> None:
         event = bus.json_object(sample.payload.to_bytes())
@@ -123,7 +124,8 @@ class Hub:
         data = event.get("data") if isinstance(event.get("data"), dict) else {}
         with self._lock:
             if event.get("kind") == "trial_started":
-                self.trial = {"name": data.get("name"), "metadata": data.get("metadata"), "t_start": event.get("t")}
+                self.trial = {"name": data.get("name"), "metadata": data.get("metadata"),
+                              "t_start": data.get("monotonic", event.get("t"))}  # the status's trial_started "t"
             elif event.get("kind") == "trial_stopped":
                 self.trial = None
             self.events.append(event)

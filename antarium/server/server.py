@@ -113,6 +113,9 @@ class Server:
         self.loop: FrameLoop | None = None
         self.trial_log = None
         self.trial_name: str | None = None
+        #: the running trial's start ("t": s on the loop's clock, its trial_started event's `monotonic`) and
+        #: "metadata", in the status for clients that subscribed after it started (the monitor); None without one
+        self.trial_started: dict[str, Any] | None = None
         self.scene_name: str | None = None
         self._scene_digest = ""
         self.record = record
@@ -396,7 +399,7 @@ class Server:
             except (ValueError, TypeError, RecursionError):
                 log.add_command(t, ascii(name), ascii(request), ascii(reply), ok)
             if last:
-                self.trial_log, self.trial_name = None, None
+                self.trial_log, self.trial_name, self.trial_started = None, None, None
 
     def state(self) -> dict[str, Any]:
         """What a command replies: pose, scene rotation, loop mode, gains, scene and trial."""
@@ -528,7 +531,9 @@ class Server:
                 self.loop.log = None
                 raise
         self.trial_log, self.trial_name = log, name
-        self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path), **self._clock_anchor())
+        anchor = self._clock_anchor()
+        self.trial_started = {"t": anchor["monotonic"], "metadata": metadata}
+        self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path), **anchor)
 
     def _clock_anchor(self) -> dict[str, Any]:
         """`utc` (ISO 8601) and `monotonic` (s, on the loop's clock, the tables' clock) read at the same instant."""

@@ -31,7 +31,7 @@ def rig_status(server: Server) -> dict[str, Any]:
     line for each thing an operator must act on."""
     loop = server.loop
     out: dict[str, Any] = {"rig": server.rig_name, "t": server.clock.now(), "trial": server.trial_name,
-                           "scene": server.scene_name, "alarms": []}
+                           "trial_started": server.trial_started, "scene": server.scene_name, "alarms": []}
     alarms = out["alarms"]
     if server.loop_error is not None:
         alarms.append(f"frame loop stopped: {_describe(server.loop_error)}")
