@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import socket
 import threading
 import time
@@ -17,6 +18,13 @@ from functools import lru_cache
 from antarium.ant.experiment.inputs import load_route, route_digest, run_world
 from antarium.ant.experiment.spec import PROTOCOLS, Run, model_args
 from antarium.ant.routes import Route, RouteError, curved_route
+
+
+def dask_setup(worker) -> None:
+    """Dask's preload hook (`runner.local_cluster`): a local worker ignores Ctrl-C. A terminal sends it to the
+    command and its workers alike (one process group); the command ends the workers itself, where each would
+    otherwise print a KeyboardInterrupt traceback. Runs in the worker process's main thread."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 @lru_cache(maxsize=256)

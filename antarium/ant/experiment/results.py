@@ -20,8 +20,13 @@ CONDITION = ["world", "route_set", "model", "protocol", "lateral_cm", "heading_d
 
 def load_results(out: str | Path, run_ids: Iterable[str] | None = None):
     """The rows under `out/runs/` as one pandas DataFrame (done and failed runs; see column `status`): those of
-    `run_ids` (a spec's runs; the others, of specs run into `out` before, are left out), or every row."""
+    `run_ids` (a spec's runs; the others, of specs run into `out` before, are left out), or every row. Integer and
+    boolean columns (errors, decisions, arrived, ...) are pandas' nullable Int64 and boolean, NA in a failed run's
+    row, which has no metrics; a `param.` column is as pandas reads it: float with NaN where a model lacks the
+    parameter."""
     import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
 
     files = sorted((Path(out) / RUNS_DIR).glob("*.parquet"))
     if run_ids is not None:
@@ -30,7 +35,10 @@ def load_results(out: str | Path, run_ids: Iterable[str] | None = None):
     if not files:
         raise FileNotFoundError(f"no run results under {Path(out) / RUNS_DIR}"
                                 + (" of this spec's runs" if run_ids is not None else ""))
-    return pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
+    table = pa.concat_tables([pq.read_table(f) for f in files], promote_options="permissive")
+    nullable = {pa.int64(): pd.Int64Dtype(), pa.bool_(): pd.BooleanDtype()}
+    return table.to_pandas().astype({f.name: nullable[f.type] for f in table.schema
+                                     if f.type in nullable and not f.name.startswith("param.")})
 
 
 def bootstrap_ci(values, level: float = CI_LEVEL, n: int = BOOTSTRAP, seed: int = 0) -> tuple[float, float]:

@@ -2,7 +2,8 @@
 process, writing each run's row as it finishes: `<out>/runs/<run_id>.parquet`.
 
 Nothing finished is lost to a crash or Ctrl-C (each file is written whole, then renamed into place), and a rerun
-of the same spec skips the runs whose file says "done" (failed runs are tried again).
+of the same spec skips the runs whose file says "done" (failed runs are tried again). One command at a time runs
+into a results folder (`out_lock`).
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import socket
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -18,6 +20,8 @@ from pathlib import Path
 from antarium.ant.experiment.spec import Run
 
 RUNS_DIR = "runs"
+#: the file in a results folder locked by the command running into it (it holds "pid N on HOST")
+LOCK_FILE = ".lock"
 
 
 def run_path(out: Path, run_id: str) -> Path:
@@ -37,7 +41,7 @@ def write_row(out: Path, row: dict) -> Path:
 
 
 def finished(out: Path, runs: Iterable[Run]) -> set[str]:
-    """run_ids of `runs` already done in `out` (their file holds status "done")."""
+    """run_ids of `runs` already done in `out` (their file holds their own row, with status "done")."""
     import pyarrow.parquet as pq
 
     done = set()
@@ -45,12 +49,35 @@ def finished(out: Path, runs: Iterable[Run]) -> set[str]:
         path = run_path(out, run.run_id)
         if path.is_file():
             try:
-                status = pq.read_table(path, columns=["status"]).column("status")[0].as_py()
+                row = pq.read_table(path, columns=["run_id", "status"]).to_pylist()[0]
             except Exception:  # an unreadable file is not a finished run: run it again
                 continue
-            if status == "done":
+            if row == {"run_id": run.run_id, "status": "done"}:   # not another run's row under its name
                 done.add(run.run_id)
     return done
+
+
+@contextlib.contextmanager
+def out_lock(out: Path) -> Iterator[None]:
+    """Hold `out`'s lock (`LOCK_FILE`) while the block runs: a second command into one results folder would run
+    every run the first has not finished yet, again. RuntimeError naming the command that holds it."""
+    import fcntl
+
+    with open(Path(out) / LOCK_FILE, "a+") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            holder = f.read().strip() or "a process that has not written its pid yet"
+            raise RuntimeError(f"results folder {out} is in use by another experiment ({holder}); wait for it to "
+                               "end, or give another --out") from None
+        f.truncate(0)
+        f.write(f"pid {os.getpid()} on {socket.gethostname()}")
+        f.flush()
+        try:
+            yield
+        finally:
+            f.truncate(0)
 
 
 @dataclass
@@ -94,6 +121,11 @@ def run_experiment(runs: list[Run], out: str | Path, scheduler: str | None = Non
     """
     out = Path(out)
     (out / RUNS_DIR).mkdir(parents=True, exist_ok=True)
+    with out_lock(out):
+        return _run_pending(runs, out, scheduler, workers, serial, progress_bar, on_row)
+
+
+def _run_pending(runs: list[Run], out: Path, scheduler, workers, serial: bool, progress_bar: bool, on_row) -> Progress:
     done = finished(out, runs)
     pending = [r for r in runs if r.run_id not in done]
     progress = Progress(len(runs), skipped=len(runs) - len(pending))
@@ -128,13 +160,15 @@ WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": N
 
 
 def local_cluster(n_workers: int):
-    """A LocalCluster of `n_workers` processes on loopback, one thread each, with `worker_env` and `WORKER_CONFIG`."""
+    """A LocalCluster of `n_workers` processes on loopback, one thread each, with `worker_env` and `WORKER_CONFIG`,
+    ignoring Ctrl-C (`execute.dask_setup`: the command stops them)."""
     import dask
     from distributed import LocalCluster
 
     with dask.config.set(WORKER_CONFIG):
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                            dashboard_address=None, silence_logs=40, env=worker_env(n_workers))
+                            dashboard_address=None, silence_logs=40, env=worker_env(n_workers),
+                            preload=["antarium.ant.experiment.execute"])
 
 
 def worker_env(n_workers: int) -> dict[str, str]:
@@ -146,6 +180,8 @@ def worker_env(n_workers: int) -> dict[str, str]:
     return {"LP_NUM_THREADS": str(max(1, (os.cpu_count() or 1) // n_workers))}
 
 
+#: how long the command waits for a lab cluster's scheduler to answer (s)
+SCHEDULER_TIMEOUT_S = 15
 #: how often the main process looks for a Ctrl-C while it waits for the runs' results (s)
 INTERRUPT_POLL_S = 0.1
 
@@ -176,7 +212,11 @@ def _run_dask(pending: list[Run], out: Path, scheduler, workers, progress: Progr
 
     if scheduler:
         cluster = None
-        client = Client(scheduler, timeout="30s")
+        try:
+            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+        except (OSError, ValueError) as exc:   # nothing answers there (OSError), or not an address (ValueError)
+            raise RuntimeError(f"--scheduler {scheduler}: {exc}; start one with `dask scheduler` (it listens on "
+                               "tcp://<host>:8786), or leave --scheduler out to run on this machine") from None
     else:
         cluster = local_cluster(workers or os.cpu_count() or 1)
         client = Client(cluster)
