@@ -15,6 +15,7 @@ endpoints when that is empty, and listen nowhere themselves.
 from __future__ import annotations
 
 import json
+import re
 import socket
 import struct
 from pathlib import Path
@@ -38,11 +39,11 @@ def check_key_chunk(value: str, what: str) -> str:
 
 
 def json_object(payload: bytes) -> dict | None:
-    """A bus message's JSON object, or None for one that is not UTF-8 JSON or not an object (a subscriber skips
-    it: a malformed message never reaches a callback)."""
+    """A bus message's JSON object, or None for one that is not UTF-8 JSON, nested deeper than Python's JSON reader
+    goes, or not an object (a subscriber skips it: a malformed message never reaches a callback)."""
     try:
         value = json.loads(payload)
-    except ValueError:  # UnicodeDecodeError included
+    except (ValueError, RecursionError):  # UnicodeDecodeError included
         return None
     return value if isinstance(value, dict) else None
 
@@ -112,18 +113,9 @@ def session_config(bus: BusSection | dict[str, Any] | None, role: str = "server"
     from antarium.config import BusSection
 
     bus = BusSection.read(bus or {})
+    conf = zenoh.Config()
     if bus.access_control and role == "server":  # the server enforces who may command the rig
-        path = Path(bus.access_control)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise ValueError(f"[bus] access_control file {str(path)!r} cannot be read: {exc}") from None
-        try:
-            conf = zenoh.Config.from_json5("{access_control: " + text + "}")
-        except Exception as exc:  # zenoh raises its own ZError for bad JSON5 or unknown fields
-            raise ValueError(f"[bus] access_control file {str(path)!r} is not a valid zenoh ACL: {exc}") from None
-    else:
-        conf = zenoh.Config()
+        _insert_access_control(conf, Path(bus.access_control))
     conf.insert_json5("mode", json.dumps(bus.mode))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(bus.multicast_scouting))
     listen, connect = bus.listen, bus.connect
@@ -136,6 +128,32 @@ def session_config(bus: BusSection | dict[str, Any] | None, role: str = "server"
     return conf
 
 
+def _insert_access_control(conf, path: Path) -> None:
+    """The ACL file `path` (a zenoh `access_control` object, JSON5) into `conf`; ValueError naming the file and
+    what is wrong in it, at the line and column of the file itself."""
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ValueError(f"[bus] access_control file {str(path)!r} cannot be read: {exc}") from None
+    try:
+        conf.insert_json5("access_control", text)
+    except Exception as exc:  # zenoh raises its own ZError for bad JSON5 or unknown fields
+        raise ValueError(f"[bus] access_control file {str(path)!r} is not a valid zenoh ACL: "
+                         f"{zenoh_message(exc)}") from None
+
+
+def zenoh_message(exc: BaseException) -> str:
+    """A zenoh error as one readable line: the message of a JSON5 error with its line and column, without the
+    Rust source locations (`at /root/.cargo/...rs:86.`) zenoh appends."""
+    text = str(exc)
+    found = re.search(r'msg: "((?:[^"\\]|\\.)*)", location: Some\(Location \{ line: (\d+), column: (\d+)', text)
+    if found:
+        msg = json.loads(f'"{found[1]}"')
+        msg = msg.rsplit("= ", 1)[-1] if "-->" in msg else msg  # a syntax error: pest's caret drawing, then "= what"
+        return f"line {found[2]}, column {found[3]}: {msg.strip()}"
+    return re.sub(r"\s+", " ", re.sub(r"\.? at /\S+\.rs:\d+\.?", "", text)).strip()
+
+
 def open_session(bus: BusSection | dict[str, Any] | None = None, role: str = "server"):
     """Open a zenoh session from a `[bus]` section (defaults when None). See `session_config`."""
     import zenoh
@@ -144,7 +162,7 @@ def open_session(bus: BusSection | dict[str, Any] | None = None, role: str = "se
     try:
         return zenoh.open(conf)
     except zenoh.ZError as exc:
-        raise RuntimeError(f"cannot open the zenoh session (role {role}, [bus] {bus}): {exc}") from None
+        raise RuntimeError(f"cannot open the zenoh session (role {role}, [bus] {bus}): {zenoh_message(exc)}") from None
 
 
 def free_tcp_endpoint(host: str = "127.0.0.1") -> str:

@@ -22,8 +22,10 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import sys
 import threading
 import time
+import traceback
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -101,7 +103,7 @@ class Rig:
     def __init__(self, name: str = "rig1", *, config: str | Path | dict | None = None,
                  connect: list[str] | None = None, timeout_s: float = 10.0, session=None,
                  log_dir: str | Path | None = None) -> None:
-        from antarium.config import RigConfig, load_config, resolve
+        from antarium.config import BusSection, ConfigError, RigConfig, load_config, resolve
 
         try:
             self.name = bus.check_rig_name(name)
@@ -111,7 +113,16 @@ class Rig:
             cfg = config
         else:
             cfg = resolve(config) if isinstance(config, dict) else load_config(config)
-        self.bus_section = cfg.bus.model_copy(update=None if connect is None else {"connect": list(connect)})
+        if connect is None:
+            self.bus_section = cfg.bus
+        else:
+            if isinstance(connect, str) or not isinstance(connect, list | tuple):
+                raise RigError(f"connect must be a list of endpoints, e.g. ['tcp/192.168.10.1:7447'], got "
+                               f"{connect!r:.80}")
+            try:  # checked as the config's own [bus] connect is
+                self.bus_section = BusSection.read({**cfg.bus.model_dump(), "connect": list(connect)})
+            except ConfigError as exc:
+                raise RigError(f"connect: {exc}") from None
         value = as_real(timeout_s)
         if not (math.isfinite(value) and value > 0):
             raise RigError(f"timeout_s must be a positive number of seconds, got {_shown(timeout_s)}")
@@ -123,6 +134,7 @@ class Rig:
         self._latest_lock = threading.Lock()
         self._subs: list = []
         self._alive = threading.Event()
+        self._server_lost = False  # the server's liveliness token went away since it was first seen
 
     # -- connection ------------------------------------------------------------------------------------
     @property
@@ -147,14 +159,27 @@ class Rig:
         return self
 
     def _on_alive(self, sample) -> None:
+        """The server's liveliness token appeared or went away (a bus thread). Both after the first are told on
+        stderr, one line each: a server that comes back is a new run, with its config's state, not the script's."""
         import zenoh
 
         if sample.kind == zenoh.SampleKind.PUT:
             self._alive.set()
+            if self._server_lost:
+                self._server_lost = False
+                self._tell(f"the server of rig {self.name!r} is back: a new run, with its config's scene, pose, modes "
+                           "and no trial (frame numbers start again); set again what the script had set")
         else:  # the server is gone: its last pose is no longer the rig's
             self._alive.clear()
+            self._server_lost = True
             with self._latest_lock:
                 self._latest = None
+            self._tell(f"the server of rig {self.name!r} is gone (its liveliness token went away); commands fail "
+                       "until it is back")
+
+    @staticmethod
+    def _tell(message: str) -> None:
+        print(f"antarium.Rig: {message}", file=sys.stderr, flush=True)
 
     def _on_pose_sample(self, sample) -> None:
         try:
@@ -166,6 +191,7 @@ class Rig:
 
     def close(self) -> None:
         self._alive.clear()  # a later connect() waits for the server again
+        self._server_lost = False
         with self._latest_lock:
             self._latest = None
         for sub in self._subs:
@@ -192,6 +218,7 @@ class Rig:
         if self._session is None:
             raise RigError("the rig is not connected; use `with Rig(...) as rig:` or `rig.connect()`")
         payload = _payload(command, params)
+        self._check_server(command, "the command was not sent")
         key = bus.command_key(self.name, command)
         wait_s = self.reply_s(command)
         replies = self._session.get(key, payload=payload, timeout=wait_s)
@@ -205,6 +232,12 @@ class Rig:
         raise RigTimeout(f"{command}: no reply from rig {self.name!r} within {wait_s:g} s "
                          "(server gone, or the command was refused by the bus's access control); it may have run: "
                          "check status() before sending it again")
+
+    def _check_server(self, what: str, outcome: str) -> None:
+        """RigError at once when the Rig is connected and its server's liveliness token went away: nobody to ask."""
+        if self._subs and not self._alive.is_set():
+            raise RigError(f"{what}: the server of rig {self.name!r} is gone (its liveliness token went away); "
+                           f"{outcome}")
 
     def reply_s(self, command: str) -> float:
         """How long `call` waits for `command`'s reply (s): the Rig's `timeout_s`, or the command's own `reply_s`
@@ -308,7 +341,7 @@ class Rig:
     # -- streams ---------------------------------------------------------------------------------------
     def pose(self, timeout_s: float | None = None) -> Pose:
         """The newest pose from the server's stream (waits for the first one up to `timeout_s`); RigError when the
-        rig is not connected."""
+        rig is not connected or its server is gone."""
         if self._session is None:
             raise RigError("the rig is not connected; use `with Rig(...) as rig:` or `rig.connect()`")
         wait = self.timeout_s if timeout_s is None else as_real(timeout_s)
@@ -320,6 +353,7 @@ class Rig:
                 latest = self._latest
             if latest is not None:
                 return latest.pose
+            self._check_server("pose", "there is no pose")
             if time.monotonic() >= deadline:
                 p = self.status()["pose"]
                 return Pose(p["x"], p["y"], p["z"], math.radians(p["heading_deg"]))
@@ -332,31 +366,47 @@ class Rig:
 
     def on_pose(self, callback: Callable[[PoseUpdate], None]):
         """Call `callback(PoseUpdate)` for every pose the server publishes (on a bus thread; keep it short).
-        Returns the subscription; `.undeclare()` it to stop."""
-        if self._session is None:
-            raise RigError("the rig is not connected")
-
-        def handler(sample) -> None:
+        Returns the subscription; `.undeclare()` it to stop. See `_subscribe` for a callback that raises."""
+        def decode(payload: bytes) -> PoseUpdate | None:
             try:
-                update = _decode_pose(sample.payload.to_bytes())
+                return _decode_pose(payload)
             except bus.StreamError:
-                return
-            callback(update)
+                return None
 
-        sub = self._session.declare_subscriber(bus.pose_key(self.name), handler)
-        self._subs.append(sub)
-        return sub
+        return self._subscribe("on_pose", bus.pose_key(self.name), decode, callback)
 
     def on_event(self, callback: Callable[[dict], None]):
-        """Call `callback({"t", "kind", "data"})` for every server event."""
+        """Call `callback({"t", "kind", "data"})` for every server event (a malformed message is skipped, never
+        handed on)."""
+        return self._subscribe("on_event", bus.events_key(self.name), bus.json_object, callback)
+
+    def _subscribe(self, what: str, key: str, decode: Callable[[bytes], Any], callback: Callable[[Any], None]):
+        """Subscribe `callback(decode(payload))` to `key` (payloads decoded to None are skipped). An exception of
+        the callback is told on stderr, the first with its traceback, then one line every 1000th, and the
+        subscription goes on (a stream of 190 poses a second must not flood the terminal)."""
         if self._session is None:
             raise RigError("the rig is not connected")
-        def handler(sample) -> None:
-            event = bus.json_object(sample.payload.to_bytes())
-            if event is not None:  # a malformed message is skipped, never handed on
-                callback(event)
+        if not callable(callback):
+            raise RigError(f"{what} needs a function to call with each message, got {callback!r:.60}")
+        failures = 0
 
-        sub = self._session.declare_subscriber(bus.events_key(self.name), handler)
+        def handler(sample) -> None:
+            nonlocal failures
+            value = decode(sample.payload.to_bytes())
+            if value is None:
+                return
+            try:
+                callback(value)
+            except Exception as exc:  # the script's bug: tell it, keep the stream going  # noqa: BLE001
+                failures += 1
+                if failures == 1:
+                    self._tell(f"{what} callback {callback!r:.60} raised (told once, then every 1000th):\n"
+                               + "".join(traceback.format_exception(exc)).rstrip())
+                elif failures % 1000 == 0:
+                    self._tell(f"{what} callback raised {failures} times so far, the latest: "
+                               f"{type(exc).__name__}: {exc}")
+
+        sub = self._session.declare_subscriber(key, handler)
         self._subs.append(sub)
         return sub
 

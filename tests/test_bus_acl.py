@@ -125,3 +125,28 @@ def test_a_peer_on_an_unlisted_interface_is_refused(tmp_path):
     finally:
         server.stop()
 
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ('{ enabled: "yes", default_permission: "deny" }', r"line 1, column 12: invalid type: string \"yes\", expected a "
+                                                       "boolean$"),
+    ('{\n  enabled: true,\n  default_permission: "maybe",\n}', "line 3, column 23: unknown variant `maybe`"),
+    ('{ enabled: true, default_permission: "deny" } }', "line 1, column 47: expected EOI$"),
+])
+def test_a_broken_acl_file_is_one_line_naming_its_own_line_and_column(tmp_path, text, message):
+    """Positions are those of the file (not of a text wrapped around it) and zenoh's Rust source paths are gone."""
+    acl = tmp_path / "acl.json5"
+    acl.write_text(text)
+    with pytest.raises(ValueError, match="access_control file .*is not a valid zenoh ACL: " + message) as info:
+        bus.session_config({"access_control": str(acl)}, role="server")
+    assert "\n" not in str(info.value) and ".rs:" not in str(info.value)
+
+
+def test_an_acl_zenoh_refuses_at_open_is_one_line_without_rust_source_paths(tmp_path):
+    acl = tmp_path / "acl.json5"
+    acl.write_text('{ enabled: true, default_permission: "deny", rules: [{ id: "r", permission: "allow", '
+                   'flows: ["ingress"], messages: ["put"], key_exprs: ["antarium/rig1/**"] }], subjects: '
+                   '[{ id: "s", interfaces: ["lo"] }], policies: [{ rules: ["nosuch"], subjects: ["s"] }] }')
+    with pytest.raises(RuntimeError, match="Rule 'nosuch' in policy #0 does not exist in rules list$") as info:
+        bus.open_session({"listen": [bus.free_tcp_endpoint()], "access_control": str(acl)}, role="server")
+    assert ".rs:" not in str(info.value)

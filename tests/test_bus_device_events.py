@@ -100,3 +100,26 @@ def test_without_last_seq_the_next_sample_clears_the_loss_and_back_always_does()
     src._on_event(_lost(last_seq=5))  # sample 5 never arrives: "locomotion_back" still resumes it
     src._on_event(_Sample(b'{"event": "locomotion_back", "source": "usb"}'))
     assert src.status()["connected"] is True
+
+
+def test_an_event_nested_too_deeply_is_skipped_by_the_bus_source_without_a_traceback(capfd):
+    """A JSON array nested 100,000 deep overflows Python's JSON reader (RecursionError, not ValueError): it is a
+    malformed message like any other, skipped without an exception in the bus thread; the next event is read."""
+    deep = b"[" * 100_000
+    assert bus.json_object(deep) is None
+    endpoint = bus.free_tcp_endpoint()
+    with bus.open_session({"listen": [endpoint]}, "server") as server, \
+            bus.open_session({"listen": [endpoint]}, "client") as driver:
+        src = open_source("bus", rig="tdeep", session=server, timeout_s=30.0)
+        src.start()
+        try:
+            time.sleep(0.5)  # the subscription reaches the driver's session
+            driver.put(bus.events_key("tdeep"), deep)
+            driver.put(bus.events_key("tdeep"), json.dumps({"event": "locomotion_lost", "source": "usb"}))
+            deadline = time.monotonic() + 10
+            while src.status()["connected"] and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert not src.status()["connected"]
+        finally:
+            src.stop()
+    assert "RecursionError" not in capfd.readouterr().err

@@ -20,7 +20,6 @@ with "kind") are ignored.
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 from antarium.core.clock import Clock, MonotonicClock
@@ -101,11 +100,10 @@ class BusSource(BufferedSource):
                 self._straggler_seq = None
 
     def _on_event(self, sample) -> None:  # zenoh thread
-        try:
-            event = json.loads(sample.payload.to_string())
-        except ValueError:
-            return
-        if not isinstance(event, dict) or "source" not in event:
+        from antarium.bus import json_object
+
+        event = json_object(sample.payload.to_bytes())
+        if event is None or "source" not in event:
             return
         kind = event.get("event")
         with self._lock:
