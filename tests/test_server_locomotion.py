@@ -25,7 +25,7 @@ class Feeder:
 
     def __init__(self, section, rig):
         self.session = bus.open_session(section, "client")
-        self.pub = self.session.declare_publisher(bus.locomotion_key(rig), express=True)
+        self.pub = bus.locomotion_publisher(self.session, rig)  # the trackball driver's: blocks, never drops
         self.seq = 0
 
     def push(self, n):
