@@ -238,3 +238,23 @@ def test_a_rig_without_renderer_publishes_render_time_as_nan_not_zero(tmp_path):
         assert all(math.isnan(r["render"]) and math.isnan(r["sample"]) for r in received), received[:3]
     finally:
         server.stop()
+
+
+def test_a_second_server_for_the_same_rig_on_one_bus_is_refused(tmp_path):
+    """Two servers named alike on one bus both ran every command (one set_pose moved both) and interleaved their
+    poses on one stream; the second is refused at its start, naming the rig. Another name on the same bus runs."""
+    from antarium.server import ServerError
+
+    first = Server(_config(tmp_path, rig="twin"), renderer_factory=None, link=False).start_thread()
+    try:
+        linked = {"connect": first.config.bus.listen}  # a second computer's server on the same network
+        twin = Server(_config(tmp_path / "b", rig="twin", **linked), renderer_factory=None, link=False)
+        with pytest.raises(ServerError, match=r"another antarium server already serves rig 'twin' on this bus .*"
+                                              r"give this rig another \[rig\] name"):
+            twin.start_thread()
+        assert first.loop.frame > 0 and first.status()["alarms"] == []  # the first goes on
+        other = Server(_config(tmp_path / "c", rig="other", **linked), renderer_factory=None, link=False)
+        other.start_thread()
+        other.stop()
+    finally:
+        first.stop()

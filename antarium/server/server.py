@@ -40,6 +40,9 @@ ALARM_EVENTS = ("link_outage", "locomotion_lost", "log_error", "frame_rejected",
 #: printed on stderr too: the end of an alarm event's trouble (stderr's last word is not the outage)
 RECOVERY_EVENTS = ("link_back", "locomotion_back")
 COMMAND_TIMEOUT_S = 60.0
+#: how long a starting server asks the bus whether another server serves its rig name (s; answered at once on
+#: loopback, measured)
+TWIN_CHECK_S = 0.5
 #: how long a scene load waits for the loop to run one slice of its meshes' upload before leaving the rest to
 #: the swap itself (s)
 UPLOAD_STEP_WAIT_S = 1.0
@@ -184,6 +187,7 @@ class Server:
                 return
             self.session = bus.open_session(self.config.bus, role="server")
         s = self.session
+        self._refuse_a_twin(s)
         self._pose_pub = s.declare_publisher(bus.pose_key(self.rig_name), express=True)
         self._stats_pub = s.declare_publisher(bus.stats_key(self.rig_name), express=True)
         self._entities += [self._pose_pub, self._stats_pub,
@@ -195,6 +199,16 @@ class Server:
         self.monitor = start_monitor(self.config)
         if self.monitor is not None:  # its address once it listens, or why it stopped (a port in use)
             self.monitor.report(self.echo)
+
+    def _refuse_a_twin(self, session) -> None:
+        """ServerError when another server already serves this rig name on the bus (its liveliness token answers):
+        both would run every command and interleave their poses on one stream, and a client could not tell."""
+        others = [reply for reply in session.liveliness().get(bus.alive_key(self.rig_name), timeout=TWIN_CHECK_S)
+                  if reply.ok is not None]
+        if others:
+            raise ServerError(f"another antarium server already serves rig {self.rig_name!r} on this bus "
+                              f"([bus] listen {self.config.bus.listen}, connect {self.config.bus.connect}): stop "
+                              "it, or give this rig another [rig] name")
 
     # -- bus traffic -----------------------------------------------------------------------------------
     def _on_query(self, query) -> None:
