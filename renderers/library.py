@@ -117,10 +117,11 @@ def _mesh_world(p):
     if "path" not in p:
         raise ValueError("a mesh scene needs 'path' (OBJ, PLY, GLB/GLTF or STL)")
     path = _path(p, "path")
+    units = {k: p.pop(k) for k in ("scale", "up") if k in p}
     far = [_sky(p)]
     if "panorama" in p:
         far.append(Panorama(_path(p, "panorama")))
-    return Scene(far=far, objects=load_mesh_objects(path), name=Path(path).stem)
+    return Scene(far=far, objects=load_mesh_objects(path, **units), name=Path(path).stem)
 
 
 def _habitat(p):

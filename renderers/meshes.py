@@ -1,4 +1,5 @@
-"""Mesh worlds from files through trimesh (OBJ, PLY, GLB/GLTF, STL): metres, +z up.
+"""Mesh worlds from files through trimesh (OBJ, PLY, GLB/GLTF, STL): metres, +z up (a file in other units or
++y up is converted on load by its `scale` and `up`).
 
 Each geometry node becomes a named `SceneObject`: its position is the node's translation, its vertices the
 rest of the node transform (vertices far from the node's origin, as in georeferenced files, are recentred: their
@@ -26,8 +27,10 @@ MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl")
 DEFAULT_GREY = 0.5
 #: Vertices whose middle lies farther than this (m) from their node's origin are stored relative to that middle.
 RECENTRE_BEYOND_M = 1000.0
-#: glTF is +y up (its specification): (X, Y, Z) glTF -> (X, -Z, Y) world. Other formats are taken as +z up.
+#: glTF is +y up (its specification): (X, Y, Z) glTF -> (X, -Z, Y) world. Other formats: +z up unless stated.
 GLTF_TO_WORLD = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
+#: a mesh file's up axis -> the 4 x 4 turn of its coordinates into the world's (+z up)
+UP_AXES = {"z": np.eye(4), "y": GLTF_TO_WORLD}
 
 
 def recentring(local: np.ndarray) -> np.ndarray:
@@ -139,6 +142,28 @@ def gltf_json(path: Path) -> dict:
         raise ValueError(f"cannot read glTF file {path}: {exc}") from exc
 
 
+#: glTF extensions that a file may require and trimesh cannot decode (it loads their meshes as zeros, or drops
+#: their textures): extension -> (what it is, the Python module that would decode it, or None)
+UNDECODED_GLTF_EXTENSIONS = {
+    "KHR_draco_mesh_compression": ("Draco mesh compression", "DracoPy"),
+    "EXT_meshopt_compression": ("meshopt compression", None),
+    "KHR_texture_basisu": ("KTX2/Basis Universal textures", None),
+}
+
+
+def check_gltf_extensions(path: Path) -> None:
+    """ValueError naming the file and the first extension it requires (`extensionsRequired`) that is in
+    UNDECODED_GLTF_EXTENSIONS and whose decoder is not installed."""
+    from importlib.util import find_spec
+
+    for name in gltf_json(path).get("extensionsRequired", []):
+        what, module = UNDECODED_GLTF_EXTENSIONS.get(name, (None, None))
+        if what is not None and (module is None or find_spec(module) is None):
+            raise ValueError(f"{path} requires the glTF extension {name} ({what}), which cannot be decoded here; "
+                             f"allowed: a file exported without it (e.g. Blender's glTF export with compression "
+                             f"off)")
+
+
 def check_gltf_textures(path: Path) -> None:
     """ValueError naming the file and the material whose base colour texture does not lead to an image: a texture
     or image index out of range, or an image file that is missing (trimesh drew such a material untextured)."""
@@ -159,15 +184,28 @@ def check_gltf_textures(path: Path) -> None:
                              f"a texture index into textures whose source indexes images, the image file present")
 
 
-def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
-    """Named objects of a mesh file. Raises FileNotFoundError or ValueError naming the file and the problem."""
+def load_mesh_objects(path: str | Path, scale: float = 1.0, up: str | None = None) -> dict[str, SceneObject]:
+    """Named objects of a mesh file in metres, +z up: `scale` metres per file unit (0.001: millimetres), `up` the
+    file's up axis, "z" or "y" (default: "y" for GLB/GLTF, +y up by their specification, else "z"; GLB/GLTF take
+    "y" only). Raises FileNotFoundError or ValueError naming the file and the problem."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"mesh file not found: {path}")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise ValueError(f"unsupported mesh format {path.suffix!r} ({path}); allowed: {', '.join(MESH_SUFFIXES)}")
+    gltf = path.suffix.lower() in (".glb", ".gltf")
+    up = ("y" if gltf else "z") if up is None else up
+    if not isinstance(up, str) or up not in UP_AXES or (gltf and up != "y"):
+        allowed = '"y" (GLB/GLTF are +y up by their specification)' if gltf else '"z" or "y"'
+        raise ValueError(f"{path}: up must be the file's up axis, {allowed}; got {repr(up)[:60]}")
+    if not (isinstance(scale, (int, float)) and not isinstance(scale, bool) and np.isfinite(scale) and scale > 0):
+        raise ValueError(f"{path}: scale must be a positive number of metres per file unit (0.001: millimetres), "
+                         f"got {repr(scale)[:60]}")
+    to_world = UP_AXES[up] @ np.diag([scale, scale, scale, 1.0])
     import trimesh
 
+    if gltf:
+        check_gltf_extensions(path)
     try:
         if path.suffix.lower() in TEXT_SUFFIXES:
             loaded = load_text_mesh(path)
@@ -178,7 +216,6 @@ def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
     except Exception as exc:  # trimesh raises many types for corrupt files
         raise ValueError(f"cannot read mesh file {path}: {type(exc).__name__}: {exc}") from exc
     objects: dict[str, SceneObject] = {}
-    gltf = path.suffix.lower() in (".glb", ".gltf")
     if gltf:
         check_gltf_textures(path)
     for node in loaded.graph.nodes_geometry:
@@ -192,9 +229,7 @@ def load_mesh_objects(path: str | Path) -> dict[str, SceneObject]:
             geom.unmerge_vertices()
         try:
             colours, uv, texture = _colours_and_texture(geom, name, loaded.metadata.get("mtl_kd", {}), gltf)
-            t = np.asarray(transform, dtype=np.float64)
-            if gltf:
-                t = GLTF_TO_WORLD @ t
+            t = to_world @ np.asarray(transform, dtype=np.float64)
             local = np.asarray(geom.vertices, dtype=np.float64) @ t[:3, :3].T
             shift = recentring(local)
             mesh = MeshData((local - shift).astype(np.float32), np.asarray(geom.faces), colours, uv, texture)
