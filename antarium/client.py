@@ -533,7 +533,9 @@ def script_rig(args, out: str | Path | None = None) -> Iterator[Rig]:
     the script's output folder, where its trial logs go too (on this computer's server; see `Rig` log_dir),
     made only once the rig answers: a refused option, config or server leaves nothing behind.
     The rig is --rig, or the [rig] name of --config when --rig is not given. With --start-server the config is
-    checked as `antarium serve` checks it (`check_config`: a bus port in use is one ConfigError line)."""
+    checked as `antarium serve` checks it (`check_config`: a bus port in use is one ConfigError line). A rig that
+    is recording a trial is refused (ScriptArgumentError): the script's scene and loop commands would go into that
+    trial before the server refused the script's own."""
     from antarium.config import load_config
 
     check_script_arguments(args)
@@ -553,6 +555,11 @@ def script_rig(args, out: str | Path | None = None) -> Iterator[Rig]:
             raise
     try:
         with Rig(name, config=config, timeout_s=args.timeout, log_dir=out) as rig:
+            recording = rig.status().get("trial")
+            if recording is not None:
+                raise ScriptArgumentError(f"rig {name!r} is recording trial {_shown(recording)}: this script would "
+                                          "change its scene and loop; run it when that trial has ended (one script "
+                                          "at a time on a rig)")
             if out is not None:
                 try:
                     Path(out).mkdir(parents=True, exist_ok=True)

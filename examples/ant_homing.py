@@ -55,7 +55,8 @@ def main(argv: list[str] | None = None) -> int:
                               put_back_distance=math.inf)
         top = scene_top_view(ant.loop.renderer.scene)
     s = result.summary
-    plot_paths(out / "homing_paths.png", home, {"homing Antcar": result.track}, "homing: route home and stop",
+    # The learned (outbound) route: its start is the nest and its end the feeder, as the picture labels them.
+    plot_paths(out / "homing_paths.png", outbound, {"homing Antcar": result.track}, "homing: route home and stop",
                top=top)
     plot_traces(out / "homing_traces.png", result.track,
                 f"homing: familiarities (lambda_nest < {args.threshold} stops it)")

@@ -3,8 +3,9 @@
 The panoramas are equirectangular images (PNG/JPEG/EXR; 2:1, elevation +90 at the top row, azimuth 0 at the
 left edge increasing to the right — see the renderer's panorama docs). Without `--panorama` the script writes
 three of its own (a single dark landmark, two landmarks, a skyline) so that it runs anywhere. Each image is
-shown in open loop (the ant's walking does not move the scene) for `--seconds`, all in one trial log, whose
-scene table holds each image's SHA-256.
+shown in open loop (the ant's walking does not move the scene) for `--seconds`, all in one trial log, which
+opens on the first image; its scene table holds when each image went on and its SHA-256 (an image stays on
+while the next one loads).
 
     antarium serve &
     python examples/open_loop_panoramas.py --panorama pano1.png --panorama pano2.png --seconds 30
@@ -71,9 +72,11 @@ def main(argv: list[str] | None = None) -> int:
         panoramas = [Path(p).resolve() for p in args.panorama] or write_panoramas(out)
         rig.closed_loop(False)  # open loop: the ball is recorded, the scene does not follow it
         rig.set_pose(0.0, 0.0, heading_deg=0.0)
+        rig.load_scene(panoramas[0])  # on before the trial starts: the log opens on the first image
         with rig.trial("open-loop-panoramas", panoramas=[p.name for p in panoramas], seconds=args.seconds) as log:
-            for path in panoramas:
-                rig.load_scene(path)
+            for i, path in enumerate(panoramas):
+                if i:
+                    rig.load_scene(path)
                 print(f"showing {path.name} for {args.seconds:g} s")
                 rig.wait(args.seconds)
         status = rig.status()

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from antarium.client import add_script_arguments, check_script_arguments, run_script, script_rig
+from antarium.client import ScriptArgumentError, add_script_arguments, check_script_arguments, run_script, script_rig
 
 
 def condition_poses(seed: int = 0) -> dict[str, tuple[object, float, float, float]]:
@@ -75,8 +75,7 @@ def run_condition(rig, name, scene, x, y, heading_deg, rng, duration, window, se
             updates.append(update)
 
     sub = rig.on_pose(keep)
-    with rig.trial(f"poc-{name}", condition=name, seed=seed, scene=scene if isinstance(scene, str) else str(scene),
-                   origin=[x, y, heading_deg]) as path:
+    with rig.trial(f"poc-{name}", condition=name, seed=seed, scene=scene, origin=[x, y, heading_deg]) as path:
         t = 0.0
         while True:
             gap = rng.uniform(window, 2 * window)  # rotations at least one window apart
@@ -91,7 +90,8 @@ def run_condition(rig, name, scene, x, y, heading_deg, rng, duration, window, se
         return list(updates), path
 
 
-def plot(results, window, out: Path) -> Path:
+def plot(results, window, png: Path) -> Path:
+    """The conditions' paths on the ball side by side, written to the PNG `png`."""
     from antarium.plots import style
 
     fig, axes = style.figure((4 * len(results), 4.2), ncols=len(results))
@@ -113,7 +113,7 @@ def plot(results, window, out: Path) -> Path:
         ax.set_ylabel("y on the ball (cm)")
         ax.set_aspect("equal", adjustable="datalim")
     fig.suptitle(f"Paths {window:g} s before (red) and after (blue) each 90° scene rotation (dot)")
-    return style.save(fig, out / "proof_of_concept_paths.png")
+    return style.save(fig, png)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -125,12 +125,17 @@ def main(argv: list[str] | None = None) -> int:
                         help="seed of the rotation times and directions (default %(default)s)")
     parser.add_argument("--duration", type=float, default=120.0, help="seconds per condition (default %(default)g)")
     parser.add_argument("--window", type=float, default=15.0,
-                        help="seconds plotted before and after a rotation (default %(default)g)")
+                        help="seconds plotted before and after a rotation, and the least time between rotations; "
+                             "--duration is at least 3 x this (default %(default)g)")
     parser.add_argument("--short", action="store_true", help="quick run: 1.2 s per condition, 0.4 s windows")
     args = parser.parse_args(argv)
     if args.short:
         args.duration, args.window = 1.2, 0.4
     check_script_arguments(args, seconds=("duration", "window"))  # before anything is written or connected
+    if args.duration < 3 * args.window and not math.isclose(args.duration, 3 * args.window):  # --short: 1.2, 0.4
+        # a rotation comes 1 to 2 windows in, then a window after it
+        raise ScriptArgumentError(f"--duration {args.duration:g} s must be at least 3 x --window ({args.window:g} s) "
+                                  "so that every condition has a rotation with a whole window before and after it")
     out = Path(args.out).resolve()  # made by script_rig once the rig answers
     rng = random.Random(args.seed)
     results, logs = {}, []
@@ -143,7 +148,8 @@ def main(argv: list[str] | None = None) -> int:
             results[name] = updates
             logs.append(log)
             print(f"{name}: {len(updates)} poses, {len(rotation_indices(updates))} rotations, log {log}")
-    print(f"plot: {plot(results, args.window, out)}")
+    run = Path(logs[0]).stem.rsplit("_", 1)[0]  # <rig>_<UTC time> of the first log: a reused --out keeps both
+    print(f"plot: {plot(results, args.window, out / f'{run}_proof_of_concept_paths.png')}")
     return 0
 
 

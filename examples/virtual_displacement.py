@@ -21,8 +21,8 @@ import numpy as np
 from antarium.client import add_script_arguments, check_script_arguments, run_script, script_rig
 
 
-def plot(updates, out: Path) -> Path:
-    """The world path; the displacement is the one step far longer than walking allows."""
+def plot(updates, png: Path) -> Path:
+    """The world path, written to the PNG `png`; the displacement is the one step far longer than walking allows."""
     from antarium.plots import style
 
     xy = np.array([(u.pose.x, u.pose.y) for u in updates])
@@ -40,7 +40,7 @@ def plot(updates, out: Path) -> Path:
     ax.set_aspect("equal", adjustable="datalim")
     style.label(ax, "Virtual displacement: the ant's path in the world", "world x (m)", "world y (m)")
     style.legend(ax, "right")
-    return style.save(fig, out / "virtual_displacement_path.png")
+    return style.save(fig, png)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"displaced to ({state['pose']['x']:.2f}, {state['pose']['y']:.2f}) m; trial log: {log}")
     with lock:
         done = list(updates)
-    print(f"plot: {plot(done, out)}")
+    print(f"plot: {plot(done, out / (Path(log).stem + '_path.png'))}")  # named after its log: a reused --out keeps both
     return 0
 
 

@@ -218,6 +218,8 @@ def test_a_rig_refuses_a_timeout_that_is_not_positive():
     ("open_loop_panoramas", ["--panorama", "missing.png"], "--panorama missing.png: no such file"),
     ("proof_of_concept", ["--duration", "-1"], "--duration must be a positive number of seconds"),
     ("proof_of_concept", ["--window", "nan"], "--window must be a positive number of seconds"),
+    ("proof_of_concept", ["--duration", "5", "--window", "10", "--timeout", "1"],
+     "--duration 5 s must be at least 3 x --window (10 s)"),  # else no rotation at all, silently
     ("virtual_displacement", ["--timeout", "-1"], "--timeout must be a positive number of seconds (at most 86400), "
                                                   "got -1"),
     ("virtual_displacement", ["--to-x", "nan"], "--to-x must be a finite number, got nan"),
@@ -283,3 +285,24 @@ def test_help_shows_every_default_and_a_whole_description(script, monkeypatch):
         if action is not None and not action.required:  # the help as printed shows the value
             shown = f"{action.default:g}" if isinstance(action.default, float) else str(action.default)
             assert f"default {shown}" in formatter._expand_help(action), (script, option)
+
+
+def test_a_script_is_refused_while_its_rig_records_another_trial(tmp_path, capsys):
+    """A second script on a recording rig loaded its scene, switched the loop and reset the origin inside the
+    running trial (an 'open-loop' trial ended with 4,465 of 13,622 frames in closed loop), and only then was its own
+    trial refused: it is refused before it sends anything, and the trial goes on untouched."""
+    toml, _ = _quick_server_toml(tmp_path, "tclibusytrial")
+    server = Server(load_config(toml), renderer_factory=None, link=False, echo=lambda line: None).start_thread()
+    try:
+        server.trial_start("running", {})
+        server.loop.set_closed_loop(False)
+        code = client.run_script(_load("proof_of_concept").main,
+                                 ["--config", str(toml), "--short", "--out", str(tmp_path / "out")])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1, err
+        assert ("rig 'tclibusytrial' is recording trial 'running': this script would change its scene and loop; run "
+                "it when that trial has ended (one script at a time on a rig)") in err[0]
+        assert not server.loop.closed_loop and server.trial_name == "running"
+        assert not (tmp_path / "out").exists()
+    finally:
+        server.stop()

@@ -1,12 +1,14 @@
 """The experiment scripts in examples/, each run in its short mode against one embedded server."""
 
 import importlib.util
+import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from antarium import bus
-from antarium.trial_log import read_table
+from antarium.trial_log import open_log, read_table
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -52,22 +54,26 @@ def _args(rig_config, out):
 def test_proof_of_concept(rig_config, tmp_path, capsys):
     assert _load("proof_of_concept").main(_args(rig_config, tmp_path)) == 0
     text = capsys.readouterr().out
-    assert (tmp_path / "proof_of_concept_paths.png").stat().st_size > 10_000
     for condition in ("familiar", "nest", "unfamiliar", "unstructured"):
         assert f"{condition}: " in text and "1 rotations" in text
     logs = sorted(tmp_path.glob("*poc-*.h5"))  # everything the run writes lies under its --out
     assert len(logs) == 4 and not list((rig_config[1] / "logs").glob("*poc-*.h5"))
+    (picture,) = tmp_path.glob("*_proof_of_concept_paths.png")  # named after the run's first log
+    assert picture.stat().st_size > 10_000 and logs[0].name.startswith(picture.name.split("_proof_of_concept")[0])
     assert f"log {logs[0]}" in text  # reported absolute
     events = list(read_table(logs[0], "events")["kind"])
     assert events.count("scene_rotated") >= 1
+    with open_log(next(p for p in logs if p.name.endswith("poc-unstructured.h5"))) as f:
+        assert json.loads(f.attrs["metadata"])["scene"] == {"scene": "horizon"}  # the spec as JSON, not its repr
 
 
 def test_open_loop_panoramas(rig_config, tmp_path, capsys):
     assert _load("open_loop_panoramas").main(_args(rig_config, tmp_path)) == 0
     log = next(tmp_path.glob("*open-loop-panoramas.h5"))
     scenes = read_table(log, "scenes")
-    assert [Path(n).name for n in scenes["name"]][-3:] == ["one_landmark.png", "two_landmarks.png", "skyline.png"]
-    assert all(len(h) == 64 for h in scenes["sha256"][-3:])
+    # The trial opens on the first image (loaded before it starts), not on what the rig showed before.
+    assert [Path(n).name for n in scenes["name"]] == ["one_landmark.png", "two_landmarks.png", "skyline.png"]
+    assert all(len(h) == 64 for h in scenes["sha256"])
     frames = read_table(log, "frames")
     assert not frames["closed_loop"].any()
 
@@ -80,9 +86,37 @@ def test_virtual_displacement(rig_config, tmp_path, capsys):
     assert frames["x"][0] < 1.0 and frames["x"][-1] > 3.9
 
 
+def test_a_second_run_into_the_same_out_keeps_the_first_runs_plot(rig_config, tmp_path, capsys):
+    """Each run's picture is named after its own trial log, so a reused --out holds both runs, log and plot."""
+    for _ in range(2):
+        assert _load("virtual_displacement").main(_args(rig_config, tmp_path)) == 0
+    logs = sorted(tmp_path.glob("*virtual-displacement*.h5"))
+    assert len(logs) == 2
+    assert sorted(p.name for p in tmp_path.glob("*.png")) == [f"{log.stem}_path.png" for log in logs]
+
+
 def test_the_rig_is_the_configs_without_rig(rig_config, tmp_path, capsys):
     """`--config rig.toml` alone talks to the rig that file names ([rig] name = "texamples"), not to rig1."""
     toml, _ = rig_config
     args = ["--config", str(toml), "--short", "--out", str(tmp_path)]
     assert _load("virtual_displacement").main(args) == 0
     assert "displaced to (4.00, -3.00) m" in capsys.readouterr().out
+
+
+def test_ant_homing_draws_the_nest_where_the_nest_is(tmp_path, monkeypatch):
+    """The paths picture labels the drawn route's start "nest" and its end "feeder": the route drawn is the
+    learned outbound one (nest first), not the way home (released at the feeder, which would swap the labels)."""
+    module = _load("ant_homing")
+    drawn = {}
+    real = module.plot_paths
+
+    def keep(path, route, tracks, *args, **kwargs):
+        drawn["route"], drawn["release"] = route, tracks["homing Antcar"].arrays()[0][0]
+        return real(path, route, tracks, *args, **kwargs)
+
+    monkeypatch.setattr(module, "plot_paths", keep)
+    assert module.main(["--short", "--out", str(tmp_path)]) == 0
+    route = drawn["route"]
+    assert np.linalg.norm(route.end - drawn["release"]) < 0.05  # released at the feeder
+    assert np.linalg.norm(route.start - drawn["release"]) > 1.0  # the nest, 1.2 m away along the route
+    assert (tmp_path / "homing_paths.png").stat().st_size > 10_000
