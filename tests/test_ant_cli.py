@@ -1,6 +1,7 @@
 """`antarium ant learn | run | evaluate`: files written, bad input refused with a clear error (exit 2)."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +24,10 @@ def test_learn_then_run_writes_model_log_pictures_and_summary(tmp_path, capsys):
         assert (tmp_path / "run" / name).stat().st_size > 0
     summary = json.loads((tmp_path / "run" / "run.json").read_text())["summary"]
     assert summary["arrived"] and summary["decisions"] > 5
+    # A run that never reaches the nest has no stopping distance: null in run.json, not NaN (no JSON reader takes)
+    assert main(["ant", "run", str(model), "--out", str(tmp_path / "short"), "--max-decisions", "1"]) == 0
+    short = json.loads((tmp_path / "short" / "run.json").read_text(), parse_constant=lambda c: pytest.fail(c))
+    assert short["summary"]["stop_distance"] is None and short["summary"]["decisions"] == 1
     # The path of an earlier trial log is a route too: the learning walk's log holds the route it walked.
     walked = route_from_log(tmp_path / "learn.h5")
     assert walked.length == pytest.approx(Route.load(route).length, abs=0.005)
@@ -81,6 +86,15 @@ def test_params_are_converted_by_the_type_of_the_models_field():
      "choose the compass with --compass"),
     (["homing", "--tether", "fixed", "--cue-wait-frames", "-1", "--seeds", "1", "--steps", "2"],
      "tether must be free_yaw or fixed and cue_wait_frames an integer >= 0, got 'fixed' and -1"),
+    # NaN passed every check: put-back NaN evaluated every route never putting the ant back; a NaN or infinite
+    # length ended in "cannot convert float NaN to integer"; a negative curved seed in numpy's own words
+    (["evaluate", "--put-back-cm", "nan", "--routes", "1", "--length", "0.2", "--models", "antcar"],
+     "--put-back-cm must be a finite number >= 0 (0: never put back), got nan"),
+    (["evaluate", "--length", "nan"], "--length a finite number > 0 m, got 10 and nan"),
+    (["learn", "--route", "curved:1", "--length", "inf"], "route length and spacing must be finite numbers > 0 m"),
+    (["learn", "--route", "curved:-1"], "route 'curved:-1': use curved:SEED with an integer seed >= 0"),
+    (["displace", "--lateral-cm", "nan", "--steps", "2"],
+     "--lateral-cm must be a finite number (cm left of the feeder; negative: right), got nan"),
 ])
 def test_bad_values_are_refused_in_one_line(tmp_path, capsys, argv, message):
     out = ["--out", str(tmp_path / ("m.npz" if argv[0] == "learn" else "out"))]
@@ -103,3 +117,45 @@ def test_homing_in_the_fixed_tether_waits_for_its_sky_compass(tmp_path, capsys):
         why = record["outcomes"][0]["lost_cue"]
         assert why is None if lost is None else why.startswith(lost)
     capsys.readouterr()
+
+
+def test_a_compass_mismatch_is_refused_before_either_compass_runs(tmp_path, capsys):
+    """--compass both with --param compass=sky: refused before the sky run (it ran and wrote its files, and the
+    ideal run was refused after it)."""
+    out = tmp_path / "out"
+    argv = ["ant", "homing", "--compass", "both", "--param", "compass=sky", "--seeds", "1", "--steps", "2",
+            "--inbound", "1", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "model parameter compass='sky' differs from the task's compass 'ideal'" in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_the_printed_homing_summary_is_the_strict_json_of_the_file(tmp_path, capsys):
+    """A run whose metrics are NaN (every outbound ended without a cue) printed NaN, which no JSON reader takes,
+    where the file holds null; the file lacked the pictures' paths that the print has."""
+    out = tmp_path / "out"
+    argv = ["ant", "homing", "--tether", "fixed", "--cue-wait-frames", "0", "--compass", "sky", "--seeds", "1",
+            "--steps", "20", "--inbound", "10", "--out", str(out)]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads(printed[printed.index("\n{") + 1:], parse_constant=lambda c: pytest.fail(f"printed {c}"))
+    assert summary["closest_approach_share_median"] is None and summary["runs_without_cue"]
+    assert summary == json.loads((out / "pi_homing_sky.json").read_text())["summary"]
+    assert Path(summary["paths_png"]).stat().st_size > 0
+
+
+def test_run_refuses_a_central_complex_model_file_naming_its_kind(tmp_path, capsys):
+    """A cx model file given to `ant run` walked into the habitat and ended on 'the sky compass has no cue';
+    `ant serve` took it too."""
+    from antarium.ant.eye import EyeParams
+    from antarium.ant.models import make_model
+    from antarium.ant.storage import save_model
+
+    model = tmp_path / "cx.npz"
+    save_model(model, make_model("cx", EyeParams().n_pn), EyeParams(), np.array([[0.0, 0.0], [0.5, 0.0]]))
+    for argv in (["run", str(model)], ["serve", str(model), "--config", str(tmp_path / "no.toml")]):
+        assert main(["ant", *argv, "--out", str(tmp_path / "out"), "--max-decisions", "3"]) == 2
+        err = capsys.readouterr().err
+        assert "holds a cx model; a route is followed by a route model (antcar, ardin, perfect_memory)" in err
+        assert err.count("\n") == 1 and not (tmp_path / "out").exists()

@@ -19,7 +19,6 @@ metrics cover the decisions walked until then, and the experiment goes on with i
 from __future__ import annotations
 
 import copy
-import json
 import math
 import time
 from dataclasses import asdict, dataclass, replace
@@ -31,7 +30,7 @@ import numpy as np
 from antarium.ant.central_complex import CentralComplex
 from antarium.ant.compass import NoSkyCueError
 from antarium.ant.eye import EyeParams
-from antarium.ant.metrics import median_mad
+from antarium.ant.metrics import json_text, median_mad
 from antarium.plots.homing import plot_arena, plot_distance, plot_trips
 
 #: turning of the outbound random walk: turn_k = 0.9 turn_(k-1) + N(0, sd) rad per decision
@@ -46,17 +45,8 @@ NEST_RADIUS = 0.1
 
 
 def write_json(path: Path, record: Any) -> None:
-    """`record` as strict JSON (NaN, e.g. the metrics of a run that never reached the feeder, written as null)."""
-    def strict(v):
-        if isinstance(v, dict):
-            return {k: strict(x) for k, x in v.items()}
-        if isinstance(v, list | tuple):
-            return [strict(x) for x in v]
-        if isinstance(v, float | np.floating):
-            return float(v) if math.isfinite(v) else None
-        return v
-
-    path.write_text(json.dumps(strict(record), indent=2, allow_nan=False, default=float))
+    """`record` as strict JSON text (`json_text`) in `path`."""
+    path.write_text(json_text(record))
 
 
 #: frames an ant of the foraging task stands still at most waiting for its sky compass cue (`VirtualAnt`): in the
@@ -204,7 +194,7 @@ def homing_metrics(outbound: Trip, inbound: Trip, nest=(0.0, 0.0)) -> dict[str, 
             "search_median_share": float(np.median(dist[k:]) / length)}
 
 
-def _check_compass(model_params: dict | None, compass: str) -> None:
+def check_compass(model_params: dict | None, compass: str) -> None:
     """Refuse a model parameter `compass` other than the task's: the model and the rig would read different
     compasses (and the files carry the task's name)."""
     given = (model_params or {}).get("compass", compass)
@@ -246,7 +236,7 @@ def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 150
     from antarium.ant.world import virtual_rig
 
     n_outbound, n_inbound = trip_decisions(n_outbound, n_inbound)
-    _check_compass(model_params, compass)
+    check_compass(model_params, compass)
     if tether not in ("free_yaw", "fixed") or isinstance(cue_wait_frames, bool) \
             or not isinstance(cue_wait_frames, int) or cue_wait_frames < 0:
         raise ValueError(f"tether must be free_yaw or fixed and cue_wait_frames an integer >= 0, got {tether!r} "
@@ -272,15 +262,15 @@ def pi_homing(out_dir: str | Path | None, seeds=range(20), n_outbound: int = 150
                      f" % of {metrics['outbound_length_m']:.1f} m, tortuosity {metrics['tortuosity']:.2f}{lost}")
     summary = summarise(outcomes)
     if out is not None:
-        write_json(out / f"pi_homing_{compass}.json",
-                   {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
-                    "n_inbound": n_inbound, "scene": str(scene), "tether": tether,
-                    "cue_wait_frames": cue_wait_frames})
         title = (f"CX path integration, {compass} compass, {tether.replace('_', ' ')} tether ({len(outcomes)} "
                  f"routes of {n_outbound} steps)")
         summary["paths_png"] = str(plot_trips(out / f"pi_homing_{compass}_paths.png", trips, title))
         summary["distance_png"] = str(plot_distance(out / f"pi_homing_{compass}_distance.png", trips, title,
                                                     model.params.step))
+        write_json(out / f"pi_homing_{compass}.json",
+                   {"summary": summary, "outcomes": [asdict(o) for o in outcomes], "n_outbound": n_outbound,
+                    "n_inbound": n_inbound, "scene": str(scene), "tether": tether,
+                    "cue_wait_frames": cue_wait_frames})
     return summary
 
 
@@ -393,7 +383,7 @@ def cluttered_arena(out_dir, seeds=range(20), n_outbound: int = 1500, n_inbound:
     from antarium.ant.world import virtual_rig
 
     n_outbound, n_inbound = trip_decisions(n_outbound, n_inbound)
-    _check_compass(model_params, compass)
+    check_compass(model_params, compass)
     outcomes: list[ArenaOutcome] = []
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
@@ -432,11 +422,17 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
     homeward views, and is then put down `lateral` m to the left of the feeder with its outbound memory restored.
     PI points to a fictive nest displaced as far; the views point back to the learned route. For each k (CPU4's
     weight; 1 = PI alone, 0 = the MBONs alone) the ant homes again; reports its closest approach to the real and
-    to the fictive nest. Writes `displacement_<compass>.json` and `.png` into `out_dir` (when given)."""
+    to the fictive nest (m, over the decisions walked; NaN for a trip that lost its compass cue at its first) and
+    why a trip ended early (`lost_cue`, None when it walked every decision). Writes `displacement_<compass>.json`
+    and `.png` into `out_dir` (when given). ValueError, before anything runs, for a lateral that is not finite, and
+    when the outbound walk loses its compass cue (no feeder to displace the ant from)."""
     from antarium.ant.models import make_model
     from antarium.ant.world import virtual_rig
 
     n_outbound, n_inbound = trip_decisions(n_outbound, n_inbound)
+    if isinstance(lateral, bool) or not isinstance(lateral, int | float | np.floating) or not math.isfinite(lateral):
+        raise ValueError(f"lateral displacement must be a finite number of metres (left of the feeder; negative: "
+                         f"right), got {lateral!r}")
     path = Path(out_dir) if out_dir is not None else None
     if path is not None:  # an unwritable folder is found before the run, not after it
         path.mkdir(parents=True, exist_ok=True)
@@ -447,9 +443,14 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
         settle(ant)
         model.cx.reset()
         out = walk_outbound(ant, outbound_turns(seed, n_outbound), model.params.step)
+        if out.lost_cue is not None:
+            raise ValueError(f"displacement: the outbound walk ended without a compass cue at {out.lost_cue}; "
+                             f"no feeder to displace the ant from (scene {scene!r} needs a polarised sky, or use "
+                             f"the ideal compass)")
         memory = model.home_memory()
         model.use_mbons = False  # home by the CX, also after the MBONs stop learning at the nest
-        trips["home 1: CX, MBONs learn"] = walk_home(ant, n_inbound, learning=True)
+        trips["home 1: CX, MBONs learn"] = home = walk_home(ant, n_inbound, learning=True)
+        result["home_1_lost_cue"] = home.lost_cue
         model.use_mbons = True
         fx, fy = out.xy[-1]
         h = float(out.heading[-1])
@@ -465,17 +466,23 @@ def displacement(out_dir, seed: int = 0, n_outbound: int = 600, n_inbound: int |
             model.params = type(model.params)(**{**asdict(model.params), "k": k})
             trip = walk_home(ant, n_inbound)
             trips[f"displaced, k = {k}"] = trip
-            result["runs"][str(k)] = {
-                "closest_to_nest_m": float(np.hypot(*trip.xy.T).min()),
-                "closest_to_fictive_nest_m": float(np.hypot(*(trip.xy - fictive).T).min())}
+            run = result["runs"][str(k)] = {
+                "closest_to_nest_m": _closest(trip.xy, (0.0, 0.0)),
+                "closest_to_fictive_nest_m": _closest(trip.xy, fictive), "lost_cue": trip.lost_cue}
             if echo is not None:
-                echo(f"k = {k}: closest to nest {result['runs'][str(k)]['closest_to_nest_m']:.2f} m, to the fictive "
-                     f"nest {result['runs'][str(k)]['closest_to_fictive_nest_m']:.2f} m")
+                lost = f"; ended without a compass cue at {trip.lost_cue}" if trip.lost_cue else ""
+                echo(f"k = {k}: closest to nest {run['closest_to_nest_m']:.2f} m, to the fictive "
+                     f"nest {run['closest_to_fictive_nest_m']:.2f} m{lost}")
     if path is not None:
-        write_json(path / f"displacement_{compass}.json", result)
         pictures = {name: (out, trip) for name, trip in trips.items()}
         result["png"] = str(plot_trips(path / f"displacement_{compass}.png", pictures,
                                        f"displaced {lateral} m left of the feeder: PI vs visual memory",
                                        {"fictive nest (where PI points)": tuple(result["fictive_nest_xy_m"])},
                                        {f"displaced, k = {k}": (float(start[0]), float(start[1])) for k in ks}))
+        write_json(path / f"displacement_{compass}.json", result)
     return result
+
+
+def _closest(xy: np.ndarray, point) -> float:
+    """Closest distance (m) of the positions xy (n, 2) m to `point` (x, y) m; NaN when there are none."""
+    return float(np.hypot(*(xy - np.asarray(point, np.float64)).T).min()) if len(xy) else math.nan

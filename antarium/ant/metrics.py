@@ -9,14 +9,31 @@
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from antarium.ant.routes import Route
 
 ARDIN_ERROR_DISTANCE_M = 0.20
+
+
+def json_text(record: Any) -> str:
+    """`record` as strict JSON text (NaN, e.g. the metrics of a run that never reached the feeder, as null): what
+    the files hold and the commands print."""
+    def strict(v):
+        if isinstance(v, dict):
+            return {k: strict(x) for k, x in v.items()}
+        if isinstance(v, list | tuple):
+            return [strict(x) for x in v]
+        if isinstance(v, float | np.floating):
+            return float(v) if math.isfinite(v) else None
+        return v
+
+    return json.dumps(strict(record), indent=2, allow_nan=False, default=float)
 
 
 def wrap(angle):

@@ -6,7 +6,6 @@ trial log (the frame loop's own), a picture of the learned and followed paths an
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import asdict, dataclass
@@ -17,7 +16,7 @@ import numpy as np
 
 from antarium.ant.agent import Track, follow_route, learning_walk
 from antarium.ant.eye import EyeParams
-from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M, median_mad, memory_pi_error
+from antarium.ant.metrics import ARDIN_ERROR_DISTANCE_M, json_text, median_mad, memory_pi_error
 from antarium.ant.models import make_model
 from antarium.ant.routes import Route, RouteError, curved_route
 from antarium.ant.storage import mbon_bytes, save_model
@@ -54,7 +53,9 @@ def parse_route(spec: str, length: float = 10.0) -> Route:
         try:
             seed = int(spec.split(":", 1)[1])
         except ValueError:
-            raise RouteError(f"route {spec!r}: use curved:SEED with an integer seed") from None
+            seed = -1
+        if seed < 0:
+            raise RouteError(f"route {spec!r}: use curved:SEED with an integer seed >= 0")
         return curved_route(seed, length=length)
     path = Path(spec)
     if not path.exists():
@@ -190,7 +191,7 @@ def follow_saved(model, eye_params: EyeParams, route: Route, out_dir: str | Path
     picture = _outputs(out, name, route, model.kind, result.track, top)
     outcome = TrialOutcome(model.kind, name, asdict(result.summary), wall, model_ms, model.learned_views,
                            mbon_bytes(model), math.nan, str(log_path), picture)
-    (out / f"{name}.json").write_text(json.dumps(asdict(outcome), indent=2, default=float))
+    (out / f"{name}.json").write_text(json_text(asdict(outcome)))
     return outcome, result.track
 
 
@@ -230,7 +231,7 @@ def write_outcomes(out_dir: Path, outcomes: list[TrialOutcome], extra: dict | No
     text = table(outcomes)
     (out_dir / "evaluation.md").write_text(text + "\n")
     payload = {"outcomes": [asdict(o) for o in outcomes], **(extra or {})}
-    (out_dir / "evaluation.json").write_text(json.dumps(payload, indent=2, default=float))
+    (out_dir / "evaluation.json").write_text(json_text(payload))
     return text
 
 
@@ -277,5 +278,5 @@ def demo(out_dir: str | Path, scene: Any = "habitat", progress=None) -> TrialOut
     route = curved_route(DEMO_ROUTE_SEED, length=DEMO_ROUTE_LENGTH_M)
     outcome, _ = train_and_follow("antcar", route, out, "virtual_ant", scene=scene,
                                   start_offset=(0.03, math.radians(15)), progress=progress)
-    (out / "virtual_ant.json").write_text(json.dumps(asdict(outcome), indent=2, default=float))
+    (out / "virtual_ant.json").write_text(json_text(asdict(outcome)))
     return outcome

@@ -107,8 +107,8 @@ def curved_route(seed: int, length: float = 10.0, start=(0.0, 0.0), heading: flo
     The curvature (1/m) is an Ornstein-Uhlenbeck process in arc length with standard deviation `curvature` and
     correlation length `correlation` (m); the first heading is uniform unless given. Same seed, same route.
     """
-    if length <= 0 or spacing <= 0:
-        raise ValueError(f"route length and spacing must be > 0 m, got {length}, {spacing}")
+    if not all(math.isfinite(v) and v > 0 for v in (length, spacing)):
+        raise ValueError(f"route length and spacing must be finite numbers > 0 m, got {length}, {spacing}")
     rng = np.random.default_rng(seed)
     n = max(2, int(round(length / spacing)))
     h = rng.uniform(-math.pi, math.pi) if heading is None else float(heading)

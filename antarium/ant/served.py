@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 from antarium.ant.agent import VirtualAnt
 from antarium.ant.eye import Eye, EyeParams
 from antarium.ant.locomotion import TrackballLegs
+from antarium.ant.metrics import json_text
 from antarium.core.clock import Clock, MonotonicClock
 from antarium.core.pose import Pose
 
@@ -269,11 +270,11 @@ def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out:
 
     from antarium.ant.agent import follow_route
     from antarium.ant.routes import Route
-    from antarium.ant.storage import load_model
+    from antarium.ant.storage import load_route_model
     from antarium.plots.ant import plot_paths, scene_top_view
     from antarium.renderers import build_scene
 
-    model, eye_params, stored = load_model(model_file)
+    model, eye_params, stored = load_route_model(model_file)
     if stored is None:
         raise ValueError(f"{model_file}: the model file holds no route to follow")
     route = Route(stored)
@@ -290,7 +291,7 @@ def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out:
         events = ant.loop.events
     summary = {**asdict(result.summary), "trial_log": log, "seconds": seconds,
                "decisions_per_s": result.summary.decisions / seconds}
-    (out / "served.json").write_text(json.dumps({"summary": summary, "events": events}, indent=2, default=float))
+    (out / "served.json").write_text(json_text({"summary": summary, "events": events}))
     picture = plot_paths(out / "served_paths.png", route, {f"{model.kind} (served rig)": result.track},
                          title="virtual ant on the served rig", top=scene_top_view(build_scene(cfg.render.scene)))
     echo(f"virtual ant on rig {cfg.rig.name!r}: {'arrived' if summary['arrived'] else 'did not arrive'} after "

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from antarium.ant import ROUTE_MODELS
 from antarium.ant.eye import EyeParams
 from antarium.ant.models import MODELS, PerfectMemoryModel
 from antarium.ant.mushroom_body import MBON
@@ -89,6 +90,17 @@ def load_model(path: str | os.PathLike):
         raise ModelFileError(f"{path}: damaged model file (a truncated or corrupted .npz archive: {exc})") from None
     except ValueError as exc:  # an entry numpy cannot read, or parameters the model refuses
         raise ModelFileError(f"{path}: {exc}") from None
+
+
+def load_route_model(path: str | os.PathLike):
+    """`load_model` of a route model's file (a kind in `ROUTE_MODELS`: what `antarium ant run | serve` release on
+    a route); ModelFileError naming the kind of any other (the central-complex models home by path integration)."""
+    model, eye_params, route = load_model(path)
+    if model.kind not in ROUTE_MODELS:
+        raise ModelFileError(f"{path} holds a {model.kind} model; a route is followed by a route model "
+                             f"({', '.join(ROUTE_MODELS)}); the central-complex models home by path integration: "
+                             f"`antarium ant homing | arena | displace`")
+    return model, eye_params, route
 
 
 def _entry(path: Path, data, key: str, kind: str = "") -> np.ndarray:

@@ -126,22 +126,24 @@ def _trips(p: argparse.ArgumentParser) -> None:
 
 
 def _run_trips(args: argparse.Namespace) -> int:
-    import json
-
-    from antarium.ant.homing import cluttered_arena, pi_homing
+    from antarium.ant.homing import check_compass, cluttered_arena, pi_homing
+    from antarium.ant.metrics import json_text
 
     if args.seeds < 1 or args.steps < 2 or (args.inbound is not None and args.inbound < 1):
         raise ValueError("--seeds must be >= 1, --steps >= 2 and --inbound >= 1")
     compasses = ("sky", "ideal") if args.compass == "both" else (args.compass,)
+    params = _params(args.param, "cx" if args.action == "homing" else args.model)
+    for compass in compasses:  # refused before the first compass runs, not after it
+        check_compass(params, compass)
     for compass in compasses:
         if args.action == "homing":
             wait = {} if args.cue_wait_frames is None else {"cue_wait_frames": args.cue_wait_frames}
-            summary = pi_homing(args.out, range(args.seeds), args.steps, args.inbound, compass,
-                                _params(args.param, "cx"), echo=print, tether=args.tether, **wait)
+            summary = pi_homing(args.out, range(args.seeds), args.steps, args.inbound, compass, params, echo=print,
+                                tether=args.tether, **wait)
         else:
             summary = cluttered_arena(args.out, range(args.seeds), args.steps, args.inbound, compass, args.model,
-                                      _params(args.param, args.model), echo=print)
-        print(json.dumps(summary, indent=2))
+                                      params, echo=print)
+        print(json_text(summary))
     return 0
 
 
@@ -165,14 +167,16 @@ def run(args: argparse.Namespace) -> int:
     if args.action in ("homing", "arena"):
         return _run_trips(args)
     if args.action == "displace":
-        import json
-
         from antarium.ant.homing import displacement
+        from antarium.ant.metrics import json_text
 
         if args.steps < 2 or args.seed < 0:
             raise ValueError(f"--steps must be >= 2 and --seed >= 0, got {args.steps} and {args.seed}")
-        print(json.dumps(displacement(args.out, args.seed, args.steps, None, args.lateral_cm / 100.0,
-                                      compass=args.compass, scene=args.scene, echo=print), indent=2))
+        if not math.isfinite(args.lateral_cm):
+            raise ValueError(f"--lateral-cm must be a finite number (cm left of the feeder; negative: right), "
+                             f"got {args.lateral_cm}")
+        print(json_text(displacement(args.out, args.seed, args.steps, None, args.lateral_cm / 100.0,
+                                     compass=args.compass, scene=args.scene, echo=print)))
         return 0
     if args.action == "serve":
         from antarium.ant.served import run_served
@@ -190,10 +194,11 @@ def run(args: argparse.Namespace) -> int:
         bad = [k for k in kinds if k not in ROUTE_MODELS]
         if bad or not kinds:
             raise ValueError(f"--models: unknown {bad or 'none given'}; allowed: {', '.join(ROUTE_MODELS)}")
-        if args.routes < 1 or args.length <= 0:
-            raise ValueError("--routes must be >= 1 and --length > 0 m")
-        if args.put_back_cm < 0:
-            raise ValueError(f"--put-back-cm must be >= 0 (0: never put back), got {args.put_back_cm}")
+        if args.routes < 1 or not (math.isfinite(args.length) and args.length > 0):
+            raise ValueError(f"--routes must be >= 1 and --length a finite number > 0 m, got {args.routes} and "
+                             f"{args.length}")
+        if not (math.isfinite(args.put_back_cm) and args.put_back_cm >= 0):
+            raise ValueError(f"--put-back-cm must be a finite number >= 0 (0: never put back), got {args.put_back_cm}")
         put_back = args.put_back_cm / 100.0 if args.put_back_cm > 0 else math.inf
         print(route_following.evaluate(out, args.routes, args.length, kinds, args.seed, args.scene, _bar, put_back))
         return 0
@@ -236,11 +241,11 @@ def _learn(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from antarium.ant.route_following import follow_saved, parse_route
     from antarium.ant.routes import Route
-    from antarium.ant.storage import load_model
+    from antarium.ant.storage import load_route_model
 
     if args.max_decisions is not None:
         _positive("--max-decisions", args.max_decisions)
-    model, eye_params, stored = load_model(args.model_file)
+    model, eye_params, stored = load_route_model(args.model_file)
     if args.route is not None:
         route = parse_route(args.route, args.length)
     elif stored is not None:
