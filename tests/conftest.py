@@ -23,6 +23,19 @@ def wait_for(predicate: Callable[[], bool], timeout_s: float = 5.0, poll_s: floa
     return predicate()
 
 
+def write_world_panorama(path: Path) -> Path:
+    """A small equirectangular test world at `path` (64 x 32 PNG): a bright sky over a dark ground and one dark
+    vertical band at azimuth 0..45 deg (something to steer by)."""
+    import cv2
+    import numpy as np
+
+    img = np.zeros((32, 64, 3), np.uint8)
+    img[:16] = 200
+    img[:, :8] = 90
+    cv2.imwrite(str(path), img)
+    return path
+
+
 def free_tcp_port(host: str = "127.0.0.1") -> int:
     """A TCP port nothing listens on now (for a bus endpoint on loopback)."""
     with socket.socket() as s:

@@ -12,8 +12,8 @@ import sys
 import time
 import tomllib
 
-import numpy as np
 import pytest
+from conftest import write_world_panorama
 
 pytest.importorskip("distributed")
 pd = pytest.importorskip("pandas")
@@ -40,12 +40,7 @@ n_kc = 100
 @pytest.fixture()
 def pano(tmp_path):
     """A panorama world (pano.png), a route folder with two short routes and the spec (spec.toml)."""
-    import cv2
-
-    img = np.zeros((32, 64, 3), np.uint8)
-    img[:16] = 200
-    img[:, :8] = 90
-    cv2.imwrite(str(tmp_path / "pano.png"), img)
+    write_world_panorama(tmp_path / "pano.png")
     (tmp_path / "routes").mkdir()
     for i in range(2):
         (tmp_path / "routes" / f"r{i}.csv").write_text(f"x_m,y_m\n0,{0.1 * i}\n0.1,{0.1 * i}\n0.2,{0.1 * i + 0.02}\n")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import write_world_panorama
 
 pytest.importorskip("distributed")
 pd = pytest.importorskip("pandas")
@@ -33,12 +34,7 @@ def _spec(experiment: str = "", worlds: str = '[[worlds]]\nscene = "pano.png"\n'
 @pytest.fixture()
 def pano(tmp_path):
     """A panorama world (pano.png) and a route folder with one route."""
-    import cv2
-
-    img = np.zeros((32, 64, 3), np.uint8)
-    img[:16] = 200
-    img[:, :8] = 90
-    cv2.imwrite(str(tmp_path / "pano.png"), img)
+    write_world_panorama(tmp_path / "pano.png")
     (tmp_path / "routes").mkdir()
     (tmp_path / "routes" / "r0.csv").write_text(ROUTE)
     return tmp_path
