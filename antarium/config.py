@@ -245,6 +245,9 @@ class MonitorSection(Section):
     def _networks(cls, v: list[str]) -> list[str]:
         import ipaddress
 
+        if not v:  # the monitor would start and refuse every browser, its own computer's included
+            raise ValueError("is empty: no browser could open the page; name at least one address or network "
+                             "(e.g. '127.0.0.1/32')")
         out = []
         for spec in v:
             try:

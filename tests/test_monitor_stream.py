@@ -121,7 +121,8 @@ def test_monitor_section_checks():
     for bad, message in [({"colour": 1}, "unknown key 'colour' in \\[monitor\\]; allowed: allow, commands"),
                          ({"port": 70000}, "port must be in \\[0, 65535\\]"),
                          ({"commands": "yes"}, "commands must be true or false"),
-                         ({"allow": ["lab"]}, "'lab' is not an address or network")]:
+                         ({"allow": ["lab"]}, "'lab' is not an address or network"),
+                         ({"allow": []}, "allow is empty: no browser could open the page; name at least one")]:
         with pytest.raises(ConfigError, match=message):
             resolve({"monitor": bad})
 
