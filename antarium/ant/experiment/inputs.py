@@ -133,6 +133,7 @@ def _is_gltf(scene: str) -> bool:
 def build_world(world: WorldSpec):
     """The `Scene` of `world`: its meshes scaled to metres and turned +z up. Raises WorldError / FileNotFoundError."""
     from antarium.renderers import build_scene
+    from antarium.renderers.meshes import UP_AXES as TURN_UP
     from antarium.renderers.scene import MeshData, SceneObject
 
     if _is_gltf(world.scene) and world.up != "y":
@@ -146,8 +147,7 @@ def build_world(world: WorldSpec):
     turn = world.up == "y" and not _is_gltf(world.scene)
     if world.scale == 1.0 and not turn:
         return scene
-    # (X, Y, Z) with +y up -> (X, -Z, Y) with +z up, as glTF's loader does; then the scale
-    rot = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]) if turn else np.eye(3)
+    rot = TURN_UP["y" if turn else "z"][:3, :3]  # the mesh loader's turn to +z up; then the scale
     for name, obj in list(scene.objects.items()):
         m = obj.mesh
         v = (np.asarray(m.vertices, np.float64) @ rot.T * world.scale).astype(np.float32)
