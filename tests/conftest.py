@@ -1,4 +1,5 @@
-"""Shared helpers and fixtures: polling with a deadline, a free bus endpoint, a rig config, an isolated cache."""
+"""Shared helpers and fixtures: polling with a deadline, a free bus endpoint, the dome and a renderer per test
+module, an isolated cache."""
 
 from __future__ import annotations
 
@@ -50,6 +51,25 @@ def process_gone(pid: int) -> bool:
             return f.read().rsplit(")", 1)[1].split()[0] == "Z"
     except OSError:
         return True
+
+
+@pytest.fixture(scope="module")
+def dome():
+    """The embedded default dome, loaded once per test module."""
+    from antarium.geometry import load_dome
+
+    return load_dome()
+
+
+@pytest.fixture(scope="module")
+def renderer(request, dome):
+    """A renderer of `dome` at the test module's `FACE` (px a cube face, 64 where the module sets none), released
+    after the module."""
+    from antarium.renderers import Renderer
+
+    r = Renderer(dome, face_size=getattr(request.module, "FACE", 64))
+    yield r
+    r.release()
 
 
 @pytest.fixture

@@ -6,12 +6,6 @@ import numpy as np
 import pytest
 
 from antarium.ant.eye import Eye, EyeParams, View, row_gain_control, sobel_magnitude
-from antarium.geometry import load_dome
-
-
-@pytest.fixture(scope="module")
-def dome():
-    return load_dome()
 
 
 @pytest.fixture(scope="module")

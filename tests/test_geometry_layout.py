@@ -5,16 +5,11 @@ import hashlib
 import numpy as np
 import pytest
 
-from antarium.geometry import LayoutParams, generate_layout, load_dome, load_layout
+from antarium.geometry import LayoutParams, generate_layout, load_layout
 from antarium.geometry.constants import GB_PER_PANEL, N_GB, N_PIXELS, N_UV, UV_PER_PANEL
 from antarium.geometry.lattice import edge_distance
 from antarium.geometry.layout import SHIPPED_LAYOUT, save_layout
 from antarium.geometry.spacing import layout_summary
-
-
-@pytest.fixture(scope="module")
-def dome():
-    return load_dome()
 
 
 @pytest.fixture(scope="module")

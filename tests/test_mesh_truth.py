@@ -9,25 +9,9 @@ import numpy as np
 import pytest
 
 from antarium.core.pose import Pose
-from antarium.geometry import load_dome
 from antarium.renderers.library import build_scene
 from antarium.renderers.meshes import load_mesh_objects
-from antarium.renderers.renderer import Renderer
 from antarium.renderers.scene import MeshData, SceneObject
-
-FACE = 64
-
-
-@pytest.fixture(scope="module")
-def dome():
-    return load_dome()
-
-
-@pytest.fixture(scope="module")
-def renderer(dome):
-    r = Renderer(dome, face_size=FACE)
-    yield r
-    r.release()
 
 
 def radiance(frame, dome) -> np.ndarray:

@@ -14,7 +14,6 @@ import pytest
 from conftest import wait_for
 
 from antarium.core.pose import Pose
-from antarium.geometry import load_dome
 from antarium.renderers import cubemap
 from antarium.renderers.far_layer import EyeVelocity, allowed_displacement, cube_taps
 from antarium.renderers.habitat import habitat_scene
@@ -25,11 +24,6 @@ from antarium.renderers.scene import SceneObject
 #: a walk of 10 cm with turns, eye 1 cm above the ground (as an ant on the ball)
 WALK = [Pose(0.002 * k, 0.001 * k, 0.01, 0.02 * k) for k in range(50)]
 CHECK = (0, 20, 49)
-
-
-@pytest.fixture(scope="module")
-def dome():
-    return load_dome()
 
 
 def small_habitat():

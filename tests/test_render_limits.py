@@ -11,7 +11,6 @@ import pytest
 
 from antarium.config import ConfigError, resolve
 from antarium.core.pose import Pose
-from antarium.geometry import load_dome
 from antarium.renderers import footprint
 from antarium.renderers.renderer import MAX_FACE_SIZE, Renderer, smallest_face_size
 from antarium.server.config_check import check_config, face_size_range
@@ -20,11 +19,6 @@ DRIFT = {"scene": "grating", "orientation_deg": 90, "speed_deg_s": 10}  # time-v
 POSE = Pose(0.0, 0.0, 0.1, 0.0)
 POSE0 = Pose(0.0, 0.0, 0.0, 0.0)  # dome frame = world frame
 FULL = 65535.0
-
-
-@pytest.fixture(scope="module")
-def dome():
-    return load_dome()
 
 
 @pytest.fixture(scope="module")

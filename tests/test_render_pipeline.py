@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from antarium.core.pose import Pose
-from antarium.geometry import load_dome
 from antarium.renderers import cubemap, footprint
 from antarium.renderers.library import build_scene
 from antarium.renderers.renderer import Renderer
@@ -18,11 +17,6 @@ from antarium.renderers.stimuli import Bar
 
 FACE = 128  # smaller than the default to keep tests quick; the maths does not depend on the size
 FWHM = math.radians(1.5)
-
-
-@pytest.fixture(scope="module")
-def dome():
-    return load_dome()
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from antarium.core.pose import Pose
-from antarium.geometry import load_dome
 from antarium.renderers.library import build_scene
 from antarium.renderers.renderer import Renderer
 from antarium.renderers.scene import MeshData, SceneObject
@@ -16,18 +15,6 @@ from antarium.renderers.stimuli import Uniform
 
 FACE = 96
 HOME = Pose(0.0, 0.0, 0.01, 0.0)
-
-
-@pytest.fixture(scope="module")
-def dome():
-    return load_dome()
-
-
-@pytest.fixture(scope="module")
-def renderer(dome):
-    r = Renderer(dome, face_size=FACE)
-    yield r
-    r.release()
 
 
 def box(size=0.5, colour=(0.8, 0.1, 0.0)) -> MeshData:

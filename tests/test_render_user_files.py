@@ -8,24 +8,12 @@ import numpy as np
 import pytest
 
 from antarium.core.pose import Pose
-from antarium.geometry import load_dome
 from antarium.renderers.library import build_scene
 from antarium.renderers.mesh_text import triangulate_polygons
 from antarium.renderers.meshes import load_mesh_objects
-from antarium.renderers.renderer import Renderer
 from antarium.renderers.stimuli import Uniform
 
-
-@pytest.fixture(scope="module")
-def dome():
-    return load_dome()
-
-
-@pytest.fixture(scope="module")
-def renderer(dome):
-    r = Renderer(dome, face_size=96)
-    yield r
-    r.release()
+FACE = 96
 
 
 def lit_directions_deg(renderer, dome, scene, pose) -> tuple[np.ndarray, np.ndarray]:

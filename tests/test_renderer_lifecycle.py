@@ -12,18 +12,12 @@ from _moderngl import InvalidObject
 
 import antarium.renderers.renderer as renderer_module
 from antarium.core.pose import Pose
-from antarium.geometry import load_dome
 from antarium.renderers import shaders
 from antarium.renderers.library import build_scene
 from antarium.renderers.renderer import Renderer, mip_face_size
 from antarium.renderers.scene import MeshData, Scene, SceneObject
 
 POSE = Pose(0.0, 0.0, 0.02, 0.3)
-
-
-@pytest.fixture(scope="module")
-def dome():
-    return load_dome()
 
 
 @pytest.fixture

@@ -11,26 +11,11 @@ import pytest
 
 from antarium.config import ConfigError, resolve
 from antarium.core.pose import Pose
-from antarium.geometry import load_dome
 from antarium.renderers.library import build_scene
-from antarium.renderers.renderer import Renderer
 from antarium.renderers.stimuli import Grating
 from antarium.server.config_check import check_config
 
-FACE = 64
 HOME = Pose(0.0, 0.0, 0.01, 0.0)
-
-
-@pytest.fixture(scope="module")
-def dome():
-    return load_dome()
-
-
-@pytest.fixture(scope="module")
-def renderer(dome):
-    r = Renderer(dome, face_size=FACE)
-    yield r
-    r.release()
 
 
 def led_radiance(renderer, dome, spec) -> tuple[np.ndarray, object]:
