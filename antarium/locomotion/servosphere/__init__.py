@@ -31,10 +31,9 @@ CAMERAS: dict[str, str] = {
 
 
 def _open(registry: dict[str, str], kind: str, name: str, kwargs: dict[str, Any]):
-    try:
-        target = registry[name]
-    except KeyError:
-        raise ValueError(f"unknown servosphere {kind} {name!r}; allowed: {', '.join(sorted(registry))}") from None
+    target = registry.get(name) if isinstance(name, str) else None
+    if target is None:
+        raise ValueError(f"unknown servosphere {kind} {name!r}; allowed: {', '.join(sorted(registry))}")
     module_name, attr = target.split(":")
     return getattr(import_module(module_name), attr)(**kwargs)
 
@@ -45,7 +44,8 @@ def open_motor_link(name: str, **kwargs: Any):
 
 
 def open_camera(name: str, **kwargs: Any):
-    """A camera (`grab() -> (t, uint8 (H, W))`, `frame_rate`, `close()`) from back-end `name`."""
+    """A camera (`grab() -> (t, uint8 (H, W) frame, or None when the camera gave none)`, `frame_rate`, `close()`)
+    from back-end `name`."""
     return _open(CAMERAS, "camera", name, kwargs)
 
 

@@ -1,5 +1,7 @@
 """The `opencv` camera back-end: any camera OpenCV's VideoCapture opens (a Basler through its GenICam/V4L2 driver),
-frames converted to monochrome uint8. Timestamps are the loop clock's when the frame was read."""
+frames converted to monochrome uint8 (BGR ones to grey; other formats are handed on for the tracker to refuse).
+Timestamps are the loop clock's when the frame was read; a read that gives no frame (a dropped frame, the end of
+a video) is (t, None), which the loop counts as a `bad_frame` fault."""
 
 from __future__ import annotations
 
@@ -18,11 +20,11 @@ class OpenCVCamera:
         self.frame_rate = float(self._cap.get(cv2.CAP_PROP_FPS) or frame_rate)
         self.clock = clock or MonotonicClock()
 
-    def grab(self) -> tuple[float, np.ndarray]:
+    def grab(self) -> tuple[float, np.ndarray | None]:
         ok, frame = self._cap.read()
         if not ok:
-            raise RuntimeError("the camera returned no frame")
-        if frame.ndim == 3:
+            return self.clock.now(), None
+        if frame.ndim == 3 and frame.shape[2] == 3:
             frame = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
         return self.clock.now(), frame
 

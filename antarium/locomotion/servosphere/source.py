@@ -9,6 +9,7 @@ of `FAULTS`) stop the ball (rates ramp to 0 at the acceleration limit), are coun
 
 from __future__ import annotations
 
+import inspect
 import math
 import threading
 import time
@@ -23,11 +24,11 @@ from antarium.locomotion.servosphere import open_camera, open_motor_link
 from antarium.locomotion.servosphere import protocol as p
 from antarium.locomotion.servosphere.controller import Controller, ControllerConfig
 from antarium.locomotion.servosphere.kinematics import RotorGeometry, StepperLimits
-from antarium.locomotion.servosphere.tracker import Calibration, Tracker, calibrate
+from antarium.locomotion.servosphere.tracker import Calibration, Tracker, calibrate, frame_problem
 
 #: host-side fault names; bit i of a log row's `faults` is FAULTS[i]
 FAULTS = ("no_ant", "two_blobs", "link_timeout", "link_garbled", "stall", "watchdog", "firmware_bad_message",
-          "firmware_reset", "ant_at_edge")
+          "firmware_reset", "ant_at_edge", "bad_frame")
 _BIT = {name: 1 << i for i, name in enumerate(FAULTS)}
 #: a reply whose step counts moved more than max_rate * (its clock's advance + RESET_MARGIN_S) + 2 steps since the
 #: previous one, or whose clock went back, comes from a firmware that restarted (counters and clock from 0)
@@ -41,6 +42,9 @@ RESET_CLOCK_MARGIN_S = 0.5
 _STALLS = p.FAULT_STALL_1 | p.FAULT_STALL_2 | p.FAULT_STALL_3
 #: the dome loop's tether -> the counter_rotate it needs (with counter_rotate the ball's yaw is the ant's turning)
 _COUNTER_ROTATE = {"free_yaw": False, "fixed": True}
+#: consecutive frames the camera may give unusable (none, or not uint8 (H, W): `tracker.frame_problem`) before the
+#: loop ends with an error; each is a `bad_frame` fault (ball ramped to 0). 350 is 0.5 s at 700 frames/s
+MAX_BAD_FRAMES = 350
 #: the ant's walk (which end is its head) is judged from its displacement over the last WALK_WINDOW_S, once at
 #: least WALK_MIN_S of it is known
 WALK_WINDOW_S, WALK_MIN_S = 0.08, 0.05
@@ -74,6 +78,7 @@ class ServosphereLoop:
         self._stall_since: float | None = None
         self._clear_seq: int | None = None  # seq of the last ClearFaults sent
         self._sample_seq = 0
+        self._bad_frames = 0  # unusable frames since the last good one
         self.last_faults = 0
 
     def step(self) -> tuple[list[BallSample], tuple]:
@@ -81,6 +86,10 @@ class ServosphereLoop:
         dt = t - self._t_prev if self._t_prev is not None else 1.0 / self.camera.frame_rate
         self._t_prev = t
         det = self.tracker.update(image, self._walk_mm_s())
+        self._bad_frames = self._bad_frames + 1 if det.fault == "bad_frame" else 0
+        if self._bad_frames >= MAX_BAD_FRAMES:
+            raise RuntimeError(f"the camera gave no usable frame in the last {self._bad_frames} "
+                               f"({frame_problem(image)}); allowed: uint8 (H, W) monochrome frames")
         samples, fw_faults, reset = self._replies(t)
         faults = _BIT[det.fault] if det.fault else 0
         if reset:
@@ -94,8 +103,8 @@ class ServosphereLoop:
             self._link_errors = errors
             faults |= _BIT["link_garbled"]
         faults |= self._firmware_faults(fw_faults, t)
-        stop = faults & (_BIT["no_ant"] | _BIT["two_blobs"] | _BIT["ant_at_edge"] | _BIT["link_timeout"]
-                         | _BIT["stall"])
+        stop = faults & (_BIT["no_ant"] | _BIT["two_blobs"] | _BIT["ant_at_edge"] | _BIT["bad_frame"]
+                         | _BIT["link_timeout"] | _BIT["stall"])
         error = None if stop else (det.x_mm, det.y_mm)
         omega_before = self.controller.omega  # what was asked for over the frame that just ended
         # the yaw is only counter-rotated on a heading the walk confirmed: a guess held at 0
@@ -217,13 +226,14 @@ class ServosphereSource(BufferedSource):
             raise ValueError(f"servosphere tether {tether!r} with counter_rotate {str(bool(counter_rotate)).lower()}; "
                              "allowed: tether 'free_yaw' without counter_rotate, or 'fixed' with it")
         self.clock = clock or MonotonicClock()
-        rotors = {k: (tuple(v) if isinstance(v, list) else v) for k, v in (rotors or {}).items()}
+        rotors = {k: (tuple(v) if isinstance(v, list) else v)
+                  for k, v in _table("rotors", rotors, RotorGeometry).items()}
         if ball_radius is not None:
             if not math.isclose(rotors.setdefault("sphere_radius", ball_radius), ball_radius):
                 raise ValueError(f"servosphere rotors sphere_radius {rotors['sphere_radius']} m differs from the "
                                  f"loop's ball_radius {ball_radius} m; allowed: one value ([loop] ball_radius_m)")
         geometry = RotorGeometry(**rotors)
-        limits = StepperLimits(**(steppers or {}))
+        limits = StepperLimits(**_table("steppers", steppers, StepperLimits))
         self.rig = None
         if "simulated" in (camera, link):
             if (camera, link) != ("simulated", "simulated"):
@@ -238,7 +248,8 @@ class ServosphereSource(BufferedSource):
                                  "threshold, area_mm2, rotors, steppers, tether")
             from antarium.locomotion.servosphere.rig import SimulatedRig
 
-            self.rig = SimulatedRig(self.clock, geometry=geometry, limits=limits, **(simulation or {}))
+            simulation = _table("simulation", simulation, SimulatedRig, taken=("clock", "geometry", "limits"))
+            self.rig = SimulatedRig(self.clock, geometry=geometry, limits=limits, **simulation)
             cam = open_camera("simulated", rig=self.rig)
             motor = open_motor_link("simulated", rig=self.rig)
             cal = calibrate(self.rig.calibration_image())  # the calibration path a real rig takes
@@ -331,6 +342,21 @@ class ServosphereSource(BufferedSource):
                 "link": {"sent": loop.link.sent, "received": loop.link.received, "errors": loop.link.errors,
                          "stalled": loop.link.stalled},
                 "tracker_faults": dict(loop.tracker.faults)}
+
+
+def _table(name: str, cfg: dict | None, factory, taken: tuple[str, ...] = ()) -> dict:
+    """`[locomotion] name = {...}` ({} for None), checked against the keyword parameters of `factory` less those the
+    source sets itself (`taken`); ValueError naming the first unknown key and the allowed ones."""
+    allowed = sorted(set(inspect.signature(factory).parameters) - set(taken))
+    if cfg is None:
+        return {}
+    if not isinstance(cfg, dict):
+        raise ValueError(f"servosphere {name} must be a table {{key = value, ...}}, got {cfg!r}; allowed keys: "
+                         f"{', '.join(allowed)}")
+    unknown = sorted(set(cfg) - set(allowed))
+    if unknown:
+        raise ValueError(f"servosphere {name} has no option {unknown[0]!r}; allowed: {', '.join(allowed)}")
+    return cfg
 
 
 #: the two forms of `[locomotion] calibration`: its key that picks the form -> (required keys, optional keys)

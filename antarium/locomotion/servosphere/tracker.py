@@ -51,12 +51,24 @@ class Calibration:
         return -image_angle + math.radians(self.rotation_deg)
 
 
+def frame_problem(frame) -> str | None:
+    """None for a frame the tracker can use (uint8 (H, W), H, W >= 1), else what it is instead: 'no frame' or
+    its dtype and shape."""
+    if frame is None:
+        return "no frame"
+    if not isinstance(frame, np.ndarray):
+        return f"a {type(frame).__name__}, not an array"
+    if frame.dtype != np.uint8 or frame.ndim != 2 or frame.size == 0:
+        return f"{frame.dtype} {frame.shape}"
+    return None
+
+
 def calibrate(image: np.ndarray, disc_diameter_mm: float = 10.0, rotation_deg: float = 0.0) -> Calibration:
     """Calibration from a frame of a dark disc of `disc_diameter_mm` centred on the ball's apex (uint8 (H, W)):
     its centroid is the apex, its area gives the scale. ValueError when no single round dark disc is seen."""
-    if image.ndim != 2 or image.dtype != np.uint8:
-        raise ValueError(f"calibration image must be a uint8 (H, W) monochrome frame, got {image.dtype} "
-                         f"{image.shape}")
+    problem = frame_problem(image)
+    if problem is not None:
+        raise ValueError(f"calibration image must be a uint8 (H, W) monochrome frame, got {problem}")
     _, binary = cv2.threshold(image, 0, 255, cv2.THRESH_BINARY_INV | cv2.THRESH_OTSU)
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
@@ -80,8 +92,9 @@ _CLOSE = cv2.getStructuringElement(cv2.MORPH_RECT, (3, 3))
 @dataclass(frozen=True, slots=True)
 class Detection:
     """One frame's result. x_mm, y_mm: ant from the apex (dome frame); orientation: body axis (rad, [-pi/2, pi/2]);
-    heading: resolved direction (rad, (-pi, pi]); area_mm2; fault: None, "no_ant", "two_blobs" or "ant_at_edge"
-    (the only blob of the ant's size touches the frame's border: cut, not trusted);
+    heading: resolved direction (rad, (-pi, pi]); area_mm2; fault: None, "no_ant", "two_blobs", "ant_at_edge"
+    (the only blob of the ant's size touches the frame's border: cut, not trusted) or "bad_frame" (no frame, or
+    not a uint8 (H, W) image: `frame_problem`);
     heading_confident: the head end was confirmed by the ant's walk since it was last lost (else it is a guess)."""
 
     x_mm: float = math.nan
@@ -99,7 +112,8 @@ class Tracker:
     (the walk given to `update` is meant to be a mean over ~50-100 ms, not one frame's: see `ServosphereLoop`).
     Hysteresis: the heading flips only when the walk points more than 120 deg away from it, and is confirmed
     (`heading_confident`) when it points within 60 deg; in between, and standing still, the previous choice stays.
-    A lost ant (no_ant, two_blobs) makes the heading unconfirmed until the walk confirms it again."""
+    A lost ant (no_ant, two_blobs, ant_at_edge, bad_frame) makes the heading unconfirmed until the walk confirms
+    it again; the last position and heading are kept."""
 
     def __init__(self, calibration: Calibration, threshold: int = 120, area_mm2: tuple[float, float] = (5.0, 60.0),
                  min_walk_mm_s: float = 5.0) -> None:
@@ -119,7 +133,10 @@ class Tracker:
 
     def update(self, frame: np.ndarray, walk_mm_s: tuple[float, float] | None = None) -> Detection:
         """Track one frame. walk_mm_s: the ant's walking velocity over the ball's surface (mm/s, dome frame) if
-        known (the ball's motion added back), used to tell its head from its tail."""
+        known (the ball's motion added back), used to tell its head from its tail. A frame the tracker cannot use
+        (`frame_problem`) is the fault "bad_frame"."""
+        if frame_problem(frame) is not None:
+            return self._fault("bad_frame")
         _, binary = cv2.threshold(frame, self.threshold, 255, cv2.THRESH_BINARY_INV)
         blobs, at_edge = self._candidates(binary)
         if len(blobs) != 1:  # not one clean blob: mend 1-2 px cracks (noise, a thin glint) and look again
