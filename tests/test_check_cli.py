@@ -41,8 +41,8 @@ def test_every_check_passes_against_the_emulator(tmp_path, emulator, capsys):
     rig = _rig(tmp_path, f'host = "127.0.0.1"\nport = {emulator.port}\nspawn_emulator = false')
     assert main(["check", "--config", rig, "--auto", "--timeout-s", "5", "--min-free-gb", "0.01"]) == 0
     out = capsys.readouterr().out
-    assert _lines(out) == {"distributor": "PASS", "panels": "PASS", "trackball": "SKIP", "real time": "SKIP",
-                           "disk": "PASS", "panel mapping": "PASS"}
+    assert _lines(out) == {"config": "PASS", "distributor": "PASS", "panels": "PASS", "trackball": "SKIP",
+                           "real time": "SKIP", "disk": "PASS", "panel mapping": "PASS"}
     assert "55 panels of 370 pixels, firmware 1.0, protocol 1" in out
     assert "55 test patterns sent and latched" in out
 
@@ -134,6 +134,38 @@ def test_a_served_rig_whose_distributor_lacks_a_capability_raises_an_alarm(tmp_p
             assert wait_for(lambda: any("without dot_correction" in a for a in server.status()["alarms"]), 10.0)
 
 
+def test_a_distributor_that_latched_an_earlier_run_shows_the_first_panel_when_asked(tmp_path, monkeypatch, capsys):
+    """A second `antarium check` on the same board (or one after `antarium serve`) starts its frame sequence at 0
+    again, which the board's latch rule drops as stale (docs/protocol.md, "Restarts"): the first panel was named to
+    the operator while the dome stayed dark (review 2026-11-27)."""
+    from antarium.firmware_proto.control import encode_hello
+    from antarium.firmware_proto.emulator import Emulator
+    from antarium.geometry.constants import PIXELS_PER_PANEL
+
+    board, lit = Emulator(), []
+
+    def operator(panel: int, where: str) -> bool:
+        rows = slice(panel * PIXELS_PER_PANEL, (panel + 1) * PIXELS_PER_PANEL)
+        lit.append(wait_for(lambda: board.led_values()[rows].any(), 1.0))
+        return lit[-1]
+
+    monkeypatch.setattr("antarium.commands.check._ask_operator", operator)
+    with _board(lambda tag: board.handle_datagram(encode_hello(tag))[0], board) as port:
+        rig = _rig(tmp_path, f'host = "127.0.0.1"\nport = {port}\nspawn_emulator = false')
+        for _ in range(2):
+            assert main(["check", "--config", rig, "--min-free-gb", "0.01", "--panels", "0,1"]) == 0, \
+                capsys.readouterr().out
+    assert lit == [True, True, True, True]
+
+
+def test_a_second_auto_check_on_the_same_distributor_passes(tmp_path, emulator, capsys):
+    """--auto counted the first pattern of the second run as dropped: `1 failed: panel mapping` on a good rig."""
+    rig = _rig(tmp_path, f'host = "127.0.0.1"\nport = {emulator.port}\nspawn_emulator = false')
+    for _ in range(2):
+        assert main(["check", "--config", rig, "--auto", "--timeout-s", "5", "--min-free-gb", "0.01",
+                     "--panels", "0,1"]) == 0, capsys.readouterr().out
+
+
 def test_the_operator_confirms_each_panel(tmp_path, monkeypatch, capsys):
     rig = _rig(tmp_path, 'interface = "virtual"')
     monkeypatch.setattr("sys.stdin", io.StringIO("\nn\n"))  # panel 7 lit where expected, panel 30 not
@@ -181,8 +213,8 @@ def test_a_bad_distributor_host_fails_its_line_and_the_other_checks_run(tmp_path
     rig = _rig(tmp_path, f'host = "{host}"\nport = 19055\nspawn_emulator = false')
     assert main(["check", "--config", rig, "--auto", "--min-free-gb", "0.01"]) == 1
     out = capsys.readouterr().out
-    assert _lines(out) == {"distributor": "FAIL", "panels": "FAIL", "trackball": "SKIP", "real time": "SKIP",
-                           "disk": "PASS", "panel mapping": "FAIL"}
+    assert _lines(out) == {"config": "FAIL", "distributor": "FAIL", "panels": "FAIL", "trackball": "SKIP",
+                           "real time": "SKIP", "disk": "PASS", "panel mapping": "FAIL"}
     assert f"FAIL distributor: {shown}" in out and "fix [link] host" in out
 
 
@@ -224,3 +256,92 @@ def test_only_yes_or_enter_confirms_a_panel(tmp_path, monkeypatch, capsys, answe
     if answers.split("\n")[0] not in ("", "y", "yes", "n", "no"):
         assert "is not an answer" in out and out.count("panel 0 (pentagon") == 2  # asked twice
 
+
+
+def _fictrac_line(i: int) -> bytes:
+    from antarium.locomotion.fictrac.protocol import FicTracFrame, format_line
+
+    values = [0.0] * 25
+    values[0] = values[22] = i
+    return (format_line(FicTracFrame(*values)) + "\n").encode()
+
+
+def test_fictrac_frames_that_arrive_pass_the_trackball_line(tmp_path, capsys):
+    port = free_udp_port("127.0.0.1")
+    rig = _rig(tmp_path, 'interface = "virtual"', f'[locomotion]\nsource = "fictrac"\nport = {port}\n')
+    done = threading.Event()
+
+    def fictrac():
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            i = 1
+            while not done.wait(0.01):
+                tx.sendto(_fictrac_line(i), ("127.0.0.1", port))
+                i += 1
+
+    sender = threading.Thread(target=fictrac)
+    sender.start()
+    try:
+        assert main(["check", "--config", rig, "--auto", "--min-free-gb", "0.01"]) == 0
+    finally:
+        done.set()
+        sender.join()
+    assert f"PASS trackball: FicTrac frames arrive on udp 127.0.0.1:{port} (" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("locomotion, verdicts, shown", [
+    # nothing sends: the check passed (trackball SKIP) on a rig whose ant could never move
+    ('source = "fictrac"\nport = {port}', {"config": "PASS", "trackball": "FAIL"},
+     "FAIL trackball: no FicTrac frame within 0.3 s: is FicTrac running and sending to udp 127.0.0.1:{port}"),
+    # a log of no frames, and an option `antarium serve` refuses: both passed
+    ('source = "fictrac-replay"\npath = "{log}"', {"config": "PASS", "trackball": "FAIL"},
+     "FAIL trackball: no FicTrac frame in {log}, 1 malformed (last: FicTrac line must hold 25"),
+    ('source = "fictrac"\ntransport = "tpc"', {"config": "FAIL", "trackball": "FAIL"},
+     "FAIL config: [locomotion] FicTrac transport must be one of udp, tcp, got 'tpc' (`antarium serve` refuses"),
+    ('source = "replay"\npath = "{tmp}/gone.h5"', {"config": "FAIL", "trackball": "SKIP"},
+     "FAIL config: [locomotion] path '{tmp}/gone.h5' does not exist"),
+])
+def test_a_locomotion_source_that_cannot_work_fails(tmp_path, capsys, locomotion, verdicts, shown):
+    log = tmp_path / "run.dat"
+    log.write_text("not, a, fictrac, line\n")
+    fill = {"port": free_udp_port("127.0.0.1"), "log": log, "tmp": tmp_path}
+    rig = _rig(tmp_path, 'interface = "virtual"', "[locomotion]\n" + locomotion.format(**fill) + "\n")
+    assert main(["check", "--config", rig, "--auto", "--timeout-s", "0.3", "--min-free-gb", "0.01"]) == 1
+    out = capsys.readouterr().out
+    assert {k: _lines(out)[k] for k in verdicts} == verdicts, out
+    assert shown.format(**fill) in out, out
+
+
+#: a lab computer's /proc/net/route: default via 192.0.2.1 on eth0, eth0 on 192.0.2.0/24, the rig card enp3s0 on
+#: 192.168.55.0/24 (the kernel writes each address as a little-endian hex word)
+ROUTES = ("Iface\tDestination\tGateway \tFlags\tRefCnt\tUse\tMetric\tMask\t\tMTU\tWindow\tIRTT\n"
+          "eth0\t00000000\t010200C0\t0003\t0\t0\t0\t00000000\t0\t0\t0\n"
+          "eth0\t000200C0\t00000000\t0001\t0\t0\t0\t00FFFFFF\t0\t0\t0\n"
+          "enp3s0\t0037A8C0\t00000000\t0001\t0\t0\t0\t00FFFFFF\t0\t0\t0\n")
+
+
+@pytest.mark.parametrize("rig_card, host, route", [
+    (True, "192.168.55.2", None),                      # the rig card is on the distributor's subnet
+    (False, "192.168.55.2", ("eth0", "192.0.2.1")),    # it is not: the datagrams go to the lab's gateway
+    (False, "192.0.2.9", None),                        # on eth0's own subnet
+    (False, "127.0.0.1", None),                        # a local emulator
+])
+def test_a_distributor_behind_a_gateway_names_the_card_it_goes_through(tmp_path, rig_card, host, route):
+    """A rig card without an address (or the cable in the lab card) was reported as a silent distributor among
+    five possible causes; the route table says which (review 2026-11-27)."""
+    from antarium.commands.check import gateway_route
+
+    table = tmp_path / "route"
+    table.write_text(ROUTES if rig_card else "".join(ROUTES.splitlines(keepends=True)[:3]))
+    assert gateway_route(host, str(table)) == route
+    assert gateway_route(host, str(tmp_path / "no-such-table")) is None
+
+
+def test_the_trackball_ids_of_a_file_named_by_locomotion_are_the_ones_searched(tmp_path, capsys):
+    """`[locomotion] trackball = "tb.toml"` (the driver reads the ids there): the check searched the default ids
+    1209:0001 instead (review 2026-11-27)."""
+    tb = tmp_path / "tb.toml"
+    tb.write_text("[trackball]\nvendor_id = 0xfffe\nproduct_id = 0xfffd\n")
+    rig = _rig(tmp_path, 'interface = "virtual"', f'[locomotion]\nsource = "usb"\ntrackball = "{tb}"\n')
+    assert main(["check", "--config", rig, "--auto", "--min-free-gb", "0.01"]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL trackball: no USB device fffe:fffd" in out, out

@@ -189,3 +189,11 @@ def test_a_frame_that_does_not_convert_is_counted_and_the_reader_goes_on(monkeyp
         assert src._thread.is_alive() and [s.seq for s in src.read()] == [1, 3]
     assert status["frames"] == 2 and status["malformed"] == 1
     assert status["last_error"] == "FicTrac frame 2 does not convert to a sample: float division by zero"
+
+
+@pytest.mark.parametrize("retry_s", [-1.0, 0.0, "x"])
+def test_a_retry_time_the_tcp_reader_cannot_use_is_refused_in_one_line(retry_s):
+    """-1 and "x" ended the reader thread with a traceback (the source then waited for ever, last_error empty);
+    0 spun a core on `connect` (review 2026-11-27)."""
+    with pytest.raises(ValueError, match=r"FicTrac retry_s must be a finite number > 0 \(s between tries"):
+        open_source("fictrac", transport="tcp", port=1, retry_s=retry_s)

@@ -3,8 +3,10 @@
     antarium check --config rig.toml          # asks the operator to confirm each panel of the test pattern
     antarium check --config rig.toml --auto   # sends the test pattern, checks the distributor latched it
 
-Checks: the distributor answers (VERSION and STATUS telemetry); panel count, pixels per panel, protocol and
-firmware versions, faults; the USB trackball is present (when [locomotion] source = "usb"); real-time
+Checks: the config is one `antarium serve` can run (`check_config`: scene, locomotion options, ...); the
+distributor answers (VERSION and STATUS telemetry); panel count, pixels per panel, protocol and
+firmware versions, faults; the USB trackball is present (source "usb") or FicTrac's frames arrive (source
+"fictrac"; "fictrac-replay": its log holds frames); real-time
 scheduling is allowed at [loop] realtime_priority; free disk space for [log] dir; the panel mapping (each
 panel lit in turn). Exit status 0 when nothing failed, 1 otherwise. See docs/real_rig.md.
 """
@@ -14,6 +16,7 @@ from __future__ import annotations
 import argparse
 import math
 import shutil
+import socket
 import sys
 import threading
 import time
@@ -23,7 +26,7 @@ from pathlib import Path
 
 from antarium.commands import require_seconds
 
-HELP = "first-run checklist of a rig: distributor, panels, trackball, real time, disk, panel mapping"
+HELP = "first-run checklist of a rig: config, distributor, panels, trackball, real time, disk, panel mapping"
 
 #: test-pattern drive of a lit panel's green LEDs (of 65535): bright enough to see, far below full current
 PATTERN_LEVEL = 8192
@@ -117,14 +120,48 @@ def _ask_version(link, timeout_s: float) -> dict | None:
             return version
 
 
-def check_distributor(report: Report, link, where: str, timeout_s: float) -> dict | None:
-    """Distributor reachable and answering VERSION and STATUS; returns its telemetry (None when silent)."""
+def gateway_route(host: str, routes: str = "/proc/net/route") -> tuple[str, str] | None:
+    """(interface, gateway address) when this computer sends IPv4 `host` (an address or a name) through a gateway,
+    read from the kernel's route table `routes` (Linux, longest prefix first); None when `host` is on a network of
+    one of its cards, is its own loopback, or the table cannot be read. The distributor is never behind a gateway:
+    such a route means that no card has an address on its subnet."""
+    import ipaddress
+
+    try:
+        address = ipaddress.IPv4Address(socket.gethostbyname(host))
+        rows = [line.split() for line in Path(routes).read_text().splitlines()[1:]]
+    except (OSError, ValueError, UnicodeError):
+        return None
+    if address.is_loopback:
+        return None
+    best = None
+    for row in rows:
+        iface, dest, gateway, mask = row[0], int(row[1], 16), int(row[2], 16), int(row[7], 16)
+        # the table's words are little-endian
+        dest, gateway, mask = (int.from_bytes(v.to_bytes(4, "little"), "big") for v in (dest, gateway, mask))
+        if int(address) & mask == dest and (best is None or mask > best[0]):
+            best = (mask, iface, gateway)
+    if best is None or best[2] == 0:
+        return None
+    return best[1], str(ipaddress.IPv4Address(best[2]))
+
+
+def check_distributor(report: Report, link, where: str, timeout_s: float, host: str | None = None) -> dict | None:
+    """Distributor reachable and answering VERSION and STATUS; returns its telemetry (None when silent). host: the
+    distributor's [link] host, whose route names a wrong network card when it goes through a gateway."""
     version = _ask_version(link, timeout_s)
     if link.incompatible:  # it answered VERSION, in another protocol version: no frames can go to it
         report.fail("distributor", f"{where} answers but {link.incompatible}")
         return None
     telemetry = link.telemetry(wait_s=timeout_s) if version is not None else None
     if version is None or not telemetry.get("counters"):
+        route = gateway_route(host) if host else None
+        if route is not None:
+            report.fail("distributor", f"no answer from {where} within {timeout_s:g} s: no network card of this "
+                        f"computer has an address on its subnet, so its datagrams go to the gateway {route[1]} on "
+                        f"{route[0]} (`ip route get {host}`); give the rig card an address on the distributor's "
+                        "subnet (docs/real_rig.md section 2), or fix [link] host")
+            return None
         report.fail("distributor", f"no answer from {where} within {timeout_s:g} s: check the distributor is "
                     "powered, its cable is in this computer's rig network card, that card has an address on the "
                     "distributor's subnet (`ip addr`), and [link] host/port name the distributor")
@@ -155,13 +192,38 @@ def check_panels(report: Report, telemetry: dict) -> bool:
                                    f"no LED faults{hottest}")
 
 
-def check_trackball(report: Report, config) -> bool:
-    """The USB trackball of [trackball] is plugged in (only when [locomotion] source = "usb")."""
-    if config.locomotion.source != "usb":
-        return report.skip("trackball", f"[locomotion] source = {config.locomotion.source!r}, not \"usb\"")
-    from antarium.locomotion.trackball import config as tbconfig
+def check_rig_config(report: Report, config) -> bool:
+    """What `antarium serve` would refuse in the file before it starts (`check_config`), the ports in use aside."""
+    from antarium.config import ConfigError
+    from antarium.server.config_check import check_config
 
-    tb = tbconfig.parse_section(config.foreign.get("trackball"))
+    try:
+        check_config(config, ports=False)
+    except ConfigError as exc:
+        return report.fail("config", f"{exc} (`antarium serve` refuses this config)")
+    return report.passed("config", "scene, [locomotion] source and options, [link] and [trackball] are usable "
+                                   "(`antarium serve` checks the ports in use when it starts)")
+
+
+#: locomotion sources whose input `check_trackball` reads: FicTrac's live stream and its logs
+FICTRAC_SOURCES = ("fictrac", "fictrac-replay")
+
+
+def check_trackball(report: Report, config, timeout_s: float) -> bool:
+    """The USB trackball of [trackball] is plugged in ([locomotion] source = "usb"), or FicTrac's frames arrive
+    within `timeout_s` (s; "fictrac") or its log holds frames ("fictrac-replay")."""
+    source = config.locomotion.source
+    if source in FICTRAC_SOURCES:
+        return _check_fictrac(report, config, timeout_s)
+    if source != "usb":
+        return report.skip("trackball", f"[locomotion] source = {source!r}, neither \"usb\" nor FicTrac")
+    from antarium.locomotion.trackball import config as tbconfig
+    from antarium.server.config_check import source_options
+
+    try:  # as the driver reads it: [trackball] here, or the file [locomotion] trackball names
+        tb = tbconfig.load(source_options(config).get("trackball"))
+    except (OSError, ValueError) as exc:
+        return report.fail("trackball", f"{exc}: fix [trackball] or [locomotion] trackball")
     ids = f"{tb.vendor_id:04x}:{tb.product_id:04x}"
     try:
         import usb.core
@@ -174,6 +236,35 @@ def check_trackball(report: Report, config) -> bool:
         return report.fail("trackball", f"no USB device {ids} ([trackball] vendor_id/product_id): plug it in, "
                                         "check `lsusb`, then `antarium trackball calibrate --config RIG.toml`")
     return report.passed("trackball", f"USB device {ids} present")
+
+
+def _check_fictrac(report: Report, config, timeout_s: float) -> bool:
+    """Open the FicTrac source as `antarium serve` would and wait up to `timeout_s` (s) for a frame."""
+    from antarium.locomotion import open_source
+    from antarium.server.config_check import source_options
+
+    name = config.locomotion.source
+    try:
+        source = open_source(name, **source_options(config))
+        source.start()
+    except (OSError, RuntimeError, TypeError, ValueError) as exc:  # port in use, no such log, a bad option
+        return report.fail("trackball", f"{name}: {exc}")
+    try:
+        deadline = time.monotonic() + timeout_s
+        while source.status()["frames"] == 0 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        status = source.status()
+    finally:
+        source.stop()
+    malformed = f", {status['malformed']} malformed (last: {status['last_error']})" if status["malformed"] else ""
+    live = name == "fictrac"
+    if status["frames"] == 0:
+        where, hint = ((f"within {timeout_s:g} s", source.lost_hint()) if live
+                       else (f"in {status['path']}", "give a FicTrac .dat log as [locomotion] path"))
+        return report.fail("trackball", f"no FicTrac frame {where}{malformed}: {hint}")
+    where = (f"arrive on {status['source'][len('fictrac-'):]} {status['address'][0]}:{status['address'][1]}" if live
+             else f"read from {status['path']}")
+    return report.passed("trackball", f"FicTrac frames {where} ({status['frames']} frames{malformed})")
 
 
 def check_realtime(report: Report, config) -> bool:
@@ -246,6 +337,10 @@ def check_mapping(report: Report, link, panels: list[int], confirm: Callable[[in
     from antarium.geometry import load_dome
 
     dome = load_dome()
+    dark = np.zeros((dome.positions.shape[0], 2), np.uint16)
+    # a distributor that latched frames of an earlier run drops this run's first frame (docs/protocol.md, "Restarts"):
+    # that frame is a dark one, so that the first panel's pattern is shown and counted
+    link.send_frame(dark)
     before = link.telemetry(wait_s=timeout_s).get("counters", {}).get("frames_latched", 0)
     wrong, unanswered = [], None
     for p in panels:
@@ -260,7 +355,7 @@ def check_mapping(report: Report, link, panels: list[int], confirm: Callable[[in
             except NoAnswer:
                 unanswered = p
                 break
-    link.send_frame(np.zeros((dome.positions.shape[0], 2), np.uint16))
+    link.send_frame(dark)
     if unanswered is not None:
         return report.fail("panel mapping", f"no answer for panel {unanswered} (the input ended): run it at a "
                                             "terminal to confirm each panel by eye, or with --auto")
@@ -323,17 +418,18 @@ def run(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     report = Report()
     print(f"antarium check: rig {config.rig.name!r} ({args.config or 'embedded default'})", flush=True)
+    check_rig_config(report, config)
     with _dome_link(config, args.timeout_s) as (link, where):
         if link is None:
             telemetry = None
             report.fail("distributor", where)
         else:
-            telemetry = check_distributor(report, link, where, args.timeout_s)
+            telemetry = check_distributor(report, link, where, args.timeout_s, config.link.host)
         if telemetry is None:
             report.fail("panels", "no telemetry: fix the distributor first")
         else:
             check_panels(report, telemetry)
-        check_trackball(report, config)
+        check_trackball(report, config, args.timeout_s)
         check_realtime(report, config)
         check_disk(report, config, args.min_free_gb)
         if telemetry is None:
