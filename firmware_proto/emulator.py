@@ -157,6 +157,7 @@ class Emulator:
         self.thermal = PanelThermal(N_PANELS, t0)
         self.panel_current_a = supply_current_a(self.raw, CHIPS_PER_PANEL)
         self._next_thermal = t0
+        self._power_changed_t: float | None = None  # the drive changed then; not yet fed to the thermal model
         self._latched: list[tuple[int, bytes]] = []
         self._polariser_targets = np.zeros((N_PANELS, N_ACTUATORS))
         self._polariser_commanded = np.zeros((N_PANELS, N_ACTUATORS), bool)
@@ -199,8 +200,10 @@ class Emulator:
             link.send(SerialFrame(ST_VIDEO, panel % PANELS_PER_PENTAGON, payload[1], payload[2:]))
             return []
         if cls != CLASS_CONTROL:
-            raise UnknownTypeError(f"message class {cls} not accepted by the distributor: allowed 0 (video), 1")
+            raise UnknownTypeError(f"message class {cls} not accepted by the distributor: allowed 0 (video), "
+                                   "1 (control)")
         _, opcode, _ = parse_control_header(payload, CLASS_CONTROL)
+        self._refresh_power(self.clock.now())  # before a control message changes the drive (or polls the panels)
         if opcode == OP_LATCH:
             self._latch(decode_system(payload).info)
             return []
@@ -249,6 +252,7 @@ class Emulator:
 
     def show(self, items: list[tuple[int, bytes]]) -> None:
         """Decode panel images (panel, 1110 bytes of pixel data) into the latched LED values now."""
+        self._refresh_power(self.clock.now())
         self._latched.extend(items)
         self._flush()
 
@@ -268,8 +272,17 @@ class Emulator:
         if self.faults.any():  # sticky: an LED not driven now keeps the kind last detected, a driven one the latest
             found = detected_faults(self._drive(), self.faults)
             np.copyto(self.detected, found, where=found != FAULT_NONE)
-        if t >= self._next_thermal:
-            self._update_power(t)
+        if self._power_changed_t is None:
+            self._power_changed_t = t
+        self._refresh_power(t)
+
+    def _refresh_power(self, t: float, force: bool = False) -> None:
+        """Feed the present drive's power to the heat model from the time the drive changed, at most every
+        THERMAL_UPDATE_S of emulator time (any time with `force`). Called before anything changes the drive, so a
+        change the rate limit held back counts from when it happened, not from the next change or status poll."""
+        if self._power_changed_t is not None and (force or t >= self._next_thermal):
+            self._update_power(self._power_changed_t)
+            self._power_changed_t = None
             self._next_thermal = t + THERMAL_UPDATE_S
 
     def _drive(self) -> np.ndarray:
@@ -340,6 +353,7 @@ class Emulator:
             raise ValueError(f"fault kind {kind!r} unknown: allowed {sorted(codes)}")
         if not (0 <= panel < N_PANELS and 0 <= led < LEDS_PER_PANEL):
             raise ValueError(f"fault address ({panel}, {led}) out of range: panel 0..54, LED 0..739")
+        self._refresh_power(self.clock.now())
         self.faults[panel, led] = codes[kind]
         if kind == "none":
             self.detected[panel, led] = FAULT_NONE
@@ -362,6 +376,7 @@ class Emulator:
 
     def _status_replies(self, tag: int) -> list[bytes]:
         t = self.clock.now()
+        self._refresh_power(t, force=True)
         self._update_power(t)
         self._snapshot = None
         for p in range(N_PANELS):

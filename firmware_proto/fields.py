@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import operator
 import struct
 from dataclasses import dataclass
 
@@ -41,11 +42,12 @@ class FieldTable:
         ordered = []
         for f in self.fields:
             v = values[f.name]
-            if isinstance(v, bool) or not isinstance(v, int):
-                try:
-                    v = int(v)
-                except (TypeError, ValueError):
-                    raise FieldRangeError(f"{self.name}.{f.name} must be an integer, got {v!r}") from None
+            try:  # an int or a numpy integer; a float or a bool is refused, never truncated
+                if isinstance(v, bool):
+                    raise TypeError
+                v = operator.index(v)
+            except TypeError:
+                raise FieldRangeError(f"{self.name}.{f.name} must be an integer, got {v!r}") from None
             ordered.append(v)
         self._check(ordered)
         return self._struct.pack(*ordered)

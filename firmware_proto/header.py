@@ -8,6 +8,8 @@ bit 7 = IMMEDIATE flag, bits 6-0 = frame sequence); CONTROL and REPLY datagrams 
 
 from __future__ import annotations
 
+from numbers import Integral
+
 from antarium.geometry.constants import N_PANELS
 
 from .errors import LengthError, PanelError, UnknownTypeError, VersionError
@@ -51,9 +53,10 @@ def split_td(td: int) -> tuple[int, int]:
 
 
 def check_address(address: int, allow_all: bool) -> int:
-    """`address` if it is a panel 0..54 (or ADDR_ALL when `allow_all`), else PanelError."""
-    if 0 <= address < N_PANELS or (allow_all and address == ADDR_ALL):
-        return address
+    """`address` if it is a panel 0..54 (or ADDR_ALL when `allow_all`), else PanelError (also for a float or bool)."""
+    if not isinstance(address, bool) and isinstance(address, Integral) and (
+            0 <= address < N_PANELS or (allow_all and address == ADDR_ALL)):
+        return int(address)
     allowed = f"0..{N_PANELS - 1}" + (f" or {ADDR_ALL} (all)" if allow_all else "")
     raise PanelError(f"address {address} out of range: allowed {allowed}")
 

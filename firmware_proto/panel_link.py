@@ -27,7 +27,16 @@ import numpy as np
 
 from antarium.geometry.constants import LEDS_PER_PANEL, N_ACTUATORS, PANELS_PER_PENTAGON
 
-from .errors import CrcError, FramingError, LengthError, ManchesterError, PanelError, UnknownTypeError
+from .config import MAX_PERCENT
+from .errors import (
+    CrcError,
+    FieldRangeError,
+    FramingError,
+    LengthError,
+    ManchesterError,
+    PanelError,
+    UnknownTypeError,
+)
 from .fields import Field, FieldTable
 from .video import PANEL_DATA_SIZE
 
@@ -67,6 +76,8 @@ SERIAL_TYPES = {
     ST_STATUS_POLL: (0, "one"),
     ST_PANEL_STATUS: (PANEL_STATUS_HEAD.size + 2 * FAULT_BITMAP_BYTES + 2 * N_ACTUATORS, "one"),
 }
+#: frame types whose data are percentages 0..100 (a panel refuses more, as the distributor does)
+PERCENT_TYPES = (ST_DOT_CORRECTION, ST_BRIGHTNESS)
 OVERHEAD_BYTES = len(PREAMBLE) + 1 + 2 + 2  # preamble, sync, type/dest + info, CRC
 
 
@@ -95,6 +106,10 @@ def check_serial_frame(frame: SerialFrame) -> SerialFrame:
         raise PanelError(f"serial frame type 0x{frame.ftype:x}: slot {frame.slot} not allowed ({rule})")
     if not 0 <= frame.info <= 0xFF:
         raise FramingError(f"serial INFO byte {frame.info} out of range 0..255")
+    if frame.ftype in PERCENT_TYPES and frame.data and max(frame.data) > MAX_PERCENT:
+        i = next(k for k, v in enumerate(frame.data) if v > MAX_PERCENT)
+        raise FieldRangeError(f"serial frame type 0x{frame.ftype:x}: percent entry {i} is {frame.data[i]}: "
+                              f"allowed 0..{MAX_PERCENT}")
     return frame
 
 

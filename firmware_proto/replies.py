@@ -56,7 +56,7 @@ VERSION_BODY = FieldTable(
         Field("protocol_version", "B", 0, 255),
         Field("firmware_major", "B", 0, 255),
         Field("firmware_minor", "B", 0, 255),
-        Field("n_panels", "B", 0, 63),
+        Field("n_panels", "B", 0, 255),  # uint8: any count is read, and flagged unless 55
         Field("pixels_per_panel", "H", 0, 0xFFFF),
         Field("capabilities", "H", 0, 0xFFFF),
     ),

@@ -34,7 +34,10 @@ def frames():
     def build(ftype, slot, info, data):
         size, rule = pl.SERIAL_TYPES[ftype]
         slot = pl.SLOT_ALL if rule == "all" else slot
-        return pl.SerialFrame(ftype, slot, info, data[:size].ljust(size, b"\0"))
+        data = data[:size].ljust(size, b"\0")
+        if ftype in pl.PERCENT_TYPES:  # percentages 0..100
+            data = bytes(b % 101 for b in data)
+        return pl.SerialFrame(ftype, slot, info, data)
     return st.builds(build, st.sampled_from(sorted(pl.SERIAL_TYPES)), st.integers(0, 4), st.integers(0, 255),
                      st.binary(min_size=0, max_size=1110))
 

@@ -129,6 +129,9 @@ def run(args: argparse.Namespace) -> int:
 
     seconds = args.seconds or 2.0
     n_loop = args.frames or 950
+    if n_loop < 2:  # before any work: the loopback rate is measured between the first frame and the last
+        raise ValueError(f"--frames must be at least 2 for bench protocol (the loopback rate spans two frames or "
+                         f"more), got {n_loop}")
     frames = _frames(16)
     affinity = os.sched_getaffinity(0) if hasattr(os, "sched_setaffinity") else None
     if affinity is not None:

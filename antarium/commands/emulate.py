@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 
 from antarium.commands import require_port, require_seconds
 
@@ -25,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _parse_fault(spec: str) -> tuple[int, int, str]:
     parts = spec.split(":")
     if len(parts) != 3 or not parts[0].isdigit() or not parts[1].isdigit():
-        raise ValueError(f"--fault {spec!r}: expected PANEL:LED:KIND, e.g. 3:120:open")
+        raise ValueError("expected PANEL:LED:KIND, e.g. 3:120:open")
     return int(parts[0]), int(parts[1]), parts[2]
 
 
@@ -37,11 +38,19 @@ def run(args: argparse.Namespace) -> int:
 
     emulator = Emulator(line=args.line)
     for spec in args.fault:
-        emulator.inject_fault(*_parse_fault(spec))
+        try:
+            emulator.inject_fault(*_parse_fault(spec))
+        except ValueError as exc:
+            raise ValueError(f"--fault {spec!r}: {exc}") from None
 
     def ready(address):
         print(f"antarium emulate: listening on udp://{address[0]}:{address[1]} (line: {args.line})", flush=True)
 
-    stats = serve(emulator, args.host, args.port, args.seconds, ready, handle_signals=True)
+    try:
+        stats = serve(emulator, args.host, args.port, args.seconds, ready, handle_signals=True)
+    except RuntimeError as exc:  # the port could not be bound
+        if isinstance(exc.__cause__, OSError) and exc.__cause__.errno == errno.EADDRINUSE:
+            raise RuntimeError(f"{exc} (something else listens there: give another --port, 0 for a free one)") from None
+        raise
     print("antarium emulate: statistics\n" + format_stats(stats), flush=True)
     return 0
