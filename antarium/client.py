@@ -328,12 +328,21 @@ class Rig:
 
     @contextlib.contextmanager
     def trial(self, name: str, **metadata: Any) -> Iterator[str]:
-        """`with rig.trial("name", ant=3):` records the block in one log file (its path is yielded)."""
+        """`with rig.trial("name", ant=3):` records the block in one log file (its path is yielded). Ctrl-C in the
+        block stops the trial and says on stderr that its log is closed and kept, with its frames."""
         path = self.start_trial(name, **metadata)
+        interrupted = False
         try:
             yield path
+        except KeyboardInterrupt:
+            interrupted = True
+            raise
         finally:
-            self.stop_trial()
+            done = self.stop_trial()
+            if interrupted:
+                frames = done.get("rows_written", {}).get("frames", 0)
+                print(f"trial {name!r} stopped by the interruption: its log {path} is closed and kept "
+                      f"({frames} frames)", file=sys.stderr, flush=True)
 
     def status(self) -> dict:
         return self.call("status")

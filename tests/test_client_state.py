@@ -70,3 +70,26 @@ def test_a_reply_that_comes_too_late_is_a_timeout_that_may_have_run(tmp_path):
 def test_a_bad_rig_name_is_a_rig_error():
     with pytest.raises(RigError, match="rig name"):
         antarium.Rig("a/b")
+
+
+def test_ctrl_c_in_a_trial_block_stops_the_trial_and_names_its_kept_log(tmp_path, capsys):
+    """A script interrupted inside `with rig.trial(...)`: the trial is stopped, and stderr names the closed log
+    and its frames, so the experimenter knows what was kept."""
+    import h5py
+
+    config, server = _served(tmp_path, "tintr")
+    rig = antarium.Rig("tintr", config=config, timeout_s=5.0).connect()
+    try:
+        with pytest.raises(KeyboardInterrupt), rig.trial("walk", ant=3) as path:
+            assert wait_for(lambda: rig.status()["log"]["rows_written"].get("frames", 0) >= 5, 10.0)
+            raise KeyboardInterrupt
+        assert rig.status()["trial"] is None
+    finally:
+        rig.close()
+        server.stop()
+    err = capsys.readouterr().err
+    assert f"trial 'walk' stopped by the interruption: its log {path} is closed and kept (" in err
+    frames = int(err.split("is closed and kept (")[1].split(" frames)")[0])
+    with h5py.File(path, "r") as f:
+        assert frames >= 5 and len(f["frames"]) == frames
+        assert f["events"]["kind"][-1].decode() == "trial_stopped"
