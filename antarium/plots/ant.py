@@ -54,9 +54,10 @@ def plot_paths(path: str | Path, route: Route, tracks: dict[str, Track], title: 
     ax.plot(*route.end, "*", color="tab:red", ms=12, label="route end (feeder)")
     for i, (label, track) in enumerate(tracks.items()):
         xy = xys[label]
-        if len(xy) == 0:
-            continue
         colour = f"C{i % 10}" if i % 10 != 3 else "C9"
+        if len(xy) == 0:  # in the legend all the same, so that a run without a path is not missed
+            ax.plot([], [], color=colour, lw=1.2, label=f"{label}: no position recorded (0 decisions)")
+            continue
         # Ardin's protocol: at decision k the ant, too far from the route, was picked up at xy[k] and put back on
         # the nearest route point; the line breaks there and goes on from the put-back point.
         picked = np.asarray(track.put_back, int)
@@ -89,7 +90,8 @@ _TRACE_PANELS = {"familiarity": (tuple(k for k in _TRACE_KEYS if k.startswith("l
 def plot_traces(path: str | Path, track: Track, title: str = "") -> Path:
     """The model's signals against the decision since release (0, 1, ...): familiarities (λ, 0 familiar .. 1
     novel) above, their signed left - right difference on its own axis around a zero line, the other signals
-    below, each panel shown when it has a finite value; put-backs marked; writes a PNG. (The decision, not the
+    below, each panel shown when it has a finite value (none: a picture that says so); put-backs marked; writes a
+    PNG. (The decision, not the
     rig's clock: the emulated rig runs one frame per decision, whatever the model's decision takes.)"""
     n = len(track.traces)
     shown = {g: [k for k in keys if np.isfinite(track.trace(k)).any()] for g, (keys, _) in _TRACE_PANELS.items()}
@@ -108,6 +110,9 @@ def plot_traces(path: str | Path, track: Track, title: str = "") -> Path:
             ax.axvline(k, color="0.6", lw=0.8, ls="--")
         style.label(ax, f"{title}: {group}" if title else group, "", _TRACE_PANELS[group][1])
         style.legend(ax, "right")
+    if not shown:
+        style.no_data(axes[0, 0], f"no model signal with a finite value in {n} decisions")
+        axes[0, 0].set_title(f"{title}: model signals" if title else "model signals")
     axes[-1, 0].set_xlabel(f"decision since release (count; {n} decisions"
                            + (", dashed: put back on the route)" if track.put_back else ")"))
     for ax in axes[:-1, 0]:

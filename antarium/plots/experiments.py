@@ -30,14 +30,20 @@ def plot_metric_vs_parameter(df, metric: str, param: str, path: str | Path, ci: 
     """Mean of `metric` (with the interval `ci(values) -> (lo, hi)`, NaN when it has none) against parameter
     `param` (a `param.*` column of the results table `df`): one line per combination of the other condition
     columns (`conditions` and every other `param.*` column), so that no condition is pooled with another. A
-    point of one run (or without an interval) is a hollow marker without a bar; PNG."""
+    point of one run (or without an interval) is a hollow marker without a bar; runs without a finite `metric`
+    are left out (none left: a picture that says so); PNG."""
     done = df[(df.status == "done") & df[param].notna()]
+    done = done[np.isfinite(done[metric].astype(float))]
     keys = [c for c in dict.fromkeys([*conditions, *(c for c in df.columns if c.startswith("param."))])
             if c != param and c in done.columns]
     varied = [c for c in keys if done[c].nunique(dropna=False) > 1]  # what tells the lines apart
     fig, ax = style.figure((7.0, 4.2))
     hollow = False
-    for i, (key, g) in enumerate(done.groupby(keys, dropna=False, sort=True) if keys else [((), done)]):
+    if done.empty:
+        style.no_data(ax, f"no done run with {param.removeprefix('param.')} set and a finite {metric} "
+                          f"(of {len(df)} runs)")
+    groups = [] if done.empty else done.groupby(keys, dropna=False, sort=True) if keys else [((), done)]
+    for i, (key, g) in enumerate(groups):
         row = dict(zip(keys, key if isinstance(key, tuple) else (key,), strict=True))
         name = ", ".join(f"{c.removeprefix('param.')} = {row[c]}" for c in varied) \
             or f"{row.get('model', '')} ({row.get('protocol', '')})"
@@ -60,7 +66,8 @@ def plot_metric_vs_parameter(df, metric: str, param: str, path: str | Path, ci: 
         ax.plot([], [], "o", mfc="white", mec="0.3", mew=1.5, ms=7, ls="none", label="hollow: n = 1 run (no interval)")
     title = f"{metric} vs {param.removeprefix('param.')}: mean over runs, 95 % bootstrap interval"
     style.label(ax, title, _axis_label(param), _axis_label(metric))
-    style.legend(ax, "right")
+    if not done.empty:
+        style.legend(ax, "right")
     return style.save(fig, path)
 
 
@@ -75,9 +82,10 @@ def _halves(done, n: int) -> tuple[list, list]:
 def plot_worst_and_best(df, routes: dict, path: str | Path, metric: str = "lateral_median_m", n: int = 3) -> Path:
     """Paths of the `n` best (top row) and `n` worst (bottom row) done runs by `metric`, each over its route
     (routes: (route_set, route) -> RouteInput). With fewer than 2n runs the best half and the worst half are
-    shown, each run once; PNG."""
-    done = df[df.status == "done"].sort_values(metric)
-    best, worst = _halves(done, n)
+    shown, each run once; runs without a finite `metric` are not ranked, and counted in the title; PNG."""
+    done = df[df.status == "done"]
+    ranked = done[np.isfinite(done[metric].astype(float))].sort_values(metric)
+    best, worst = _halves(ranked, n)
     cols = max(1, len(best))  # the best half is never the smaller
     fig, axes = style.figure((4 * cols + 0.5, 8.6), nrows=2, ncols=cols, squeeze=False)
     for ax in axes.ravel():
@@ -94,12 +102,18 @@ def plot_worst_and_best(df, routes: dict, path: str | Path, metric: str = "later
             ax.set_aspect("equal", "datalim")
             params = ", ".join(f"{k.removeprefix('param.')}={r[k]}" for k in r.index
                                if k.startswith("param.") and r[k] == r[k])
-            style.label(ax, f"{label} {i + 1} of {len(done)}: {r.model} on {r.route} {params}\n"
+            style.label(ax, f"{label} {i + 1} of {len(ranked)}: {r.model} on {r.route} {params}\n"
                         f"{metric} = {r[metric]:.3g}, errors {r.errors}, seed {r.seed}", "x (m)", "y (m)")
             ax.title.set_fontsize(8)
     handles = {h.get_label(): h for ax in axes.ravel() if ax.get_visible() for h in ax.get_lines()}
+    unranked = len(done) - len(ranked)
+    if not best:
+        axes[0, 0].set_visible(True)
+        style.no_data(axes[0, 0], f"no done run with a finite {metric}")
     fig.suptitle(f"best and worst runs by {metric} ({len(best)} best, {len(worst)} worst of {len(done)} done runs, "
-                 "each shown once)")
+                 "each shown once" + (f"; {unranked} without a finite {metric} not ranked" if unranked else "") + ")",
+                 wrap=True)
     fig.tight_layout()
-    fig.legend(handles=list(handles.values()), loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=3)
+    if handles:
+        fig.legend(handles=list(handles.values()), loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=3)
     return style.save(fig, path)

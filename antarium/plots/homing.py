@@ -32,11 +32,13 @@ def _once(ax, label: str) -> str | None:
     return None if any(a.get_label() == label for a in ax.get_lines()) else label
 
 
-def _mark_lost_cue(ax, *trips: Trip) -> None:
-    """A black cross where a trip ended because the compass lost its cue."""
+def _mark_lost_cue(ax, *trips: Trip, start=None) -> None:
+    """A black cross where a trip ended because the compass lost its cue: at its last position, or at `start`
+    ((2,) m, where it began) when it lost the cue before its first step."""
     for trip in trips:
-        if trip.lost_cue is not None and len(trip.xy):
-            ax.plot(*trip.xy[-1], "x", color="k", ms=9, mew=2, label=_once(ax, LOST_CUE))
+        end = trip.xy[-1] if len(trip.xy) else start
+        if trip.lost_cue is not None and end is not None:
+            ax.plot(*end, "x", color="k", ms=9, mew=2, label=_once(ax, LOST_CUE))
 
 
 def _map(path: str | Path, title: str, draw) -> Path:
@@ -72,7 +74,8 @@ def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str
                 kind = PUT_DOWN if put_down else TURNED_HOME
                 ax.plot(*start, "D" if put_down else "s", mfc="w" if put_down else colour, mec=colour, mew=1.5,
                         ms=6 if put_down else 5, ls="none", label=_once(ax, kind))
-            _mark_lost_cue(ax, out, home)
+            _mark_lost_cue(ax, out)
+            _mark_lost_cue(ax, home, start=start)
         for label, (x, y) in (marks or {}).items():
             ax.plot(x, y, "X", color="k", mfc="w", ms=11, label=label)
 
@@ -81,11 +84,14 @@ def plot_trips(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str
 
 def plot_distance(path: str | Path, trips: dict[str, tuple[Trip, Trip]], title: str, step_m: float) -> Path:
     """Distance from the nest over the homeward trip, as a share of the outbound path length, against the
-    homeward decision (each a step of `step_m` metres); PNG."""
+    homeward decision (each a step of `step_m` metres); a trip without a homeward decision or an outbound path
+    says so in the legend; PNG."""
     fig, ax = style.figure((8.5, 4.5))
     for i, (label, (out, home)) in enumerate(trips.items()):
         length = float(np.linalg.norm(np.diff(np.vstack([(0, 0), out.xy]), axis=0), axis=1).sum())
-        ax.plot(100 * np.hypot(*home.xy.T) / length, color=f"C{i % 10}", lw=0.8, label=label)
+        why = "no homeward decision" if len(home.xy) == 0 else "no outbound path (length 0)" if length <= 0 else ""
+        share = 100 * np.hypot(*home.xy.T) / length if not why else []  # in the legend all the same
+        ax.plot(share, color=f"C{i % 10}", lw=0.8, label=f"{label}: {why}" if why else label)
     ax.axhline(5.0, color="k", ls="--", lw=0.8, label="goal: 5 % of the outbound path")
     style.label(ax, title, f"homeward decision (count; one step of {100 * step_m:g} cm each)",
                 "distance to the nest (% of the outbound path)")

@@ -21,6 +21,8 @@ _UNIT = re.compile(r"\(.+\)\s*$")
 FRONT = "front"
 #: elevation (degrees) of the azimuth ticks on dome maps: the horizon
 AZIMUTH_LABEL_ELEVATION_DEG = 0.0
+#: gid of the axes that `no_data` marks: nothing to draw, and they say so
+NO_DATA = "no data"
 
 
 def pyplot():
@@ -58,6 +60,15 @@ def legend(ax, where: str = "right", **kw):
     return ax.legend(**kw)
 
 
+def no_data(ax, why: str) -> None:
+    """Say `why` (e.g. "no decisions recorded") in the middle of `ax`, ticks hidden, so that a picture of no data
+    says so instead of showing blank axes; `problems` accepts such axes without data."""
+    ax.text(0.5, 0.5, why, transform=ax.transAxes, ha="center", va="center", wrap=True, color="0.25")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_gid(NO_DATA)
+
+
 def azimuth_label(deg: float) -> str:
     """Azimuth tick text in whole degrees, rounded (never truncated) into (-180, 180]."""
     d = int(round(float(deg))) % 360
@@ -92,14 +103,20 @@ def dome_axes(ax, min_elevation_deg: float = -57.0, step_deg: int = 30) -> None:
 
 
 def problems(fig) -> list[str]:
-    """What breaks the house style in `fig`: a missing title, axis labels without a unit, a legend over the data
-    (a colour bar's axes and 3D or text-only axes are judged by their own label only)."""
+    """What breaks the house style in `fig`: nothing drawn on any axes (unless `no_data` says why), a missing
+    title, axis labels without a unit, a legend over the data (a colour bar's axes and 3D or text-only axes are
+    judged by their own label only)."""
     found = []
     titled = bool(fig._suptitle and fig._suptitle.get_text())
+    shown = [ax for ax in fig.axes if ax.get_visible()]
+    if not any(ax.has_data() or ax.get_gid() == NO_DATA for ax in shown):
+        found.append("nothing drawn: no axes has data (say why with plots.style.no_data)")
     for i, ax in enumerate(fig.axes):
+        name = f"axes {i} ({ax.get_title() or 'untitled'})"
+        if ax.get_visible() and ax.get_gid() == NO_DATA and not (titled or ax.get_title()):
+            found.append(f"{name}: no title")
         if not ax.get_visible() or not ax.has_data():
             continue
-        name = f"axes {i} ({ax.get_title() or 'untitled'})"
         labels = [ax.get_xlabel(), ax.get_ylabel()] + ([ax.get_zlabel()] if hasattr(ax, "get_zlabel") else [])
         if getattr(ax, "_colorbar", None) is not None:  # a colour key: one label, with its unit
             labels = [t for t in labels if t] or [""]
