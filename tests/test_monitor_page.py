@@ -182,3 +182,16 @@ def test_a_reconnected_page_does_not_draw_the_path_twice(page_browser, rig):
         walker.join(5)
     backwards = sum(1 for a, b in zip(xs, xs[1:], strict=False) if b < a)
     assert backwards == 0 and len(xs) <= poses, (backwards, len(xs), poses)
+
+
+def test_a_rig_whose_server_sends_no_led_frames_is_said_on_the_page(page_browser, rig):
+    """`[monitor] leds_every_frames = 0` on the server: the dome stays dark, and the page says why."""
+    rig, url = rig
+    page_browser.get(url)
+    _shows_led_frame(page_browser, rig, 10)
+    assert page_browser.find_element("id", "ledsoff").text == ""
+    rig.status = {**rig.status, "led_stream_every_frames": 0}
+    _wait(lambda: "leds_every_frames = 0" in page_browser.find_element("id", "ledsoff").text, 30, "the page says so")
+    assert "sends no LED frames" in page_browser.find_element("id", "ledsoff").text
+    rig.status = {**rig.status, "led_stream_every_frames": 5}
+    _wait(lambda: page_browser.find_element("id", "ledsoff").text == "", 30, "the note goes with the stream back")

@@ -442,3 +442,12 @@ def test_the_status_says_when_the_running_trial_started_and_its_metadata(tmp_pat
     events = read_table(path, "events")
     data = json.loads(events["data"][list(events["kind"]).index("trial_started")])
     assert started == {"t": data["monotonic"], "metadata": {"ant": 7, "colony": "C3"}}
+
+
+@pytest.mark.parametrize("every", [0, 5])
+def test_the_status_says_how_often_the_led_stream_runs(every):
+    """`led_stream_every_frames` (0: no LED frames on the bus), so that a monitor can say why its dome is dark."""
+    from antarium.server.status import rig_status
+
+    config = resolve({"rig": {"name": "tledstream"}, "monitor": {"leds_every_frames": every}})
+    assert rig_status(Server(config, renderer_factory=None, link=False))["led_stream_every_frames"] == every

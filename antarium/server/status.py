@@ -31,7 +31,8 @@ def rig_status(server: Server) -> dict[str, Any]:
     line for each thing an operator must act on."""
     loop = server.loop
     out: dict[str, Any] = {"rig": server.rig_name, "t": server.clock.now(), "trial": server.trial_name,
-                           "trial_started": server.trial_started, "scene": server.scene_name, "alarms": []}
+                           "trial_started": server.trial_started, "scene": server.scene_name,
+                           "led_stream_every_frames": server.config.monitor.leds_every_frames, "alarms": []}
     alarms = out["alarms"]
     if server.loop_error is not None:
         alarms.append(f"frame loop stopped: {_describe(server.loop_error)}")
