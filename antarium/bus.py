@@ -142,6 +142,26 @@ def _insert_access_control(conf, path: Path) -> None:
                          f"{zenoh_message(exc)}") from None
 
 
+def acl_missing_interfaces(path: str | Path) -> list[str]:
+    """One line for each network interface the ACL file `path` names in a subject's `interfaces` that this computer
+    does not have (`socket.if_nameindex`): no connection matches such a subject until the interface appears (a
+    misspelt name, a card not plugged in). The file is read as `session_config` reads it (ValueError when it
+    cannot be)."""
+    import zenoh
+
+    conf = zenoh.Config()
+    _insert_access_control(conf, Path(path))
+    have = sorted(name for _, name in socket.if_nameindex())
+    lines = []
+    for subject in json.loads(conf.get_json("access_control")).get("subjects") or []:
+        for name in subject.get("interfaces") or []:
+            if name not in have:
+                lines.append(f"[bus] access_control subject {subject.get('id')!r} names the network interface "
+                             f"{name!r}, which this computer does not have (it has {', '.join(have)}; `ip link`): "
+                             "no connection matches that subject until it appears")
+    return lines
+
+
 def zenoh_message(exc: BaseException) -> str:
     """A zenoh error as one readable line: the message of a JSON5 error with its line and column, without the
     Rust source locations (`at /root/.cargo/...rs:86.`) zenoh appends."""

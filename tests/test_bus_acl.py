@@ -150,3 +150,28 @@ def test_an_acl_zenoh_refuses_at_open_is_one_line_without_rust_source_paths(tmp_
     with pytest.raises(RuntimeError, match="Rule 'nosuch' in policy #0 does not exist in rules list$") as info:
         bus.open_session({"listen": [bus.free_tcp_endpoint()], "access_control": str(acl)}, role="server")
     assert ".rs:" not in str(info.value)
+
+
+def test_an_acl_naming_an_interface_this_computer_lacks_is_said_at_start(tmp_path):
+    """A subject's interface that does not exist here (misspelt, a card not plugged in) matches no connection: the
+    server says so in one line at start, naming the subject, the interface and the interfaces it has; the doc's
+    example as written says nothing of an interface this computer has."""
+    import socket
+
+    have = {name for _, name in socket.if_nameindex()}
+    acl = tmp_path / "acl.json5"
+    acl.write_text(doc_acl().replace(OPERATORS, '{ id: "operators", interfaces: ["lo", "enp9s9x"] }'))
+    lines = bus.acl_missing_interfaces(acl)
+    assert lines[0].startswith("[bus] access_control subject 'operators' names the network interface 'enp9s9x', "
+                               "which this computer does not have (it has ")
+    assert "lo" in lines[0] and all("'lo'" not in line for line in lines)
+    assert len(lines) == 1 + ("eth0" not in have)  # the doc's lab subject names eth0
+
+    echoed = []
+    config = resolve({"rig": {"name": "rig1"}, "log": {"dir": str(tmp_path / "logs")},
+                      "bus": {"listen": [bus.free_tcp_endpoint()], "access_control": str(acl)}})
+    server = Server(config, renderer_factory=None, link=False, echo=echoed.append).start_thread()
+    try:
+        assert [line for line in echoed if "access_control" in line] == [f"antarium serve: {line}" for line in lines]
+    finally:
+        server.stop()

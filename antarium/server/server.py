@@ -186,6 +186,9 @@ class Server:
             if not self.config.bus.enabled:
                 return
             self.session = bus.open_session(self.config.bus, role="server")
+            if self.config.bus.access_control:
+                for line in bus.acl_missing_interfaces(self.config.bus.access_control):
+                    self.echo(f"antarium serve: {line}")
         s = self.session
         self._refuse_a_twin(s)
         self._pose_pub = s.declare_publisher(bus.pose_key(self.rig_name), express=True)
