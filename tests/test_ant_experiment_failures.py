@@ -132,3 +132,38 @@ def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_flag(pano):
     assert proc.returncode == 2 and len(lines) == 1, err
     assert "--scheduler tcp://127.0.0.1:9" in lines[0] and "dask scheduler" in lines[0], lines[0]
     assert time.monotonic() - t0 < runner.SCHEDULER_TIMEOUT_S + 20
+
+
+def _hangs_on_ardin_r1(run):
+    """A worker's task (`execute.run_task`) whose ardin run on route r1 hangs after it started (a GL driver that
+    never returns); every other run runs as it would."""
+    from antarium.ant.experiment.execute import announce_start, run_task
+
+    if run.model == "ardin" and run.route == "r1":
+        announce_start(run)
+        time.sleep(3600)
+    return run_task(run)
+
+
+def test_a_run_that_hangs_is_recorded_failed_at_run_timeout_and_the_others_finish(pano):
+    """A hung run held up the whole sweep for ever: with run_timeout_s it is recorded failed (RunTimeout), its worker
+    restarted, and the other runs finish; without Dask a timeout is refused, as is a timeout that is no time."""
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the task, to workers that cannot import tests/
+    runs, out = _runs(pano), pano / "out"
+    rows = []
+    p = run_experiment(runs, out, workers=2, progress_bar=False, run_timeout_s=30.0, task=_hangs_on_ardin_r1,
+                       on_row=rows.append)
+    assert (p.done, p.failed) == (len(runs) - 1, 1), rows
+    (failed,) = [r for r in rows if r["status"] == "failed"]
+    assert (failed["model"], failed["route"]) == ("ardin", "r1")
+    assert failed["error"].startswith("RunTimeout: the run was still running after ")
+    assert "(--run-timeout-s 30); its worker was restarted" in failed["error"]
+    df = load_results(out)
+    assert sorted(df.run_id) == sorted(r.run_id for r in runs) and (df.status == "done").sum() == len(runs) - 1
+    for bad in (0, -1.0, float("nan"), "x"):
+        with pytest.raises(ValueError, match="--run-timeout-s must be a finite number of seconds > 0"):
+            run_experiment(runs, out, workers=2, progress_bar=False, run_timeout_s=bad)
+    with pytest.raises(ValueError, match="--run-timeout-s needs Dask workers"):
+        run_experiment(runs, out, serial=True, progress_bar=False, run_timeout_s=10.0)

@@ -17,6 +17,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                                      "LocalCluster on this machine)")
     p.add_argument("--workers", type=int, default=None, help="LocalCluster worker processes (default: every core)")
     p.add_argument("--serial", action="store_true", help="run in this process, without Dask")
+    p.add_argument("--run-timeout-s", type=float, default=None,
+                   help="a run still running this many seconds after its worker started it is recorded as failed "
+                        "(RunTimeout) and its worker restarted, so that a run that hangs cannot hold up the sweep "
+                        "(default: no limit; not with --serial)")
     p.add_argument("--world", default=None, help="run in this world instead of the spec's: a scene name, mesh or "
                                                  "panorama file")
     p.add_argument("--world-scale", type=float, default=None, help="metres per unit of --world's file (default 1)")
@@ -75,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     exp = expand(data, spec.parent)
     out = Path(args.out)
     print(f"{len(exp.runs)} runs -> {out}")
-    progress = run_experiment(exp.runs, out, scheduler=args.scheduler, workers=args.workers, serial=args.serial)
+    progress = run_experiment(exp.runs, out, scheduler=args.scheduler, workers=args.workers, serial=args.serial,
+                              run_timeout_s=args.run_timeout_s)
     print(f"runs: {progress.done} done now, {progress.skipped} done before, {progress.failed} failed")
     print(report(out, exp.routes, exp.metrics, [r.run_id for r in exp.runs]))
     return 1 if progress.failed else 0

@@ -60,6 +60,28 @@ def _renderer(face_size: int, scene, x: float, y: float, z: float):
     return renderer
 
 
+#: the Dask event topic on which a worker says that it starts a run ({"run_id", "worker": its address})
+RUN_STARTED_TOPIC = "antarium-run-started"
+
+
+def announce_start(run: Run) -> None:
+    """Tell the command (`runner`, which enforces --run-timeout-s) that this worker starts `run` now; nothing
+    outside a Dask worker."""
+    from distributed import get_worker
+
+    try:
+        worker = get_worker()
+    except ValueError:  # not in a worker
+        return
+    worker.log_event(RUN_STARTED_TOPIC, {"run_id": run.run_id, "worker": worker.address})
+
+
+def run_task(run: Run) -> dict:
+    """What a Dask worker runs for `run`: `announce_start`, then `run_row`."""
+    announce_start(run)
+    return run_row(run)
+
+
 def run_row(run: Run) -> dict:
     """Learn and follow the run's route; the row of the results table (see `spec.METRICS`)."""
     from antarium.ant.route_following import train_and_follow

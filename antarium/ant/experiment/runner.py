@@ -9,10 +9,12 @@ into a results folder (`out_lock`).
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import signal
 import socket
 import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,20 +114,31 @@ def _failed_row(run: Run, exc: BaseException) -> dict:
 
 def run_experiment(runs: list[Run], out: str | Path, scheduler: str | None = None, workers: int | None = None,
                    serial: bool = False, progress_bar: bool = True,
-                   on_row: Callable[[dict], None] | None = None) -> Progress:
+                   on_row: Callable[[dict], None] | None = None, run_timeout_s: float | None = None,
+                   task: Callable[[Run], dict] | None = None) -> Progress:
     """Run what is not yet done of `runs`, writing a Parquet row per run into `out/runs/` as each finishes.
 
     scheduler: a Dask scheduler address (tcp://host:8786) of a lab cluster; otherwise a LocalCluster of `workers`
     processes (default: every core), one thread each; serial: in this process, no Dask.
-    on_row: called with each finished row (in this process). Returns the counts.
+    on_row: called with each finished row (in this process). run_timeout_s: a run still running that long after
+    its worker started it (s; None: no limit; Dask only) is recorded as failed (`RunTimeout`) and its worker
+    restarted, so that a run that hangs cannot hold up the sweep. task: what a worker runs per run (default
+    `execute.run_task`). Returns the counts.
     """
+    if run_timeout_s is not None:
+        if not (isinstance(run_timeout_s, int | float) and math.isfinite(run_timeout_s) and run_timeout_s > 0):
+            raise ValueError(f"--run-timeout-s must be a finite number of seconds > 0, got {run_timeout_s!r}")
+        if serial:
+            raise ValueError("--run-timeout-s needs Dask workers (a run in this process cannot be stopped); leave "
+                             "out --serial, or --run-timeout-s")
     out = Path(out)
     (out / RUNS_DIR).mkdir(parents=True, exist_ok=True)
     with out_lock(out):
-        return _run_pending(runs, out, scheduler, workers, serial, progress_bar, on_row)
+        return _run_pending(runs, out, scheduler, workers, serial, progress_bar, on_row, run_timeout_s, task)
 
 
-def _run_pending(runs: list[Run], out: Path, scheduler, workers, serial: bool, progress_bar: bool, on_row) -> Progress:
+def _run_pending(runs: list[Run], out: Path, scheduler, workers, serial: bool, progress_bar: bool, on_row,
+                 run_timeout_s: float | None = None, task=None) -> Progress:
     done = finished(out, runs)
     pending = [r for r in runs if r.run_id not in done]
     progress = Progress(len(runs), skipped=len(runs) - len(pending))
@@ -140,7 +153,7 @@ def _run_pending(runs: list[Run], out: Path, scheduler, workers, serial: bool, p
                 if on_row is not None:
                     on_row(row)
         elif pending:
-            _run_dask(pending, out, scheduler, workers, progress, bar, on_row)
+            _run_dask(pending, out, scheduler, workers, progress, bar, on_row, run_timeout_s, task)
     finally:
         if bar is not None:
             bar.close()
@@ -203,12 +216,50 @@ def _interrupt_flag() -> Iterator[threading.Event]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _run_dask(pending: list[Run], out: Path, scheduler, workers, progress: Progress, bar, on_row) -> None:
-    """Run `pending` on Dask, recording each row as it comes; Ctrl-C stops waiting within INTERRUPT_POLL_S,
-    closes the client and the local cluster and raises KeyboardInterrupt (the rows recorded so far are kept)."""
+class _Watch:
+    """When each run started on which worker (`execute.announce_start`'s events, timed on this computer's clock:
+    the workers' clocks are never compared with it)."""
+
+    def __init__(self) -> None:
+        self.started: dict[str, tuple[float, str]] = {}  # run_id -> (time.monotonic(), worker address)
+
+    def __call__(self, event) -> None:  # the Dask client's thread
+        msg = event[1]
+        self.started[msg["run_id"]] = (time.monotonic(), msg["worker"])
+
+    def overdue(self, run_ids: Iterable[str], timeout_s: float) -> list[tuple[str, float, str]]:
+        """(run_id, seconds running, worker) of the runs among `run_ids` running longer than `timeout_s`."""
+        now, late = time.monotonic(), []
+        for run_id in run_ids:
+            if run_id in self.started:
+                t0, worker = self.started[run_id]
+                if now - t0 > timeout_s:
+                    late.append((run_id, now - t0, worker))
+        return late
+
+
+def _stop_overdue(client, run: Run, running_s: float, worker: str, timeout_s: float) -> dict:
+    """The failed row of `run`, overdue on `worker`; the worker is restarted (by its nanny), which ends the run."""
+    import sys
+
+    status = client.restart_workers([worker], raise_for_error=False).get(worker, "no answer")
+    restarted = "its worker was restarted" if status == "OK" else f"its worker could not be restarted ({status})"
+    error = (f"RunTimeout: the run was still running after {running_s:.0f} s on worker {worker} (--run-timeout-s "
+             f"{timeout_s:g}); {restarted}")
+    if status != "OK":
+        print(f"antarium ant experiment: run {run.run_id}: {error}; a worker without a nanny (dask worker "
+              "--no-nanny) cannot be restarted: stop it by hand", file=sys.stderr, flush=True)
+    return {**run.columns(), "status": "failed", "error": error}
+
+
+def _run_dask(pending: list[Run], out: Path, scheduler, workers, progress: Progress, bar, on_row,
+              run_timeout_s: float | None = None, task=None) -> None:
+    """Run `pending` on Dask, recording each row as it comes; a run over `run_timeout_s` is recorded as failed
+    and its worker restarted (`_stop_overdue`); Ctrl-C stops waiting within INTERRUPT_POLL_S, closes the client
+    and the local cluster and raises KeyboardInterrupt (the rows recorded so far are kept)."""
     from distributed import Client, as_completed
 
-    from antarium.ant.experiment.execute import run_row
+    from antarium.ant.experiment.execute import RUN_STARTED_TOPIC, run_task
 
     if scheduler:
         cluster = None
@@ -222,15 +273,29 @@ def _run_dask(pending: list[Run], out: Path, scheduler, workers, progress: Progr
         client = Client(cluster)
     try:
         with _interrupt_flag() as interrupted:
+            watch = _Watch()
+            if run_timeout_s is not None:
+                client.subscribe_topic(RUN_STARTED_TOPIC, watch)
             by_key = {f"run-{r.run_id}": r for r in pending}
-            futures = as_completed(client.map(run_row, pending, key=list(by_key), pure=False, retries=0))
+            submitted = client.map(task or run_task, pending, key=list(by_key), pure=False, retries=0)
+            running = {by_key[f.key].run_id: f for f in submitted}  # not yet recorded
+            futures = as_completed(submitted)
             while not futures.is_empty():
                 if interrupted.is_set():
                     raise KeyboardInterrupt
+                for run_id, running_s, worker in watch.overdue(running, run_timeout_s) if run_timeout_s else ():
+                    fut = running.pop(run_id)
+                    fut.cancel()  # first: the scheduler forgets it, so the restart does not run it again
+                    row = _stop_overdue(client, by_key[fut.key], running_s, worker, run_timeout_s)
+                    _record(out, row, progress, bar)
+                    if on_row is not None:
+                        on_row(row)
                 if not futures.has_ready():
                     interrupted.wait(INTERRUPT_POLL_S)
                     continue
                 fut = next(futures)
+                if running.pop(by_key[fut.key].run_id, None) is None:  # recorded as overdue (now cancelled)
+                    continue
                 try:
                     row = fut.result()
                 except Exception as exc:  # the worker died (e.g. out of memory): record it, go on
