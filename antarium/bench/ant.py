@@ -16,6 +16,8 @@ import time
 
 import numpy as np
 
+from antarium.bench import progress, write_json
+
 GOAL_DECISIONS_PER_S = 1000.0
 GOAL_LEARN_VIEWS_PER_S = 100.0
 GOAL_BYTES_PER_ROUTE_MBON = 2000
@@ -96,6 +98,7 @@ def measure_on_one_core(seconds: float, n_frames: int) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     seconds = args.seconds if args.seconds is not None else 2.0
+    progress("ant", f"11 figures of at least {seconds:g} s each, in a child process on one core")
     result = measure_on_one_core(seconds, args.frames or 20)
     r = result["ratios"]
     print(f"virtual ant, model alone ({'one core' if result['one_core'] else 'all cores'}; shared machine: noisy)")
@@ -120,6 +123,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {text + ' decisions (LED frame):':40s} {result[f'{kind}_decisions_per_s']:8.0f} /s "
               f"= {rc[f'{kind}_vs_goal_1000']:.2f} x goal 1000/s; memory {result[f'{kind}_memory_bytes']} B")
     if args.json_out:
-        with open(args.json_out, "w") as fh:
-            json.dump(result, fh, indent=2)
+        write_json(args.json_out, "ant", result)
     return 0

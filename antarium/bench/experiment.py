@@ -11,10 +11,11 @@ worker (building the world, the footprint matrix) is counted in runs/hour but no
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import tempfile
 import time
+
+from antarium.bench import progress, write_json
 
 GOAL_SCALING_2_WORKERS = 1.8
 GOAL_OVERHEAD = 0.05
@@ -61,7 +62,11 @@ def measure(n: int = 6, length: float = 2.0, model: str = "ardin") -> dict:
 
 def run(args: argparse.Namespace) -> int:
     n = args.frames or 6
+    if n < 3:  # the overhead is the gap between two arrivals after the first, on one worker
+        raise ValueError(f"bench experiment: --frames (the number of runs) must be at least 3, got {n}: the "
+                         "cluster's overhead is measured between the arrivals of the second and later runs")
     length = args.seconds or 2.0
+    progress("experiment", f"{n} runs, three times over: in this process, on 1 worker, on 2 workers")
     r = measure(n, length)
     print(f"antarium ant experiment: {n} runs of Ardin's MB on {length:g} m curved routes in the habitat "
           f"(--frames runs, --seconds m)")
@@ -73,6 +78,5 @@ def run(args: argparse.Namespace) -> int:
     print(f"  cluster overhead per run (1 worker): {100 * r['overhead_per_run']:.1f} % of a run "
           f"(goal < {100 * GOAL_OVERHEAD:.0f} %)")
     if args.json_out:
-        with open(args.json_out, "w") as fh:
-            json.dump(r, fh, indent=2)
+        write_json(args.json_out, "experiment", r)
     return 0

@@ -22,7 +22,6 @@ was the machine's (unknown where a probe is not real-time: our own load then del
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import multiprocessing
 import os
@@ -33,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from antarium.bench import progress, write_json
 from antarium.core.clock import Clock, MonotonicClock
 
 #: a gap longer than this (s) between two clock readings of the busy thread counts as a stall
@@ -263,6 +263,9 @@ def run(args: argparse.Namespace) -> int:
     seconds = 30.0 if args.seconds is None and args.frames is None else args.seconds
     # both given: whichever ends first, as `bench loop` (Server.run) does
     slots = min(n for n in (args.frames, None if seconds is None else int(seconds * rate)) if n is not None)
+    if slots < 1:
+        raise ValueError(f"--seconds must be at least one frame slot ({1e3 * period:.2f} ms at {rate:g} Hz), "
+                         f"got {seconds:g}")
     work_ms = 2.5 if args.work_ms is None else args.work_ms
     work = work_ms / 1e3
     if not 0.0 <= work < period:
@@ -288,6 +291,7 @@ def run(args: argparse.Namespace) -> int:
         longest = np.zeros(slots)
         out["arrays"] = (*measure(MonotonicClock(), period, work, slots, longest), longest)
 
+    progress("jitter", f"measuring {slots} frame slots ({slots / rate:.1f} s)")
     steal0 = _steal_s()
     thread = threading.Thread(target=skeleton, name="jitter-skeleton")
     thread.start()
@@ -299,8 +303,7 @@ def run(args: argparse.Namespace) -> int:
                   steal_s=None if steal0 is None or steal1 is None else steal1 - steal0)
     _print(result)
     if args.json_out:
-        with open(args.json_out, "w") as fh:
-            json.dump(result, fh, indent=2)
+        write_json(args.json_out, "jitter", result)
     return 0
 
 

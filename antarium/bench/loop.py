@@ -37,6 +37,7 @@ if TYPE_CHECKING:
 
 import numpy as np
 
+from antarium.bench import progress, write_json
 from antarium.bench.gpu_clocks import GpuClocks
 from antarium.bench.gpu_clocks import describe as describe_clocks
 
@@ -164,12 +165,16 @@ def run(args: argparse.Namespace) -> int:
         if json_out and len(paths) > 1:  # one file per path: loop.json -> loop-gpu.json, loop-cpu.json
             root, ext = os.path.splitext(json_out)
             json_out = f"{root}-{path}{ext}"
-        _run_one(args, config, seconds, {"gl_renderer": gl, "path": used}, json_out)
+        if _run_one(args, config, seconds, {"gl_renderer": gl, "path": used}, json_out):
+            raise KeyboardInterrupt  # no further path, no further run of `bench monitor`
     return 0
 
 
 def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None, device: dict[str, str],
-             json_out: str | None) -> None:
+             json_out: str | None) -> bool:
+    """One run of the loop on `config`: its report printed, and written to `json_out` when given. True when Ctrl-C
+    ended it after frames had run: the report is then over those frames. Ctrl-C before any frame raises
+    KeyboardInterrupt."""
     from antarium.bus import free_tcp_endpoint
     from antarium.server import Server
     from antarium.trial_log import read_table
@@ -183,38 +188,52 @@ def _run_one(args: argparse.Namespace, config: RigConfig, seconds: float | None,
             else None
         script = ScriptedCommands(server, config.render.scene,
                                   {kind: getattr(args, option, None) for kind, option in SCRIPTED.items()})
-        watch = ServerWatch(server, getattr(args, "on_frames_end", None))
+        length = " or ".join(t for t in (seconds and f"{seconds:g} s", args.frames and f"{args.frames} frames") if t)
+        watch = ServerWatch(server, getattr(args, "on_frames_end", None),
+                            lambda: progress("loop", f"frames running for {length}"
+                                             + (", whichever ends first" if " or " in length else "")))
         clocks = GpuClocks().start() if device["path"] == "gpu" else None
+        interrupted = False
         try:
             server.run(seconds=seconds, frames=args.frames)
+        except KeyboardInterrupt:  # Ctrl-C: the server has closed its log; the frames run so far are reported
+            interrupted = True
         finally:
             watch.join()
             stalls = probes.stop() if probes is not None else None
             script.stop()
             gpu_clocks = clocks.stop() if clocks is not None else None
+        if interrupted and not server.trial_paths:
+            raise KeyboardInterrupt  # before the recording began: nothing measured
         frames = read_table(server.trial_paths[0], "frames")
+        if interrupted and len(frames["t_start"]) < 2:
+            raise KeyboardInterrupt  # fewer than two frames: no figure
         result = summarise(frames, config.loop.rate_hz, stalls, server.final_stats, watch.loop_cpus)
         result["commands"] = script.summary(frames)
         result["device"] = {**device, "gpu_clocks": gpu_clocks}
         result["config"] = {"render": config.render.model_dump(), "loop_rate_hz": config.loop.rate_hz,
                             "keep_gpu_busy": config.loop.keep_gpu_busy,
                             "link": config.link.interface, "locomotion": config.locomotion.source}
+        result["interrupted"] = interrupted
+    if interrupted:
+        print(f"loop bench INTERRUPTED (Ctrl-C): the figures below are over the {result['frames']} frames run before")
     _print(result)
     if json_out:
-        with open(json_out, "w") as fh:
-            json.dump(result, fh, indent=2)
+        write_json(json_out, "loop", result)
         print(f"  figures written to {json_out}")
+    return interrupted
 
 
 class ServerWatch:
     """A thread beside `server.run`: once the frames are about to run, which CPUs the frame loop has (`loop_cpus`:
     {its own CPU}, or None when it has none of its own, so that it may run on any); when they end (the server
-    begins to stop), `on_frames_end()` if given (`bench monitor` ends the page's measuring there)."""
+    begins to stop), `on_frames_end()` if given (`bench monitor` ends the page's measuring there). Just before the
+    frames, `on_frames_start()` if given."""
 
-    def __init__(self, server, on_frames_end=None) -> None:
+    def __init__(self, server, on_frames_end=None, on_frames_start=None) -> None:
         import threading
 
-        self.server, self.on_frames_end = server, on_frames_end
+        self.server, self.on_frames_end, self.on_frames_start = server, on_frames_end, on_frames_start
         self.loop_cpus: set[int] | None = None
         self._thread = threading.Thread(target=self._run, name="bench-watch", daemon=True)
         self._thread.start()
@@ -224,6 +243,8 @@ class ServerWatch:
         if server.wait_ready(None):
             isolation = server.placement._isolation  # set before the frames, None without a CPU of its own
             self.loop_cpus = None if isolation is None else {isolation.cpu}
+            if self.on_frames_start is not None:
+                self.on_frames_start()
         server._stopping.wait()
         if self.on_frames_end is not None:
             self.on_frames_end()

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from antarium.bench import write_json
 from antarium.bench.cpu import process_tree_cpu_s
 
 CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
@@ -190,6 +191,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"  loop, {mode:7s}: {r['achieved_rate_hz']:.1f} Hz, {r['late_frames']} late of {r['frames']}, "
               f"latency p50 {lat['p50_ms']:.2f} p99 {lat['p99_ms']:.2f} ms")
     if args.json_out:
-        with open(args.json_out, "w") as fh:
-            json.dump(results, fh, indent=2)
+        write_json(args.json_out, "monitor", results)
     return 0

@@ -9,13 +9,12 @@ path, on a GPU: habitat >= 2,000, panorama-only >= 5,000).
 
 from __future__ import annotations
 
-import json
 import math
-import sys
 import time
 
 import numpy as np
 
+from antarium.bench import progress, write_json
 from antarium.bench.cpu import process_cpu_s
 from antarium.core.rates import DOME_RATE_HZ
 
@@ -94,11 +93,6 @@ def measure(renderer, scene, frames: int, warmup: int = 20) -> dict:
             "render_ms": ms[0], "sample_ms": ms[1], "convert_ms": ms[2]}
 
 
-def _progress(text: str) -> None:
-    """One progress line on stderr, at once (the table on stdout stays clean)."""
-    print(f"bench render: {text} ...", file=sys.stderr, flush=True)
-
-
 def run(args) -> int:
     from antarium.geometry import load_dome
     from antarium.renderers.gl import gl_renderer_string
@@ -113,40 +107,50 @@ def run(args) -> int:
     gl = gl_renderer_string()
     paths = getattr(args, "path", None) or [default_path(gl)]
     print(f"GL renderer: {gl}; per-LED path{'s' if len(paths) > 1 else ''}: {', '.join(paths)}")
-    _progress("building the scenes (the habitat takes a while)")
+    progress("render", "building the scenes (the habitat takes a while)")
     loads = workloads()
     print(f"{'path':<5}{'workload':<14}{'triangles':>10}{'frames/s':>10}{'x190 Hz':>9}{'goal':>7}{'render ms':>11}"
           f"{'sample ms':>11}{'convert ms':>12}{'CPU ms':>8}")
     runs = [(path, name, workload) for path in paths for name, workload in loads.items()]
-    for i, (path, name, (make, kwargs)) in enumerate(runs):
-        _progress(f"workload {i + 1}/{len(runs)} {name!r} on the {path} path: {frames} frames")
-        renderer = Renderer(dome, path=path, **kwargs)
-        try:
-            r = measure(renderer, make(), frames)
-            r["renderer"] = {"face_size": renderer.face_size, "gl": renderer.gl_renderer, "path": path, **kwargs}
-            r["far_layer"] = renderer.far_layer_status()
-        finally:
-            renderer.release()
-        r["workload"] = name
-        r["x_dome_rate"] = r["fps"] / DOME_RATE_HZ
-        goal = GOALS_HZ[path].get(name.split("-")[0])
-        r["goal_fps"] = goal
-        results.append(r)
-        goal_txt = f"{r['fps'] / goal:6.2f}x" if goal else "     -"
-        print(f"{path:<5}{name:<14}{r['triangles']:>10}{r['fps']:>10.1f}{r['x_dome_rate']:>9.2f}{goal_txt:>7}"
-              f"{r['render_ms']:>11.2f}{r['sample_ms']:>11.2f}{r['convert_ms']:>12.2f}"
-              f"{r['cpu_ms_per_frame']:>8.2f}", flush=True)
+    interrupted = False
+    try:
+        for i, (path, name, (make, kwargs)) in enumerate(runs):
+            progress("render", f"workload {i + 1}/{len(runs)} {name!r} on the {path} path: {frames} frames")
+            renderer = Renderer(dome, path=path, **kwargs)
+            try:
+                r = measure(renderer, make(), frames)
+                r["renderer"] = {"face_size": renderer.face_size, "gl": renderer.gl_renderer, "path": path, **kwargs}
+                r["far_layer"] = renderer.far_layer_status()
+            finally:
+                renderer.release()
+            r["workload"] = name
+            r["x_dome_rate"] = r["fps"] / DOME_RATE_HZ
+            goal = GOALS_HZ[path].get(name.split("-")[0])
+            r["goal_fps"] = goal
+            results.append(r)
+            goal_txt = f"{r['fps'] / goal:6.2f}x" if goal else "     -"
+            print(f"{path:<5}{name:<14}{r['triangles']:>10}{r['fps']:>10.1f}{r['x_dome_rate']:>9.2f}{goal_txt:>7}"
+                  f"{r['render_ms']:>11.2f}{r['sample_ms']:>11.2f}{r['convert_ms']:>12.2f}"
+                  f"{r['cpu_ms_per_frame']:>8.2f}", flush=True)
+    except KeyboardInterrupt:  # Ctrl-C: the workloads measured so far are reported (none: nothing to report)
+        if not results:
+            raise
+        interrupted = True
+        print(f"INTERRUPTED (Ctrl-C): {len(results)} of the {len(runs)} workloads measured")
     device = results[0]["renderer"]["gl"]
-    layered = next(r for r in results if r["workload"] == "habitat-layer")
     print("sample ms on the gpu path: the compute passes, their wait and the read-back; convert ms: the copy out")
-    print(f"GL: {device}. Face size {results[0]['renderer']['face_size']}; habitat-layer: near meshes at "
-          f"{layered['renderer']['face_size']}, far layer at 192 in its own process "
-          f"({layered['far_layer']['builds']} layers built, {layered['builder_cpu_ms_per_frame']:.2f} CPU ms per "
-          f"frame there, not in the CPU column; {layered['far_layer']['full_frames']} frames drawn in full)")
+    print(f"GL: {device}. Face size {results[0]['renderer']['face_size']}")
+    for layered in (r for r in results if r["workload"] == "habitat-layer"):
+        print(f"habitat-layer, {layered['renderer']['path']} path: near meshes at {layered['renderer']['face_size']}, "
+              f"far layer at 192 in its own process ({layered['far_layer']['builds']} layers built, "
+              f"{layered['builder_cpu_ms_per_frame']:.2f} CPU ms per frame there, not in the CPU column; "
+              f"{layered['far_layer']['full_frames']} frames drawn in full)")
     print("goal: frames/s divided by the path's goal (cpu: habitat 390, panorama 1,900; gpu: habitat 2,000, panorama "
           "5,000 frames/s). CPU ms: process CPU time per "
           "frame, all threads (llvmpipe's included) - less sensitive than wall time to other jobs on a shared machine")
     if args.json_out:
-        with open(args.json_out, "w") as fh:
-            json.dump({"device": device, "results": results}, fh, indent=2)
+        write_json(args.json_out, "render", {"device": device, "interrupted": interrupted, "results": results})
+        print(f"figures written to {args.json_out}")
+    if interrupted:
+        raise KeyboardInterrupt  # the command's exit status, 130, and its line on what was kept
     return 0

@@ -9,11 +9,11 @@ publication (the bus `put` returned); unplug seen within 100 ms; FicTrac >= 10,0
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import numpy as np
 
+from antarium.bench import progress, write_json
 from antarium.core.rates import DOME_RATE_HZ, FRAME_PERIOD_S
 
 GOAL_REPORTS_HZ = 1000.0
@@ -89,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     from antarium.locomotion import wire
 
     seconds = args.seconds or 2.0
+    progress("trackball", f"two driver runs of {seconds:g} s, 20 unplugs, {args.frames or 100_000:,} FicTrac lines")
     endpoint = bus.free_tcp_endpoint()
     with bus.open_session({"listen": [endpoint]}, "server") as server, \
             bus.open_session({"listen": [endpoint]}, "client") as client:
@@ -126,6 +127,5 @@ def run(args: argparse.Namespace) -> int:
           f"the 10,000/s goal, {fictrac['lines_per_s'] / DOME_RATE_HZ:,.0f} lines per dome frame)")
     print("(shared machine: timings are noisy)")
     if args.json_out:
-        with open(args.json_out, "w") as f:
-            json.dump(results, f, indent=2)
+        write_json(args.json_out, "trackball", results)
     return 0

@@ -44,7 +44,8 @@ def check_output(path: str | os.PathLike, option: str, *, suffixes: Sequence[str
 
     suffixes: the endings a file name must have (any when empty), lowercase with the dot; the name must carry one,
     for writers that would append it silently. make_folders: the writer makes missing folders on the way (else
-    the folder must exist). Either way the nearest existing one must be a folder this user may write in."""
+    the folder must exist). Either way the nearest existing one must be a folder this user may write in; a file
+    in an existing folder is tried (opened for appending; a new one removed again)."""
     text = os.fspath(path)
     what = "folder" if folder else "file"
     if not text.strip():
@@ -70,4 +71,14 @@ def check_output(path: str | os.PathLike, option: str, *, suffixes: Sequence[str
         raise ValueError(f"{option} {text!r}: no permission to write in folder {str(existing)!r}")
     if target.exists() and not os.access(target, os.W_OK):
         raise ValueError(f"{option} {text!r}: no permission to overwrite it")
+    if not folder and existing == parent:  # tried: a folder may say it is writable and refuse files (/proc)
+        existed = target.exists()
+        try:
+            with open(target, "a"):
+                pass
+        except OSError as exc:
+            raise ValueError(f"{option} {text!r}: cannot write there ({exc.strerror}); give a file in a folder "
+                             "where files can be made") from None
+        if not existed:
+            target.unlink()
     return target

@@ -4,17 +4,23 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from importlib import import_module
 
 from antarium.bench import OPTIONS, TARGETS
 from antarium.commands import check_output, require_seconds
+from antarium.core.rates import DOME_RATE_HZ
+
+#: the longest run a benchmark may be asked for (s), and the most frames: a day at the dome's rate
+MAX_SECONDS = 86400.0
+MAX_FRAMES = int(MAX_SECONDS * DOME_RATE_HZ)
 
 HELP = "run a benchmark and report it against the dome's 190 frames/s (5.3 ms frame period)"
 
 #: each option's usual meaning; `OPTIONS` (antarium.bench) says which targets take it and what it means in each
 USUAL = {
-    "--frames": "number of frames, at least 1",
-    "--seconds": "duration in seconds",
+    "--frames": f"number of frames, from 1 to {MAX_FRAMES:,} (a day at {DOME_RATE_HZ:g} frames/s)",
+    "--seconds": f"duration in seconds, > 0 and at most {MAX_SECONDS:g} (a day)",
     "--work-ms": "busy time standing for one frame's work (ms; default 2.5)",
     "--machine-probe": "also run a stall probe on every CPU and tell the machine's late frames (stalls on the loop's "
                        "CPU) from ours",
@@ -55,9 +61,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument(option, type=float, default=None, metavar="S", help=_help(option))
     parser.add_argument("--browser-idle", action="store_true", help=_help("--browser-idle"))
     parser.add_argument("--json", dest="json_out", default=None,
-                        help="also write the results to this JSON file, in an existing folder; an existing file is "
+                        help="also write the results to this .json file, in an existing folder; an existing file is "
                              "overwritten (loop with several --path: one file per path, NAME-gpu.json and "
-                             "NAME-cpu.json)")
+                             "NAME-cpu.json). Every bench but protocol and servosphere puts the same \"run\" table "
+                             "(bench, antarium version, host, platform, cpus, finished_utc) beside its own figures, "
+                             "and a figure it could not measure (NaN) as null")
 
 
 def refuse_others(args: argparse.Namespace) -> None:
@@ -71,12 +79,20 @@ def refuse_others(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     refuse_others(args)
-    require_seconds(args, "seconds")
-    if args.frames is not None and args.frames < 1:
-        raise ValueError(f"--frames must be at least 1, got {args.frames}")
+    require_seconds(args, "seconds", "load_every", "displace_every", "edit_every", "sky_every")
+    if args.seconds is not None and args.seconds > MAX_SECONDS:
+        raise ValueError(f"--seconds must be at most {MAX_SECONDS:g} seconds (a day), got {args.seconds:g}")
+    if args.frames is not None and not 1 <= args.frames <= MAX_FRAMES:
+        raise ValueError(f"--frames must be from 1 to {MAX_FRAMES:,} (a day at {DOME_RATE_HZ:g} frames/s), got "
+                         f"{args.frames}")
     if args.work_ms is not None and not (math.isfinite(args.work_ms) and args.work_ms >= 0):
         raise ValueError(f"--work-ms must be a number of milliseconds >= 0, got {args.work_ms:g}")
     if args.json_out is not None:  # before the benchmark, which a bad name would throw away
-        check_output(args.json_out, "--json", make_folders=False)
+        check_output(args.json_out, "--json", suffixes=(".json",), make_folders=False)
     module_name, func = TARGETS[args.target].split(":")
-    return int(getattr(import_module(module_name), func)(args) or 0)
+    try:
+        return int(getattr(import_module(module_name), func)(args) or 0)
+    except KeyboardInterrupt:
+        print(f"antarium bench {args.target}: interrupted (Ctrl-C) before its end: what it measured is printed above "
+              "(nothing, where no figures are), and no --json file was written unless said above", file=sys.stderr)
+        return 130

@@ -46,8 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="equal-area map of the LED colours (PNG; default %(default)s; folders made, an existing "
                              "file is overwritten)")
     parser.add_argument("--cube", default=None, metavar="FILE.png",
-                        help="also save the raw cube map (six faces, PNG; folders made, an existing file is "
-                             "overwritten)")
+                        help="also save the raw cube map (six faces, top to bottom looking the eye's forward (+x), "
+                             "back, left (+y), right, up, down; PNG; folders made, an existing file is overwritten)")
     parser.add_argument("--face-size", type=int, default=None,
                         help="cube face side in texels (default: the renderer's; allowed: from the smallest that "
                              "samples every LED's footprint, 55 at the dome's 1.5 degree pitch, to 2048)")
