@@ -8,11 +8,12 @@ given as ratios to the dome's rate. Frames are seeded random LED frames.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
 
 import numpy as np
+
+from antarium.bench import write_json
 
 GOAL_ENCODE_FPS = 5000.0
 GOAL_DECODE_FPS = 380.0
@@ -165,6 +166,5 @@ def run(args: argparse.Namespace) -> int:
           f"{loop['send_frame_ms_mean']:.2f} ms mean, {loop['send_frame_ms_max']:.2f} ms max "
           f"of the {period_ms:.2f} ms period")
     if args.json_out:
-        with open(args.json_out, "w") as fh:
-            json.dump(result, fh, indent=2)
+        write_json(args.json_out, "protocol", result)
     return 0

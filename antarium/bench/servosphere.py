@@ -11,13 +11,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import time
 
 import numpy as np
 
+from antarium.bench import write_json
 from antarium.core.rates import DOME_RATE_HZ, FRAME_PERIOD_S
 
 GOAL_TRACKER_HZ = 700.0
@@ -154,6 +154,6 @@ def run(args: argparse.Namespace) -> int:
           and lp["path_error_fraction"] <= GOAL_PATH)
     print(f"  goals {'met' if ok else 'NOT met'}")
     if args.json_out:
-        with open(args.json_out, "w") as f:
-            json.dump({"where": where, "tracker": tr, "loop": lp, "realtime": rt, "goals_met": ok}, f, indent=2)
+        write_json(args.json_out, "servosphere", {"where": where, "tracker": tr, "loop": lp, "realtime": rt,
+                                                  "goals_met": ok})
     return 0 if ok else 1

@@ -63,7 +63,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", dest="json_out", default=None,
                         help="also write the results to this .json file, in an existing folder; an existing file is "
                              "overwritten (loop with several --path: one file per path, NAME-gpu.json and "
-                             "NAME-cpu.json). Every bench but protocol and servosphere puts the same \"run\" table "
+                             "NAME-cpu.json). Every bench puts the same \"run\" table "
                              "(bench, antarium version, host, platform, cpus, finished_utc) beside its own figures, "
                              "and a figure it could not measure (NaN) as null")
 
