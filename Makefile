@@ -38,6 +38,8 @@ install: $(VENV)/.installed-test
 
 demo: install
 	$(BIN)/antarium demo --out $(OUT)
+	@echo "Next: '. $(VENV)/bin/activate' puts antarium (and the python that imports it) on this shell's PATH"
+	@echo "for the other commands in README.md, e.g. 'antarium demo --rig-seconds 8', 'antarium --help'."
 
 test: install browser-check
 	$(BIN)/ruff check .

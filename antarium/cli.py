@@ -14,6 +14,7 @@ import re
 import socket
 import sys
 from importlib import import_module
+from typing import NoReturn
 
 from antarium import __version__
 
@@ -36,8 +37,17 @@ COMMANDS: dict[str, str] = {
 DEBUG_HELP = "on an error, show the full traceback instead of the one-line message (before or after COMMAND)"
 
 
+class _Parser(argparse.ArgumentParser):
+    """`antarium` (or `antarium ant`) alone lists its commands, with their one-line purposes, above the error."""
+
+    def error(self, message: str) -> NoReturn:
+        if self._subparsers is not None and "arguments are required" in message:
+            self.print_help(sys.stderr)
+        super().error(message)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="antarium", description="Stimulus server and tools for the Antarium LED dome.",
         epilog="Bad input is refused in one line `antarium COMMAND: error: ...` with exit status 2; "
                "--debug shows the traceback.")
@@ -49,10 +59,22 @@ def build_parser() -> argparse.ArgumentParser:
         module = import_module(module_name)
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
-        # SUPPRESS: a --debug before COMMAND is not reset by the sub-command's default
-        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
+        _finish(p)
         p.set_defaults(_run=module.run)
     return parser
+
+
+def _finish(parser: argparse.ArgumentParser) -> None:
+    """Give `parser` and the actions below it (`antarium ant learn`, ...) `--debug`, and each action its one-line
+    help as the description its own --help shows."""
+    # SUPPRESS: a --debug before COMMAND is not reset by the sub-command's default
+    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            helps = {choice.dest: choice.help for choice in action._choices_actions}
+            for name, sub in action.choices.items():
+                sub.description = sub.description or helps.get(name)
+                _finish(sub)
 
 
 def _zenoh_error(exc: BaseException) -> bool:

@@ -69,3 +69,29 @@ def test_building_the_package_is_quiet_about_the_shipped_layout(tmp_path):
                           str(tmp_path / "built")], cwd=src, check=True, capture_output=True, text=True)
     assert "is absent from the `packages` configuration" not in out.stdout + out.stderr
     assert (tmp_path / "built" / "antarium" / "geometry" / "data" / "layout.npz").is_file()
+
+
+def test_every_command_and_action_says_what_it_does_in_its_own_help():
+    undescribed = [name for name, p in _parsers(build_parser()) if name != "antarium" and not p.description]
+    assert undescribed == []
+    assert "walk the ant along a route while its model learns" in dict(_parsers(build_parser()))[
+        "antarium ant learn"].format_help()
+
+
+def test_debug_is_taken_after_an_ant_action_too(tmp_path, capsys):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    argv = ["ant", "demo", "--out", str(blocker / "out")]
+    assert main(argv) == 2 and "a part of the path is a file" in capsys.readouterr().err
+    with pytest.raises(NotADirectoryError):  # --debug after ACTION, as its help says: the traceback instead
+        main([*argv, "--debug"])
+
+
+@pytest.mark.parametrize("argv", [[], ["ant"]], ids=["antarium", "antarium ant"])
+def test_a_missing_command_lists_the_commands_with_their_purposes(argv, capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and "the following arguments are required" in err.splitlines()[-1]
+    listed = dict(_parsers(build_parser()))[" ".join(["antarium", *argv])].format_help()
+    assert listed in err  # every command's name and one-line purpose, as --help shows them

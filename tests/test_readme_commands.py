@@ -2,13 +2,15 @@
 
 import re
 import shlex
+import subprocess
 from pathlib import Path
 
 import pytest
 
 from antarium.cli import build_parser
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
 
 
 def readme_commands() -> list[str]:
@@ -44,3 +46,13 @@ def test_a_readme_command_answers_help(line, capsys):
         build_parser().parse_args(words[:1] + (words[1:] if words[0] in ("ant", "bench") else []) + ["--help"])
     assert stop.value.code == 0
     assert "usage: antarium" in capsys.readouterr().out
+
+
+def test_the_readme_and_make_demo_say_how_to_reach_the_installed_commands(tmp_path):
+    """`make demo` installs into a virtual environment: `antarium ...` is not on a new user's PATH until it is
+    activated, which both the README and the end of `make demo` say."""
+    assert "`. .venv/bin/activate`" in README.read_text()
+    venv = tmp_path / "venv"  # -n: nothing is installed or run, the recipe is printed
+    recipe = subprocess.run(["make", "-n", "-s", "demo", f"VENV={venv}"], cwd=ROOT, check=True, capture_output=True,
+                            text=True).stdout
+    assert f"{venv}/bin/antarium demo --out demo-output" in recipe and f". {venv}/bin/activate" in recipe

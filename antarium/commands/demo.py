@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import argparse
 
-HELP = "train a virtual ant on a short route and let it follow it in the emulated rig's closed loop (no hardware)"
+HELP = ("the main job, no hardware: the dome's layout, then a virtual ant learns a short route and follows it in "
+        "the emulated rig's closed loop")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="demo-output", metavar="FOLDER",
-                        help="folder for the outputs, made if missing; earlier outputs there are overwritten "
+                        help="folder for the outputs, made if missing; the pictures of an earlier run there are "
+                             "overwritten, its trial logs in FOLDER/trials/ kept (a new one each run) "
                              "(default: %(default)s)")
     parser.add_argument("--rig-seconds", type=float, default=0.0, metavar="S",
                         help="also run the embedded default rig (served, real time, scripted walker) for S seconds, "

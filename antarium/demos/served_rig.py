@@ -34,18 +34,30 @@ def run_demo_rig(out: str | Path, seconds: float = 8.0, echo=print, render: dict
     config.render = RenderSection.read({**config.render.model_dump(), **(render or {})})
     config.bus.listen = [free_tcp_endpoint()]  # never collide with a running `antarium serve`
     server = Server(config, record="demo", echo=lambda line: None)
-    rotate = threading.Timer(seconds / 2, lambda: server.command("rotate_scene", {"deg": 90}))
+    not_rotated: list[str] = []
+
+    def rotate_half_way() -> None:
+        try:
+            server.command("rotate_scene", {"deg": 90})
+        except RuntimeError as exc:  # the run ended first (a very short run): said below, not a thread traceback
+            not_rotated.append(str(exc))
+
+    rotate = threading.Timer(seconds / 2, rotate_half_way)
     server_ready = threading.Thread(target=lambda: server.wait_ready(120) and rotate.start(), daemon=True)
     server_ready.start()
     try:
         frames = server.run(seconds=seconds)
     finally:
-        rotate.cancel()
+        rotate.cancel()  # a timer started after this never fires
+        if rotate.ident is not None:  # started: a rotation under way ends before the outputs are written
+            rotate.join()
     log = server.trial_paths[0]
     stats = server.final_stats
     echo(f"demo rig: {frames} frames in {seconds:g} s ({stats['late_frames']} late, target "
          f"{config.loop.rate_hz:g}/s; the renderer sets the pace on a CPU), latency p50 "
          f"{_ms(stats['latency'], 'p50')}, p99 {_ms(stats['latency'], 'p99')}")
+    if not_rotated:
+        echo(f"demo rig: the scene was not rotated ({not_rotated[0]}); give a longer run to see the rotation")
     paths = {"trial log": log, "path plot": plot_path(log, out / "demo_path.png")}
     if server.final_frame is not None:
         paths["dome picture"] = dome_picture(server.final_frame, out / "demo_dome.png")
