@@ -198,11 +198,12 @@ sys.exit(2)
 """
 
 
-def test_a_script_that_ends_while_its_server_answers_a_command_exits_cleanly():
+def test_a_script_that_ends_while_its_server_answers_a_command_exits_cleanly(tmp_path):
     """A script whose command timed out (its server still answering it in zenoh's thread) and that then stopped its
     in-process server was killed by SIGABRT at exit (status 134, 'Fatal Python error: Aborted'): the shutdown
     returned while the query's thread still ran Python. The shutdown now waits for the queries being answered."""
-    proc = subprocess.run([sys.executable, "-c", _SLOW_COMMAND], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([sys.executable, "-c", _SLOW_COMMAND], capture_output=True, text=True, timeout=120,
+                          cwd=tmp_path)  # its server makes its [log] dir, ./trials, there
     assert (proc.returncode, proc.stdout) == (2, "timed out\n"), proc.stderr[-2000:]
 
 
