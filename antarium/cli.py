@@ -64,12 +64,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def has_default(action: argparse.Action) -> bool:
+    """The option's default is a value worth showing: not None, a flag's False, SUPPRESS or an empty list."""
+    return not (action.default is None or action.default is False or action.default is argparse.SUPPRESS
+                or action.default == [])
+
+
 def _finish(parser: argparse.ArgumentParser) -> None:
-    """Give `parser` and the actions below it (`antarium ant learn`, ...) `--debug`, and each action its one-line
-    help as the description its own --help shows."""
+    """Give `parser` and the actions below it (`antarium ant learn`, ...) `--debug`, each action its one-line
+    help as the description its own --help shows, and each option with a default (`has_default`) whose help does
+    not speak of it `(default X)`."""
     # SUPPRESS: a --debug before COMMAND is not reset by the sub-command's default
     parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
     for action in parser._actions:
+        if (action.option_strings and action.help not in (None, argparse.SUPPRESS) and has_default(action)
+                and "default" not in action.help.lower()):
+            action.help += " (default %(default)s)"
         if isinstance(action, argparse._SubParsersAction):
             helps = {choice.dest: choice.help for choice in action._choices_actions}
             for name, sub in action.choices.items():

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from antarium.cli import build_parser, main
+from antarium.cli import build_parser, has_default, main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -29,6 +29,17 @@ def test_every_ant_option_has_help():
                for a in p._actions
                if not isinstance(a, argparse._HelpAction | argparse._SubParsersAction) and not a.help]
     assert missing == []
+
+
+def test_every_option_with_a_default_shows_it_in_its_help():
+    """`antarium trackball --port`, `ant run --length`, `ant displace --lateral-cm` (50), ... said nothing of their
+    defaults: every option whose default is a value says it (`cli._finish` adds what a help leaves out)."""
+    silent = [f"{name} {a.option_strings[0]}" for name, p in _parsers(build_parser()) for a in p._actions
+              if a.option_strings and has_default(a) and "default" not in p._get_formatter()._expand_help(a).lower()]
+    assert silent == []
+    parsers = dict(_parsers(build_parser()))
+    assert "(default 50.0)" in " ".join(parsers["antarium ant displace"].format_help().split())
+    assert "(default 0.0)" in " ".join(parsers["antarium ant run"].format_help().split())  # a zero is shown too
 
 
 #: every option that takes a duration in seconds, with what else its command needs to get that far
