@@ -133,7 +133,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args._run(args) or 0)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # a command that keeps something on Ctrl-C says what itself (serve, bench)
+        print(f"antarium {args.command}: interrupted (Ctrl-C)", file=sys.stderr)
         return 130
     except Exception as exc:
         if args.debug or not is_user_error(exc):

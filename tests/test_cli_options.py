@@ -106,3 +106,15 @@ def test_a_missing_command_lists_the_commands_with_their_purposes(argv, capsys):
     assert stop.value.code == 2 and "the following arguments are required" in err.splitlines()[-1]
     listed = dict(_parsers(build_parser()))[" ".join(["antarium", *argv])].format_help()
     assert listed in err  # every command's name and one-line purpose, as --help shows them
+
+
+def test_ctrl_c_in_a_command_is_one_line(monkeypatch, capsys):
+    """A command stopped by Ctrl-C ended with exit status 130 and not a word."""
+    from antarium.commands import layout
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(layout, "run", interrupted)
+    assert main(["layout"]) == 130
+    assert capsys.readouterr().err.strip() == "antarium layout: interrupted (Ctrl-C)"
