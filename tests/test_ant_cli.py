@@ -159,3 +159,17 @@ def test_run_refuses_a_central_complex_model_file_naming_its_kind(tmp_path, caps
         err = capsys.readouterr().err
         assert "holds a cx model; a route is followed by a route model (antcar, ardin, perfect_memory)" in err
         assert err.count("\n") == 1 and not (tmp_path / "out").exists()
+
+
+def test_ant_demo_prints_its_figures_and_every_file_it_wrote(tmp_path, capsys):
+    """`antarium ant demo` printed its summary as a raw dict in metres, named 2 of its 5 files, and its progress
+    bar wrote a line per step into output that was not a terminal (a log file)."""
+    assert main(["ant", "demo", "--out", str(tmp_path)]) == 0
+    captured = capsys.readouterr()
+    first, files = captured.out.strip().splitlines()
+    assert first.startswith("virtual ant demo: antcar: lateral error ") and " cm, angular " in first, first
+    written = sorted(p.name for p in tmp_path.iterdir())
+    assert files == f"  wrote into {tmp_path.resolve()}: {', '.join(written)}"
+    assert {"virtual_ant.h5", "virtual_ant_paths.png", "virtual_ant_traces.png", "virtual_ant_model.npz",
+            "virtual_ant.json"} <= set(written)
+    assert "step" not in captured.err  # no progress bar where the output is no terminal

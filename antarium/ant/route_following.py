@@ -269,6 +269,10 @@ def evaluate(out_dir: str | Path, n_routes: int = 10, length: float = 10.0, kind
                                           "put_back_m": put_back if math.isfinite(put_back) else None})
 
 
+#: the stem of every file `demo` writes (virtual_ant.h5, virtual_ant_paths.png, ...)
+DEMO_NAME = "virtual_ant"
+
+
 def demo(out_dir: str | Path, scene: Any = "habitat", progress=None) -> TrialOutcome:
     """One call for `make demo`: Antcar learns a short curved route, is released 3 cm off it and turned 15 deg,
     and follows it in closed loop. Writes `virtual_ant.h5` (trial log), `virtual_ant_paths.png` (learned and
@@ -276,7 +280,7 @@ def demo(out_dir: str | Path, scene: Any = "habitat", progress=None) -> TrialOut
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     route = curved_route(DEMO_ROUTE_SEED, length=DEMO_ROUTE_LENGTH_M)
-    outcome, _ = train_and_follow("antcar", route, out, "virtual_ant", scene=scene,
+    outcome, _ = train_and_follow("antcar", route, out, DEMO_NAME, scene=scene,
                                   start_offset=(0.03, math.radians(15)), progress=progress)
-    (out / "virtual_ant.json").write_text(json_text(asdict(outcome)))
+    (out / f"{DEMO_NAME}.json").write_text(json_text(asdict(outcome)))
     return outcome

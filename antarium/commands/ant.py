@@ -148,9 +148,18 @@ def _run_trips(args: argparse.Namespace) -> int:
 
 
 def _bar(desc: str, total=None):
+    """A progress bar on a terminal; none where the output goes to a file or pipe (a log of every step else)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="step", leave=False)
+    return tqdm(total=total, desc=desc, unit="step", leave=False, disable=None)
+
+
+def _outcome_line(outcome) -> str:
+    """A closed-loop run's figures in one line (cm, degrees, ms)."""
+    s = outcome.summary
+    return (f"{outcome.model}: lateral error {100 * s['lateral_median']:.1f} ± {100 * s['lateral_mad']:.1f} cm, "
+            f"angular {s['angular_median_deg']:.1f} ± {s['angular_mad_deg']:.1f} deg, arrived {s['arrived']}, "
+            f"errors {s['errors']}, {s['decisions']} decisions, {1e3 * outcome.seconds_per_decision:.1f} ms each")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -202,8 +211,11 @@ def run(args: argparse.Namespace) -> int:
         put_back = args.put_back_cm / 100.0 if args.put_back_cm > 0 else math.inf
         print(route_following.evaluate(out, args.routes, args.length, kinds, args.seed, args.scene, _bar, put_back))
         return 0
-    outcome = route_following.demo(out, scene=args.scene, progress=_bar("virtual ant demo").update)
-    print(f"virtual ant demo: {outcome.summary}\n  log: {outcome.log}\n  picture: {outcome.picture}")
+    bar = _bar("virtual ant demo")
+    outcome = route_following.demo(out, scene=args.scene, progress=bar.update)
+    bar.close()
+    print(f"virtual ant demo: {_outcome_line(outcome)}\n  wrote into {out}: "
+          f"{', '.join(sorted(p.name for p in out.glob(route_following.DEMO_NAME + '*')))}")
     return 0
 
 
@@ -260,9 +272,6 @@ def _run(args: argparse.Namespace) -> int:
                               start_offset=(args.lateral_cm / 100.0, math.radians(args.heading_deg)),
                               progress=bar.update)
     bar.close()
-    s = outcome.summary
-    print(f"{model.kind}: lateral error {100 * s['lateral_median']:.1f} ± {100 * s['lateral_mad']:.1f} cm, "
-          f"angular {s['angular_median_deg']:.1f} ± {s['angular_mad_deg']:.1f} deg, arrived {s['arrived']}, "
-          f"errors {s['errors']}, {s['decisions']} decisions, {1e3 * outcome.seconds_per_decision:.1f} ms each")
+    print(_outcome_line(outcome))
     print(f"  log: {outcome.log}\n  picture: {outcome.picture}")
     return 0
