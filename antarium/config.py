@@ -2,9 +2,10 @@
 
 Each section is a pydantic model (`LoopSection`, `LinkSection`, ...) whose field names carry their units
 (`eye_height_m`, `face_size_px`); `load_config(path)` / `resolve(raw)` return a `RigConfig` whose sections are
-read as attributes (`config.loop.rate_hz`). Anything wrong (an unknown section or key, a wrong type, a value out
-of range) raises `ConfigError` with one line naming the key and what is allowed, before anything starts. Keys
-renamed since (`[loop] eye_height` is now `eye_height_m`) are still read, with a `ConfigDeprecationWarning`.
+read as attributes (`config.loop.rate_hz`). Anything wrong (a file that cannot be read or is not UTF-8 TOML, an
+unknown section or key, a wrong type, a value out of range) raises `ConfigError` with one line naming the file or
+key and what is allowed, before anything starts. Keys renamed since (`[loop] eye_height` is now `eye_height_m`)
+are still read, with a `ConfigDeprecationWarning` at their line of the file.
 A section owned by another part (`[trackball]`) is kept as a table for that part to parse (a
 `[trackball]` without `ball_radius` gets the loop's: the ball has one radius). With no file
 the embedded default rig is used: emulator on loopback, default habitat, scripted walker in closed loop.
@@ -14,12 +15,13 @@ See `docs/rig.example.toml`.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 import warnings
 from pathlib import Path
 from typing import Any, ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from antarium.core.ball import BALL_RADIUS_M, TETHERS
 from antarium.core.rates import DOME_RATE_HZ
@@ -45,13 +47,14 @@ class Section(BaseModel):
     ALLOWED: ClassVar[dict[str, str]] = {}
 
     @classmethod
-    def read(cls, table: Any) -> Section:
-        """This section from a parsed TOML table (or a section already read); ConfigError if anything is wrong."""
+    def read(cls, table: Any, source: tuple[str, str] | None = None) -> Section:
+        """This section from a parsed TOML table (or a section already read); ConfigError if anything is wrong.
+        source: (name, text) of the rig file it was read from, where a renamed key is warned about at its line."""
         if isinstance(table, cls):
             return table
         if not isinstance(table, dict):
             raise ConfigError(f"[{cls.NAME}] must be a table, got {table!r}")
-        table = _renamed(cls, table)
+        table = _renamed(cls, table, source)
         try:
             return cls.model_validate(table)
         except ValidationError as exc:
@@ -146,6 +149,16 @@ class LinkSection(Section):
         if isinstance(v, str) and not v.endswith(".npy") or isinstance(v, int) and not 0 <= v <= 100:
             raise ValueError(f"must be {cls.ALLOWED['dot_correction']}")
         return v
+
+    @model_validator(mode="after")
+    def _port_of_a_distributor(self) -> LinkSection:
+        from antarium.firmware_proto import DEFAULT_PORT
+
+        if self.interface == "udp" and not self.spawn_emulator and self.port == 0:
+            raise ValueError("port 0 needs spawn_emulator = true (the emulator's free port); allowed with "
+                             f"spawn_emulator = false: the distributor's UDP port 1..65535 ({DEFAULT_PORT} on the "
+                             "board)")
+        return self
 
 
 class RenderSection(Section):
@@ -295,15 +308,21 @@ class RigConfig(BaseModel):
         return out
 
 
-def resolve(raw: dict[str, Any]) -> RigConfig:
-    """The config from a parsed TOML document: defaults filled in, every section checked."""
+def resolve(raw: dict[str, Any], source: tuple[str, str] | None = None) -> RigConfig:
+    """The config from a parsed TOML document: defaults filled in, every section checked. source: (name, text) of
+    the rig file `raw` was parsed from (`load_config`), where a renamed key is warned about at its line."""
     if not isinstance(raw, dict):
         raise ConfigError(f"a rig config must be a table of sections, got {type(raw).__name__}")
     unknown = sorted(set(raw) - set(SECTIONS) - set(FOREIGN_SECTIONS))
+    loose = [key for key in unknown if not _is_table(raw[key])]
+    if loose:  # `rate_hz = 190.0` written above every [section] header
+        owner = [name for name, cls in SECTIONS.items() if loose[0] in {*cls.model_fields, *cls.RENAMED}]
+        raise ConfigError(f"{loose[0]} = {raw[loose[0]]!r} is above every section header; allowed: "
+                          + (f"under [{owner[0]}]" if owner else "keys under a [section] header"))
     if unknown:
         raise ConfigError(f"unknown section [{unknown[0]}]; allowed: "
                           + ", ".join(f"[{s}]" for s in (*SECTIONS, *FOREIGN_SECTIONS)))
-    sections = {name: cls.read(raw[name]) for name, cls in SECTIONS.items() if name in raw}
+    sections = {name: cls.read(raw[name], source) for name, cls in SECTIONS.items() if name in raw}
     foreign = {}
     for name in FOREIGN_SECTIONS:
         if name in raw:
@@ -313,6 +332,12 @@ def resolve(raw: dict[str, Any]) -> RigConfig:
     config = RigConfig(**sections, foreign=foreign)
     _one_ball_radius(raw, config)
     return config
+
+
+def _is_table(value: Any) -> bool:
+    """A parsed TOML `[table]` or `[[array of tables]]` (not a key's value)."""
+    return isinstance(value, dict) or isinstance(value, list) and bool(value) and all(
+        isinstance(v, dict) for v in value)
 
 
 def _loop_ball_radius(doc: dict[str, Any]) -> Any:
@@ -344,7 +369,7 @@ def _one_ball_radius(raw: dict[str, Any], config: RigConfig) -> None:
         given["[trackball] ball_radius"] = trackball["ball_radius"]
     path = config.locomotion.options.get("trackball")
     if config.locomotion.source == "usb" and isinstance(path, str):
-        table = trackball_table(_read_toml(path, "[locomotion] trackball file"))
+        table = trackball_table(read_toml(path, "[locomotion] trackball file"))
         where = f"[trackball] ball_radius of {path!r}" + ("" if "ball_radius" in table else " (its default)")
         given[where] = table.get("ball_radius", BALL_RADIUS_M)
     radii = {}
@@ -363,26 +388,56 @@ def _one_ball_radius(raw: dict[str, Any], config: RigConfig) -> None:
     config.loop.ball_radius_m = r
 
 
-def _read_toml(path: str | Path, what: str = "rig config") -> dict[str, Any]:
-    """A TOML file parsed; ConfigError naming it as `what` if it is missing or not TOML."""
+def read_toml(path: str | Path, what: str = "rig config") -> dict[str, Any]:
+    """A TOML file parsed; ConfigError naming it as `what` if it cannot be read, is not UTF-8 or is not TOML."""
+    return _parse_toml(_read_text(path, what), path, what)
+
+
+def _read_text(path: str | Path, what: str) -> str:
+    """A TOML file's text; ConfigError naming it as `what` if it cannot be read or is not UTF-8."""
+    where = f"{what} {str(path)!r}"
     try:
-        with Path(path).open("rb") as f:
-            return tomllib.load(f)
+        data = Path(path).read_bytes()
     except FileNotFoundError:
-        raise ConfigError(f"{what} {str(path)!r} not found") from None
+        raise ConfigError(f"{where} not found") from None
+    except IsADirectoryError as exc:  # the cause kept for `antarium --debug`
+        raise ConfigError(f"{where} is a folder; give a file") from exc
+    except NotADirectoryError as exc:
+        raise ConfigError(f"{where} cannot be read: a part of the path is a file, not a folder") from exc
+    except OSError as exc:
+        raise ConfigError(f"{where} cannot be read ({exc.strerror or exc}); give a file this user can read") from exc
+    try:
+        text = data.decode()
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise ConfigError(f"{where} is not UTF-8 text (byte 0x{data[exc.start]:02x} at line {line}); allowed: a "
+                          "TOML file in UTF-8") from None
+    return text
+
+
+def _parse_toml(text: str, path: str | Path, what: str) -> dict[str, Any]:
+    """`text` parsed; ConfigError naming the file as `what` and the line tomllib stopped at if it is not TOML."""
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{what} {str(path)!r} is not valid TOML: {exc}") from None
+        at = re.search(r"\(at line (\d+), column \d+\)$", str(exc))  # tomllib counts "\n" only
+        lines = text.split("\n")
+        shown = f": {lines[int(at[1]) - 1].strip()!r}" if at and int(at[1]) <= len(lines) else ""
+        raise ConfigError(f"{what} {str(path)!r} is not valid TOML: {exc}{shown}") from None
 
 
 def load_config(path: str | Path | None = None) -> RigConfig:
-    """The rig config from a TOML file, or the embedded default when `path` is None."""
+    """The rig config from a TOML file, or the embedded default when `path` is None. A key under its old name is
+    warned about at its line of the file (`rig.toml:12: ConfigDeprecationWarning: [loop] eye_height is ...`)."""
     if path is None:
         return resolve({})
-    return resolve(_read_toml(path))
+    text = _read_text(path, "rig config")
+    return resolve(_parse_toml(text, path, "rig config"), (str(path), text))
 
 
-def _renamed(cls: type[Section], table: dict[str, Any]) -> dict[str, Any]:
-    """`table` with old key names replaced by today's (warning once per key); both given is an error."""
+def _renamed(cls: type[Section], table: dict[str, Any], source: tuple[str, str] | None) -> dict[str, Any]:
+    """`table` with old key names replaced by today's (warning once per key, at its line of the file `source`
+    names); both given is an error."""
     if not cls.RENAMED or not set(table) & set(cls.RENAMED):
         return table
     out = dict(table)
@@ -390,16 +445,35 @@ def _renamed(cls: type[Section], table: dict[str, Any]) -> dict[str, Any]:
         if old in out:
             if new in out:
                 raise ConfigError(f"[{cls.NAME}] has both {old!r} and {new!r}; allowed: {new!r} only")
-            warnings.warn(f"[{cls.NAME}] {old} is deprecated: call it {new}", ConfigDeprecationWarning, stacklevel=4)
+            message = f"[{cls.NAME}] {old} is deprecated: call it {new}"
+            if source is None:
+                warnings.warn(message, ConfigDeprecationWarning, stacklevel=4)
+            else:
+                line = _key_line(source[1], cls.NAME, old)
+                warnings.warn_explicit(message, ConfigDeprecationWarning, source[0], line)
             out[new] = out.pop(old)
     return out
+
+
+def _key_line(text: str, section: str, key: str) -> int:
+    """The line number (from 1) of `key = ...` under `[section]` in a TOML text; that of `[section]` where the
+    key is written otherwise (`section.key`, an inline table), 0 where neither is found."""
+    header, found = None, 0
+    for number, line in enumerate(text.split("\n"), 1):
+        head = re.match(r"\s*\[\s*([^\[\]]+?)\s*\]", line)
+        if head:
+            header = head[1].strip('"\'')
+            found = found or (number if header == section else 0)
+        elif header == section and re.match(rf"\s*[\"']?{re.escape(key)}[\"']?\s*=", line):
+            return number
+    return found
 
 
 def _message(cls: type[Section], exc: ValidationError, table: dict[str, Any]) -> str:
     """One line for the first error: the key, what is allowed, what was given."""
     err = exc.errors()[0]
     key = str(err["loc"][0]) if err["loc"] else ""
-    where = f"[{cls.NAME}] {key}"
+    where = f"[{cls.NAME}] {key}".rstrip()
     got = table.get(key, err.get("input"))
     kind = err["type"]
     field = cls.model_fields.get(key)
@@ -412,7 +486,7 @@ def _message(cls: type[Section], exc: ValidationError, table: dict[str, Any]) ->
     if kind == "literal_error":
         return f"{where} must be one of {err['ctx']['expected'].replace(' or ', ', ')}, got {got!r}"
     if kind == "value_error":
-        return f"{where} {err['ctx']['error']}, got {got!r}"
+        return f"{where} {err['ctx']['error']}" + (f", got {got!r}" if key else "")  # no key: the whole section
     if key in cls.ALLOWED:
         return f"{where} must be {cls.ALLOWED[key]}, got {got!r}"
     plain = {"bool_type": "true or false", "float_type": "a finite number", "finite_number": "a finite number",

@@ -12,6 +12,7 @@ import sys
 import pytest
 
 from antarium.cli import build_parser, main
+from antarium.config import ConfigError
 
 
 def _one_line(capsys, command: str) -> str:
@@ -47,8 +48,9 @@ def test_a_config_below_a_file_is_one_line(fake_png, capsys):
 @pytest.mark.parametrize("where", ["before", "after"])
 def test_debug_before_or_after_the_command_shows_the_traceback(tmp_path, where):
     args = ["serve", "--config", str(tmp_path)]
-    with pytest.raises(IsADirectoryError):
+    with pytest.raises(ConfigError, match="is a folder") as raised:
         main(["--debug", *args] if where == "before" else [*args, "--debug"])
+    assert isinstance(raised.value.__cause__, IsADirectoryError)  # in the traceback --debug shows
 
 
 def test_debug_is_in_the_help():

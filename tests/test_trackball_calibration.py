@@ -60,12 +60,19 @@ def test_write_section_keeps_other_sections(tmp_path):
 
 
 def test_load_errors(tmp_path):
-    with pytest.raises(FileNotFoundError, match="not found"):
+    """The rig file is read as `antarium.config` reads it: one ConfigError line naming the file."""
+    from antarium.config import ConfigError
+
+    with pytest.raises(ConfigError, match="not found"):
         tbconfig.load(tmp_path / "missing.toml")
     bad = tmp_path / "bad.toml"
     bad.write_text("[trackball\n")
-    with pytest.raises(tbconfig.TrackballConfigError, match="not valid TOML"):
+    with pytest.raises(ConfigError, match="not valid TOML"):
         tbconfig.load(bad)
+    latin1 = tmp_path / "latin1.toml"
+    latin1.write_bytes("# caf\xe9\n[trackball]\n".encode("latin-1"))  # a UnicodeDecodeError naming no file before
+    with pytest.raises(ConfigError, match=r"latin1.toml' is not UTF-8 text \(byte 0xe9 at line 1\)"):
+        tbconfig.load(latin1)
 
 
 def test_calibrate_from_synthetic_counts():

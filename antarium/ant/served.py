@@ -47,7 +47,7 @@ def served_config(config: str | Path | dict[str, Any] | RigConfig) -> RigConfig:
         else load_config(config)
     link = cfg.link
     problems = []
-    if link.interface != "udp" or link.spawn_emulator or link.port == 0:
+    if link.interface != "udp" or link.spawn_emulator:  # (a udp port 0 needs the emulator: config.LinkSection)
         problems.append('[link] must be interface = "udp", spawn_emulator = false and a port (the ant\'s dome '
                         f'listens there), got {link.model_dump()}')
     if cfg.locomotion.source != "bus":

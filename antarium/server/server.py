@@ -177,9 +177,7 @@ class Server:
             self.emulator = EmulatorProcess(host, port, realtime_priority=max(1, priority - 2) if priority else 0)
             self.emulator.start()
             port = self.emulator.port
-        elif port == 0:
-            raise ServerError("[link] port must be set (the distributor's UDP port) when spawn_emulator is false")
-        return open_link("udp", host=host, port=port)
+        return open_link("udp", host=host, port=port)  # a port, 1..65535, without an emulator: config.LinkSection
 
     def _open_bus(self) -> None:
         if self.session is None:

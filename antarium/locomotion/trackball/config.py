@@ -211,16 +211,6 @@ def to_section(config: TrackballConfig) -> dict[str, Any]:
     }
 
 
-def _read_toml(path: Path) -> dict[str, Any]:
-    try:
-        with path.open("rb") as f:
-            return tomllib.load(f)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"rig config {str(path)!r} not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise TrackballConfigError(f"rig config {str(path)!r} is not valid TOML: {exc}") from None
-
-
 def load(source: str | Path | dict[str, Any] | TrackballConfig | None) -> TrackballConfig:
     """A `TrackballConfig` from a rig file path, a `[trackball]` table, a config, or None (defaults).
 
@@ -230,7 +220,9 @@ def load(source: str | Path | dict[str, Any] | TrackballConfig | None) -> Trackb
         return source or TrackballConfig()
     if isinstance(source, dict):
         return parse_section(source)
-    return parse_section(trackball_table(_read_toml(Path(source))))
+    from antarium.config import read_toml
+
+    return parse_section(trackball_table(read_toml(Path(source))))
 
 
 def write_section(path: str | Path, config: TrackballConfig) -> Path | None:
@@ -249,7 +241,9 @@ def write_section(path: str | Path, config: TrackballConfig) -> Path | None:
         _write_atomic(path, tomli_w.dumps({"trackball": to_section(config)}).encode())
         return None
     raw = path.read_bytes()
-    doc = _read_toml(path)
+    from antarium.config import read_toml
+
+    doc = read_toml(path)
     edited = _edit_calibration(raw.decode("utf-8"), doc, config)
     if edited is not None:
         _write_atomic(path, edited.encode("utf-8"))
