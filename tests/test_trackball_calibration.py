@@ -73,6 +73,8 @@ def test_load_errors(tmp_path):
     latin1.write_bytes("# caf\xe9\n[trackball]\n".encode("latin-1"))  # a UnicodeDecodeError naming no file before
     with pytest.raises(ConfigError, match=r"latin1.toml' is not UTF-8 text \(byte 0xe9 at line 1\)"):
         tbconfig.load(latin1)
+    with pytest.raises(tbconfig.TrackballConfigError, match="a rig file's path or a \\[trackball\\] table, got 5"):
+        tbconfig.load(5)  # [locomotion] trackball = 5: a TypeError of os.fspath before
 
 
 def test_calibrate_from_synthetic_counts():

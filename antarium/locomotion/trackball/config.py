@@ -220,6 +220,9 @@ def load(source: str | Path | dict[str, Any] | TrackballConfig | None) -> Trackb
         return source or TrackballConfig()
     if isinstance(source, dict):
         return parse_section(source)
+    if not isinstance(source, str | Path):
+        raise TrackballConfigError(f"trackball config must be a rig file's path or a [trackball] table, got "
+                                   f"{source!r}")
     from antarium.config import read_toml
 
     return parse_section(trackball_table(read_toml(Path(source))))
