@@ -20,6 +20,11 @@ from .sky import Sky, sun_direction
 SUN_AZIMUTH = math.radians(135.0)
 SUN_ELEVATION = math.radians(40.0)
 RELIEF_M = 0.003
+#: Largest habitat side (m) and most objects of each kind (about 3 million triangles in all, built in under a minute:
+#: 10,000 tussocks take 1.9 s); beyond them a scene load never ended (a billion tussocks) or failed on an object's
+#: position instead of naming the parameter (a size of 1e9 m)
+MAX_SIZE_M = 10_000.0
+MAX_COUNTS = {"n_trees": 500, "n_bushes": 500, "n_tussocks": 50_000, "n_stones": 10_000}
 
 
 def _shade(vertices: np.ndarray, faces: np.ndarray, srgb: np.ndarray, ambient: float = 0.45) -> np.ndarray:
@@ -163,11 +168,11 @@ def panorama_image(seed: int = 0, width: int = 2048) -> np.ndarray:
 def habitat_objects(seed: int = 0, size: float = 24.0, n_trees: int = 5, n_bushes: int = 14,
                     n_tussocks: int = 900, n_stones: int = 160) -> dict[str, SceneObject]:
     """Named objects of the habitat: 'ground', 'tussocks', 'stones', 'bush_<i>', 'tree_<i>'."""
-    if not (np.isfinite(size) and size >= 20.0):
-        raise ValueError(f"habitat size must be at least 20 m, got {size!r}")
+    if not (np.isfinite(size) and 20.0 <= size <= MAX_SIZE_M):
+        raise ValueError(f"habitat size must be in [20, {MAX_SIZE_M:g}] m, got {size!r}")
     for name, n in (("n_trees", n_trees), ("n_bushes", n_bushes), ("n_tussocks", n_tussocks), ("n_stones", n_stones)):
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-            raise ValueError(f"habitat {name} must be a non-negative integer, got {n!r}")
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 0 <= n <= MAX_COUNTS[name]:
+            raise ValueError(f"habitat {name} must be an integer in [0, {MAX_COUNTS[name]:,}], got {n!r}")
     rng = np.random.default_rng(seed)
     objects = {"ground": SceneObject(_ground(rng, size, 48))}
     if n_tussocks:

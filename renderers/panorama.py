@@ -133,6 +133,7 @@ class Panorama:
         if check_number("panorama exposure", self.exposure, 0.0) == 0:
             raise ValueError(f"panorama exposure must be > 0, got {self.exposure!r}")
         self.uv_ratio = check_number("panorama uv_ratio", self.uv_ratio, 0.0)
+        name = self.source if isinstance(self.source, (str, Path)) else "array"
         if isinstance(self.source, (str, Path)):
             img, is_float = read_image(self.source)
         else:
@@ -146,7 +147,6 @@ class Panorama:
         if w < 8 or h < 4:
             raise ValueError(f"panorama {self.source} is too small ({w}x{h} pixels)")
         if abs(w - 2 * h) > max(1.0, ASPECT_TOLERANCE * 2 * h):
-            name = self.source if isinstance(self.source, (str, Path)) else "array"
             raise ValueError(f"panorama {name} is {w}x{h} pixels: an equirectangular image spans 360 x 180 degrees, "
                              f"so its width must be twice its height (within {ASPECT_TOLERANCE:.0%})")
         rgb = self._linear(img[:, :, :3], is_float)
@@ -160,10 +160,14 @@ class Panorama:
                 raise ValueError(f"UV layer {self.uv} is {uv_img.shape[1]}x{uv_img.shape[0]}, "
                                  f"the panorama {w}x{h}: they must match")
             uv = self._linear(uv_img.reshape(h, w, -1)[:, :, 0], uv_float)
+            is_float = is_float or uv_float
+        if self.exposure != 1.0 and not is_float:  # it would be ignored: only linear (float) images are scaled
+            raise ValueError(f"panorama exposure scales float (linear) images only; {name} is an integer "
+                             f"(sRGB) image, so exposure must be 1, got {self.exposure!r} (dim it with the brightness "
+                             "or channel gains)")
         gbu = rgb_to_gbu(rgb, uv, self.uv_ratio)
         alpha = img[:, :, 3:4] if img.shape[2] == 4 else np.ones((h, w, 1))
         if not (alpha.min() >= 0.0 and alpha.max() <= 1.0):
-            name = self.source if isinstance(self.source, (str, Path)) else "array"
             raise ValueError(f"panorama {name} alpha must be in [0, 1], got values from {alpha.min():g} to "
                              f"{alpha.max():g}")
         gbua = np.concatenate([np.clip(gbu, 0.0, 1.0), alpha], axis=2).astype(np.float32)

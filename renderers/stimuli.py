@@ -24,6 +24,9 @@ from .channels import check_showable, parse_colour
 SEAM_TOLERANCE = 1e-3
 #: |sin(orientation)| below which a grating is a drum (varies with azimuth only): sin(pi) is 1.2e-16, not 0
 DRUM_TOLERANCE = 1e-9
+#: Fastest grating drift accepted (rad/s): 100 turns a second, far past what any frame rate shows without temporal
+#: aliasing; a speed of 1e308 deg/s overflowed the drum's yaw and turned the dome black
+MAX_SPEED = 200 * np.pi
 
 
 def azimuth_elevation(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -96,7 +99,8 @@ class Horizon(_Static):
         self.ground = parse_colour(self.ground, "horizon ground colour")
         self.elevation = check_number("horizon elevation (rad)", self.elevation)
         if not abs(self.elevation) < np.pi / 2:
-            raise ValueError(f"horizon elevation must be within (-90, 90) degrees, got {self.elevation!r} rad")
+            raise ValueError(f"horizon elevation must be within (-90, 90) degrees, "
+                             f"got {math.degrees(self.elevation):g}")
 
     def evaluate(self, d, t=0.0):
         out = _rgba(self.ground, len(d))
@@ -185,6 +189,9 @@ class Grating:
             raise ValueError(f"grating waveform must be 'sine' or 'square', got {self.waveform!r}")
         for name in ("period", "orientation", "speed", "phase"):
             setattr(self, name, check_number(f"grating {name} (rad)", getattr(self, name)))
+        if not abs(self.speed) <= MAX_SPEED:
+            raise ValueError(f"grating speed must be within +-{math.degrees(MAX_SPEED):g} deg/s (100 turns a second), "
+                             f"got {math.degrees(self.speed):g}")
         self.contrast = check_number("grating contrast", self.contrast, 0.0, 1.0)
         self.mean = check_number("grating mean", self.mean, 0.0)
         if not 0 < self.period <= 2 * np.pi:
@@ -243,7 +250,7 @@ class Checkerboard(_Static):
     def __post_init__(self):
         self.size = check_number("checkerboard square size (rad)", self.size)
         if not 0 < self.size <= np.pi:
-            raise ValueError(f"checkerboard square size must be in (0, 180] degrees, got {math.degrees(self.size)!r}")
+            raise ValueError(f"checkerboard square size must be in (0, 180] degrees, got {math.degrees(self.size):g}")
         check_no_seam(np.pi / self.size, f"checkerboard of {math.degrees(self.size):g} deg squares",
                       "seamless sizes are 180 / n deg (an even number of squares around)", lambda n: 180.0 / n)
         self.colour_a = parse_colour(self.colour_a, "checkerboard colour_a")
