@@ -122,7 +122,7 @@ def test_ctrl_c_during_bench_loop_reports_and_writes_the_frames_run_so_far(tmp_p
         for line in bench.stderr:  # the frames run from this line on
             if line.startswith("bench loop: frames running for 600 s"):
                 break
-        time.sleep(1.0)  # some frames (not a timing assertion: any number >= 2 will do)
+        time.sleep(2.0)  # some frames (not a timing assertion: any number >= 2 will do)
         bench.send_signal(signal.SIGINT)
         text, err = bench.communicate(timeout=60)
     finally:
