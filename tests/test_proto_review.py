@@ -9,6 +9,7 @@ import struct
 
 import numpy as np
 import pytest
+from test_proto_panel_link import crc16_bitwise  # the reference CRC, bit by bit as section 7 states it
 
 from antarium.core.clock import SimulatedClock
 from antarium.firmware_proto import config, control, panel_link, polariser, replies
@@ -17,23 +18,13 @@ from antarium.firmware_proto.link import open_link
 from antarium.firmware_proto.video import encode_frame
 
 
-def _crc(data: bytes) -> int:
-    """CRC-16/CCITT-FALSE bit by bit, as section 7 states it."""
-    c = 0xFFFF
-    for byte in data:
-        c ^= byte << 8
-        for _ in range(8):
-            c = ((c << 1) ^ 0x1021) & 0xFFFF if c & 0x8000 else (c << 1) & 0xFFFF
-    return c
-
-
 def _header(cls: int, address: int, opcode: int, info: int) -> bytes:
     return bytes([(cls << 6) | address, 1, opcode, info])
 
 
 def _line_frame(ftype: int, slot: int, info: int, data: bytes) -> bytes:
     body = bytes([(ftype << 4) | slot, info]) + data
-    return b"\x55" * 7 + b"\xd5" + body + _crc(body).to_bytes(2, "big")
+    return b"\x55" * 7 + b"\xd5" + body + crc16_bitwise(body).to_bytes(2, "big")
 
 
 def test_replies_control_and_panel_link_match_an_encoder_written_from_the_doc():
