@@ -88,49 +88,48 @@ def test_bench_experiment_refuses_too_few_runs_to_measure_the_overhead(capsys):
     assert "--frames (the number of runs) must be at least 3, got 2" in _one_line(capsys)
 
 
-def test_ctrl_c_ends_the_bench_with_one_line_saying_what_was_kept(tmp_path):
-    out = tmp_path / "render.json"
-    bench = subprocess.Popen([sys.executable, "-m", "antarium", "bench", "render", "--frames", "1000000", "--json",
-                              str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    try:
-        for line in bench.stderr:  # the progress lines: the benchmark has begun
-            if "building the scenes" in line:
-                break
-        bench.send_signal(signal.SIGINT)
-        _, err = bench.communicate(timeout=60)
-    finally:
-        if bench.poll() is None:
-            bench.kill()
-            bench.wait()
-    assert bench.returncode == 130
-    last = err.strip().splitlines()[-1]
-    assert last.startswith("antarium bench render: interrupted (Ctrl-C) before its end: what it measured is printed")
-    assert not out.exists()
-
-
-
-def test_ctrl_c_during_bench_loop_reports_and_writes_the_frames_run_so_far(tmp_path):
-    out = tmp_path / "loop.json"
+def _interrupted(args: list[str], until: str, stream: str = "stderr", settle_s: float = 0.0) -> tuple:
+    """`antarium bench ARGS`, sent Ctrl-C once a line of its `stream` starts with `until` (and `settle_s` later):
+    (exit status, the rest of its stdout, the rest of its stderr, that line). Killed should the line never come."""
     env = {k: v for k, v in os.environ.items() if k != "ANTARIUM_RIG_CONFIG"}
-    bench = subprocess.Popen([sys.executable, "-m", "antarium", "bench", "loop", "--seconds", "600", "--json",
-                              str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    bench = subprocess.Popen([sys.executable, "-m", "antarium", "bench", *args], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, env=env,
                              preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    guard = threading.Timer(120.0, bench.kill)  # should the line never come
+    guard = threading.Timer(300.0, bench.kill)
     guard.start()
+    seen = ""
     try:
-        for line in bench.stderr:  # the frames run from this line on
-            if line.startswith("bench loop: frames running for 600 s"):
+        for line in getattr(bench, stream):
+            if line.startswith(until):
+                seen = line
                 break
-        time.sleep(2.0)  # some frames (not a timing assertion: any number >= 2 will do)
+        time.sleep(settle_s)
         bench.send_signal(signal.SIGINT)
-        text, err = bench.communicate(timeout=60)
+        out, err = bench.communicate(timeout=60)
     finally:
         guard.cancel()
         if bench.poll() is None:
             bench.kill()
             bench.wait()
-    assert bench.returncode == 130, err
+    return bench.returncode, out, err, seen
+
+
+def test_ctrl_c_ends_the_bench_with_one_line_saying_what_was_kept(tmp_path):
+    out = tmp_path / "render.json"
+    code, _, err, _ = _interrupted(["render", "--frames", "1000000", "--json", str(out)],
+                                   "bench render: building the scenes")  # the benchmark has begun
+    assert code == 130
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("antarium bench render: interrupted (Ctrl-C) before its end: what it measured is printed")
+    assert not out.exists()
+
+
+def test_ctrl_c_during_bench_loop_reports_and_writes_the_frames_run_so_far(tmp_path):
+    out = tmp_path / "loop.json"
+    # some frames after the line (not a timing assertion: any number >= 2 will do)
+    code, text, err, _ = _interrupted(["loop", "--seconds", "600", "--json", str(out)],
+                                      "bench loop: frames running for 600 s", settle_s=2.0)
+    assert code == 130, err
     r = json.loads(out.read_text())
     assert r["interrupted"] is True and r["frames"] >= 2 and r["run"]["bench"] == "loop"
     assert f"loop bench INTERRUPTED (Ctrl-C): the figures below are over the {r['frames']} frames" in text
@@ -139,28 +138,12 @@ def test_ctrl_c_during_bench_loop_reports_and_writes_the_frames_run_so_far(tmp_p
 
 def test_ctrl_c_during_bench_render_reports_and_writes_the_workloads_measured(tmp_path):
     out = tmp_path / "render.json"
-    bench = subprocess.Popen([sys.executable, "-m", "antarium", "bench", "render", "--path", "cpu", "--frames",
-                              "3000", "--json", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    guard = threading.Timer(300.0, bench.kill)  # should the row never come
-    guard.start()
-    try:
-        rows = []
-        for line in bench.stdout:  # the first workload's row: one measured
-            if line.startswith("cpu "):
-                rows.append(line)
-                break
-        bench.send_signal(signal.SIGINT)
-        text, err = bench.communicate(timeout=60)
-    finally:
-        guard.cancel()
-        if bench.poll() is None:
-            bench.kill()
-            bench.wait()
-    assert bench.returncode == 130, err
+    code, text, err, row = _interrupted(["render", "--path", "cpu", "--frames", "3000", "--json", str(out)],
+                                        "cpu ", stream="stdout")  # the first workload's row: one measured
+    assert code == 130, err
     r = json.loads(out.read_text())
     assert r["interrupted"] is True and r["run"]["bench"] == "render"
     measured = len(r["results"])
     assert 1 <= measured < 5 and f"INTERRUPTED (Ctrl-C): {measured} of the 5 workloads measured" in text
-    assert r["results"][0]["workload"] == "panorama" and rows[0].split()[:2] == ["cpu", "panorama"]
+    assert r["results"][0]["workload"] == "panorama" and row.split()[:2] == ["cpu", "panorama"]
     assert f"figures written to {out}" in text
