@@ -4,7 +4,7 @@ Layers (rates in [0, 1]): TL2 (16) and CL1 (16) carry the compass heading, TB1 (
 protocerebral bridge (CL1 excitation, TB1-TB1 inhibition with a cosine profile), TN2 (2) the speed seen at
 +-45 deg of the body axis, CPU4 (16 = 2 x 8 columns) the integrating memory, Pontine (16) and CPU1 (16 = 2 x 8) the
 steering layer, whose two halves sum to the left and right motor drive. This is the paper's "Pontine" model
-(holonomic-free, speed by TN2 only): CPU4 += gain * clip(TN2 - TB1, 0, 1) - leak_bias * gain, clipped to [0, 1];
+(holonomic-free, speed by TN2 only): CPU4 += gain * clip(TN2 - TB1, 0, 1) - cpu4_decay_bias * gain, clipped to [0, 1];
 CPU1 = sigmoid(0.5 CPU4 (shifted one column) - 0.5 Pontine - TB1). Parameters, their values and the noise
 (Gaussian, sd 0.1 on every rate) are the paper's; `leak` (per step, 0 in the paper) lets the memory decay
 towards 0.5.
@@ -50,6 +50,10 @@ class CXParams:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        bad = [f"{f.name}={getattr(self, f.name)!r}" for f in fields(self)
+               if f.name != "seed" and not math.isfinite(getattr(self, f.name))]
+        if bad:  # NaN passed the range checks below: a NaN noise left the CX steering 0, a NaN gain no memory
+            raise ValueError(f"CX parameters must be finite numbers, got {', '.join(bad)}")
         if self.noise < 0 or not 0 <= self.leak < 1 or self.cpu4_gain <= 0:
             raise ValueError(f"CX noise must be >= 0, leak in [0, 1), cpu4_gain > 0; got {self.noise!r}, "
                              f"{self.leak!r}, {self.cpu4_gain!r}")
@@ -132,11 +136,15 @@ class CentralComplex:
     def steering(self, extra: np.ndarray | None = None, k: float = 1.0) -> np.ndarray:
         """CPU1 (16,) from the memory and TB1; `extra` (16,), laid out as CPU4, joins with weight 1 - k all that
         CPU1 gets from CPU4 (directly and through the Pontine cells), which gets weight k (Zhang's CXMB, Mitchell
-        2019 eq. 4: k = 0 steers by `extra` alone); no extra: Stone's CX.
+        2019 eq. 4: k = 0 steers by `extra` alone); no extra: Stone's CX. Anything else is refused (ValueError).
         CPU1 = rate(k (0.5 CPU4out (shifted) - 0.5 Pontine) + (1 - k) 0.5 extra (shifted) - TB1),
         CPU4out = rate(CPU4), Pontine = rate(CPU4out)."""
         use = extra is not None
         e = np.asarray(extra, np.float64) if use else self._no_extra
+        if use and (e.shape != (2 * N_COLUMNS,) or not np.isfinite(e).all()) or not 0.0 <= k <= 1.0:
+            # the compiled kernel does not check bounds: a shorter `extra` was read past its end
+            raise ValueError(f"CPU1's extra input must be ({2 * N_COLUMNS},) finite values and k in [0, 1], got "
+                             f"shape {e.shape} and k={k!r}")
         _kernels().cx_steering(self.tb1, self.cpu4, self.cpu1, e, float(k), use, _CPU4_TO_CPU1, _PONTINE, self._prm,
                             self._draw(6 * N_COLUMNS))
         return self.cpu1

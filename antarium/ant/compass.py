@@ -82,6 +82,8 @@ class CompassParams:
             raise ValueError(f"compass min_elevation_deg must be in [-90, 90), got {self.min_elevation_deg!r}")
         if self.min_pixels < 3:
             raise ValueError(f"compass min_pixels must be >= 3, got {self.min_pixels!r}")
+        if not 0.0 <= self.min_intensity < math.inf:  # NaN read every sky as dark, a negative one counted unlit pixels
+            raise ValueError(f"compass min_intensity must be a finite number >= 0, got {self.min_intensity!r}")
         if not 0.0 < self.min_degree < 1.0 or not 0.0 < self.max_residual <= 1.0:
             raise ValueError("compass min_degree must be in (0, 1) and max_residual in (0, 1]")
         if not 0.0 <= self.min_sun_zenith_deg < 90.0 or not self.max_degree_excess > 0.0:

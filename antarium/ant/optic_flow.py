@@ -12,10 +12,13 @@ Two ways to turn (both return a turn in rad, > 0 = left, and their trace):
   it (1/m once divided by the distance walked; only pixels nearer than `react_distance` count); the ant turns
   away from the side (left: body azimuth 0..90 deg, right: -90..0) with more nearness,
   turn = -gain * (L - R) / (L + R + half_nearness).
-- "foe" (the seed's focus-of-expansion method): the FOE is fitted by least squares (eq. 1: A = [u v],
-  b = x v - y u) in body azimuth / elevation coordinates over the frontal field, and the obstacle is located by
-  it: the flow magnitude (relative to a unit-nearness translation's) left and right of the FOE's azimuth is
-  summed, and the ant turns away from the side with more, by the same formula.
+- "foe" (the seed's focus-of-expansion method): least squares over the frontal field as eq. 1 is printed (A = [u v],
+  b = x v - y u, in body azimuth / elevation coordinates); with that A it solves for (-y0, x0) of the FOE
+  (x0, y0), and its first component, minus the FOE's elevation (near 0 for a level forward walk), is the centre
+  (trace "foe_azimuth"): the flow magnitude (relative to a unit-nearness translation's) left and right of it is
+  summed, and the ant turns away from the side with more, by the same formula. Split at the true FOE azimuth
+  (A = [v -u]) the turn loses its side: the fit is pulled ~0.2-0.36 rad towards a near cylinder, which then
+  counts partly on the other side (measured 2026-11-27).
 """
 
 from __future__ import annotations
@@ -119,6 +122,8 @@ class OpticFlow:
         else:
             x, y = rel[ok], self.elevation[ok]
             u, v = flow[ok, 0], flow[ok, 1]  # east: azimuth grows to the left
+            # eq. 1 as printed (A = [u v]): each flow line through the FOE (x0, y0) gives x0 v - y0 u = x v - y u, so
+            # this solves for (-y0, x0) and foe[0] is minus the FOE's elevation (see the module docstring)
             foe, *_ = np.linalg.lstsq(np.stack([u, v], axis=1), x * v - y * u, rcond=None)
             centre = float(np.clip(foe[0], -math.radians(p.frontal_deg), math.radians(p.frontal_deg)))
             trace["foe_azimuth"] = centre
