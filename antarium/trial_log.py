@@ -820,11 +820,23 @@ def _exists(path: Path) -> bool:
 #: what HDF5 says of a file whose writer has not closed it (a running, crashed or killed server): read it as SWMR
 _OPEN_FOR_WRITE = "already open for write"
 
+#: a read that fails is tried again this many times (READ_RETRY_S apart) even when the file looks unchanged (its
+#: writer may be in a batch, a few ms, whose size and time stamp have not shown yet), and as long as it changes (a
+#: writer appending) up to READ_ATTEMPTS times; after that the error is raised
+READ_RETRIES_UNCHANGED = 5
+READ_ATTEMPTS = 200
+READ_RETRY_S = 0.02
+
 
 def open_log(path: str | Path):
     """Open a trial log read-only, also one left open by a running, crashed or killed server (SWMR read). A file
     that is not an antarium trial log, or is cut short (a partial copy), raises LogError naming it (an SWMR read
-    skips HDF5's length check, so it is used only for a file whose writer has not closed it)."""
+    skips HDF5's length check, so it is used only for a file whose writer has not closed it). A log being written
+    is opened between two of its writer's batches (see `_retrying`)."""
+    return _retrying(path, lambda: _open_log(path))
+
+
+def _open_log(path: str | Path):
     import h5py
 
     try:
@@ -842,6 +854,38 @@ def open_log(path: str | Path):
     return f
 
 
+def _file_state(path: str | Path) -> tuple[int, int, int]:
+    """(size in bytes, mtime and ctime in ns): what changes when a writer appends a batch."""
+    st = os.stat(path)
+    return st.st_size, st.st_mtime_ns, st.st_ctime_ns
+
+
+def _retrying(path: str | Path, read: Callable[[], Any]) -> Any:
+    """`read()` (which opens and reads the log `path`), tried again when it fails with an HDF5 error while the file is
+    being written: the writer takes no file lock and appends a batch in SWMR mode every `flush_s`, so a read that
+    falls into a batch (a few ms) can see the file half-updated ("truncated file", "addr overflow", "not already
+    open for SWMR writing"). A file that stays as it is fails for good: LogError naming it and HDF5's reason
+    (FileNotFoundError as it is)."""
+    state = _file_state(path)
+    unchanged = 0
+    for _attempt in range(READ_ATTEMPTS):
+        try:
+            return read()
+        except FileNotFoundError:
+            raise
+        except (OSError, LogError) as exc:
+            error = exc
+        time.sleep(READ_RETRY_S)
+        now = _file_state(path)
+        unchanged = 0 if now != state else unchanged + 1
+        state = now
+        if unchanged >= READ_RETRIES_UNCHANGED:
+            break
+    if isinstance(error, LogError):
+        raise error
+    raise LogError(f"{str(path)!r} cannot be read as a trial log: {_hdf5_reason(error)}") from None
+
+
 def _hdf5_reason(exc: OSError) -> str:
     """HDF5's error in a few words: "truncated file: eof = ...", "file signature not found", "No such file"."""
     text = str(exc)
@@ -849,11 +893,10 @@ def _hdf5_reason(exc: OSError) -> str:
 
 
 def read_table(path: str | Path, table: str) -> dict[str, np.ndarray]:
-    """One table of a log as columns (text decoded to str): `pandas.DataFrame(read_table(path, "frames"))`."""
-    with open_log(path) as f:
-        if table not in f:
-            raise ValueError(f"{str(path)!r} has no table {table!r}; tables: {', '.join(sorted(f))}")
-        data = f[table][:]
+    """One table of a log as columns (text decoded to str): `pandas.DataFrame(read_table(path, "frames"))`; the rows
+    written so far of a log being recorded (read between two of its writer's batches, see `_retrying`), every row
+    written before a crash or kill. ValueError naming the tables when there is no `table`."""
+    data = _retrying(path, lambda: _read_dataset(path, table))
     if data.dtype.names is None:
         raise LogError(f"{str(path)!r}: table {table!r} is not a table of named columns (not written by antarium)")
     columns = {}
@@ -863,6 +906,13 @@ def read_table(path: str | Path, table: str) -> dict[str, np.ndarray]:
             col = np.array([v.decode() if isinstance(v, bytes) else v for v in col], dtype=object)
         columns[name] = col
     return columns
+
+
+def _read_dataset(path: str | Path, table: str) -> np.ndarray:
+    with _open_log(path) as f:
+        if table not in f:
+            raise ValueError(f"{str(path)!r} has no table {table!r}; tables: {', '.join(sorted(f))}")
+        return f[table][:]
 
 
 if __name__ == "__main__":

@@ -40,6 +40,7 @@ def log_file(tmp_path_factory):
         log.add_command(clock.now(), "rotate_scene", {"deg": 90}, {"ok": True, "result": {}}, True)
         log.add_command(clock.now(), "rotate_scene", {"deg": "a lot"}, {"error": "deg must be a number"}, False)
         loop.run(until=2.0)
+        loop.event("note", text="after the last frame")
     return path
 
 
@@ -49,10 +50,11 @@ def test_the_documented_recipe_gives_dataframes_with_documented_columns_and_unit
     frames, samples = namespace["frames"], namespace["samples"]
     events, commands = namespace["events"], namespace["commands"]
     text = _text_dtypes()
-    for table, dtype in ((frames, FRAME_DTYPE), (samples, SAMPLE_DTYPE), (events, text["events"]),
-                         (commands, text["commands"])):
+    for table, names in ((frames, FRAME_DTYPE.names), (samples, SAMPLE_DTYPE.names),
+                         (events, (*text["events"].names, "frame")), (commands, text["commands"].names),
+                         (namespace["scenes"], text["scenes"].names)):
         assert isinstance(table, pd.DataFrame)
-        assert list(table.columns) == list(dtype.names)
+        assert list(table.columns) == list(names)
     for name in FRAME_DTYPE.names:  # numeric columns keep their numeric types
         assert frames[name].dtype == FRAME_DTYPE[name], name
 
@@ -74,6 +76,11 @@ def test_the_documented_recipe_gives_dataframes_with_documented_columns_and_unit
     assert "scene_rotated" in kinds and all(isinstance(k, str) for k in kinds)
     rotated = json.loads(events["data"][kinds.index("scene_rotated")])
     assert rotated["angle"] == pytest.approx(math.pi / 2)
+    # the recipe's join: the first frame that showed the rotation, the frame before did not
+    shown = int(events["frame"][kinds.index("scene_rotated")])
+    assert frames["scene_rotation"][frames["frame"] == shown].item() == pytest.approx(math.pi / 2)
+    assert frames["scene_rotation"][frames["frame"] == shown - 1].item() == 0.0
+    assert math.isnan(events["frame"][kinds.index("note")])  # after the last frame: none showed it
 
     assert list(commands["name"]) == ["rotate_scene", "rotate_scene"]
     assert json.loads(commands["request"][0]) == {"deg": 90} and list(commands["ok"]) == [1, 0]
