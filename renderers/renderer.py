@@ -752,6 +752,11 @@ class Renderer:
         """Global drive scale in [0, 1] (1: a radiance of 1 drives an LED of gain 1 fully)."""
         self._convert.configure(brightness=brightness)
 
+    @property
+    def brightness(self) -> float:
+        """The global drive scale in [0, 1] (`set_brightness`; it stays across scene loads)."""
+        return self._convert.brightness
+
     def _object(self, name: str):
         scene = self._require_scene()
         if name not in scene.objects:

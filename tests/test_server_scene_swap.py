@@ -186,3 +186,34 @@ def test_an_object_edit_made_while_a_sky_change_was_prepared_is_kept(habitat_ser
     habitat_server.command("sky", {"sun_elevation_deg": 25.0, "sun_azimuth_deg": 200.0})
     assert renderer.scene.sky.sun_elevation == pytest.approx(np.radians(25.0))
     assert name not in renderer.scene.objects and renderer._meshes is meshes
+
+
+def test_a_trial_log_holds_the_state_set_before_its_trial_started(server):
+    """Gains, a sky change, a brightness and held polariser angles set before trial_start were in no log (its config
+    said gains 1 where the ant ran at 3): the trial_started event holds the state the trial starts in."""
+    import json
+
+    from antarium.trial_log import read_table
+
+    server.command("load_scene", {"scene": "sky"})
+    server.command("sky", {"sun_azimuth_deg": 120.0})
+    server.command("scene_edit", {"op": "set_brightness", "args": {"brightness": 0.5}})
+    server.command("gains", {"translation": 3.0, "rotation": 0.25})
+    server.command("polarisers", {"angles_deg": [[10.0] * 9] * 55})
+    path = server.trial_start("after_settings", {})["path"]
+    server.trial_stop()
+    events = read_table(path, "events")
+    state = json.loads(events["data"][list(events["kind"]).index("trial_started")])["state"]
+    assert state["gains"] == {"translation": 3.0, "rotation": 0.25} and state["scene"] == "sky"
+    assert state["scene_changes"] == [{"command": "sky", "request": {"sun_azimuth_deg": 120.0}},
+                                      {"command": "scene_edit",
+                                       "request": {"op": "set_brightness", "args": {"brightness": 0.5}}}]
+    assert state["brightness"] == 0.5 and np.allclose(state["polarisers_deg"], 10.0)
+    assert {"pose", "scene_rotation_deg", "closed_loop", "tether"} <= set(state)
+    server.command("load_scene", {"scene": "horizon"})  # a load ends the scene's edits; the brightness stays
+    server.command("polarisers", {"angles_deg": None})
+    path = server.trial_start("after_load", {})["path"]
+    server.trial_stop()
+    events = read_table(path, "events")
+    state = json.loads(events["data"][list(events["kind"]).index("trial_started")])["state"]
+    assert state["scene_changes"] == [] and state["brightness"] == 0.5 and state["polarisers_deg"] is None

@@ -47,13 +47,15 @@ class Command:
     prepare(server, checked params): the slow part of an in-loop command, run before it and beside the loop
     (`LoopPlacement.beside_loop`: never holding a frame); its result reaches the handler as parameter "prepared";
     reply_s: the least time (s) a client waits for the reply of a command whose work takes long (a scene load
-    parses, builds and uploads a whole world: seconds, more on a busy machine); None: the client's own timeout."""
+    parses, builds and uploads a whole world: seconds, more on a busy machine); None: the client's own timeout.
+    edits_scene: it changes the loaded scene until the next load (a trial's start state lists such changes)."""
 
     params: dict[str, Param]
     handler: Callable[[Server, dict[str, Any]], Any]
     in_loop: bool = True
     prepare: Callable[[Server, dict[str, Any]], Any] | None = None
     reply_s: float | None = None
+    edits_scene: bool = False
 
 
 _XY = 1e6  # metres: anything farther is a typo, not a world
@@ -268,7 +270,7 @@ COMMANDS: dict[str, Command] = {
     "scene_edit": Command({
         "op": Param("str", True, choices=tuple(SCENE_EDITS)),
         "args": Param("object", False, {}, doc="the operation's arguments (see docs/bus.md)"),
-    }, _scene_edit, prepare=_prepare_edit),
+    }, _scene_edit, prepare=_prepare_edit, edits_scene=True),
     "trial_start": Command({
         "name": Param("str", True, doc="trial name (part of the log file name)"),
         "metadata": Param("object", False, {}, doc="JSON object stored with the trial"),
@@ -281,7 +283,7 @@ COMMANDS: dict[str, Command] = {
         "sun_elevation_deg": Param("number", False, None, lo=-90, hi=90),
         "dop_max": Param("number", False, None, lo=0, hi=1, doc="maximum degree of polarisation"),
         "sun_radiance": Param("number", False, None, lo=0, hi=1000),
-    }, _sky, prepare=_prepare_sky),
+    }, _sky, prepare=_prepare_sky, edits_scene=True),
     "polarisers": Command(
         {"angles_deg": Param("number_list", False, None, doc="55 x 9 e-vector angles, degrees; null: follow the sky")},
         _polarisers),

@@ -119,6 +119,8 @@ class Server:
         #: the running trial's start ("t": s on the loop's clock, its trial_started event's `monotonic`) and
         #: "metadata", in the status for clients that subscribed after it started (the monitor); None without one
         self.trial_started: dict[str, Any] | None = None
+        #: the scene edits and sky changes made since the scene was loaded ({"command", "request"}, in order)
+        self._scene_edits: list[dict[str, Any]] = []
         self.scene_name: str | None = None
         self._scene_digest = ""
         self.record = record
@@ -396,6 +398,8 @@ class Server:
             self._log_command(name, request, {"error": str(exc)}, False)
             raise
         result = self.state() if result is None else result
+        if COMMANDS[name].edits_scene:
+            self._scene_edits.append({"command": name, "request": request})
         self._log_command(name, request, {"result": result}, True)
         return result
 
@@ -463,6 +467,7 @@ class Server:
             raise self._scene_failed(scene, exc) from None
         self.scene_name = scene if isinstance(scene, str) else json.dumps(scene, sort_keys=True)
         self._scene_digest = digest
+        self._scene_edits = []
         self.loop.renderer_changed()
         log = self.trial_log  # read once: trial_stop may end the trial in another thread
         if log is not None:
@@ -548,7 +553,18 @@ class Server:
         self.trial_log, self.trial_name = log, name
         anchor = self._clock_anchor()
         self.trial_started = {"t": anchor["monotonic"], "metadata": metadata}
-        self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path), **anchor)
+        self.loop.event("trial_started", name=name, metadata=metadata, path=str(log.path), state=self._start_state(),
+                        **anchor)
+
+    def _start_state(self) -> dict[str, Any]:
+        """What the dome shows as a trial starts (loop's thread), for its log: the loop's pose, scene rotation, mode,
+        tether and gains, the scene, its edits and sky changes since it was loaded (the commands' requests, in
+        order), the brightness (None without a renderer) and the polariser angles held (55 x 9 deg; None: they
+        follow the sky)."""
+        held = self.loop.polariser_override
+        return {**loop_state(self.loop), "scene": self.scene_name, "scene_changes": list(self._scene_edits),
+                "brightness": getattr(self.renderer, "brightness", None),
+                "polarisers_deg": None if held is None else np.degrees(held).tolist()}
 
     def _clock_anchor(self) -> dict[str, Any]:
         """`utc` (ISO 8601) and `monotonic` (s, on the loop's clock, the tables' clock) read at the same instant."""
