@@ -329,20 +329,28 @@ class Rig:
     @contextlib.contextmanager
     def trial(self, name: str, **metadata: Any) -> Iterator[str]:
         """`with rig.trial("name", ant=3):` records the block in one log file (its path is yielded). Ctrl-C in the
-        block stops the trial and says on stderr that its log is closed and kept, with its frames."""
+        block stops the trial and says on stderr that its log is closed and kept, with its frames. When the block
+        raises, that error is the one raised: a stop that fails too (the server gone) is told on stderr."""
         path = self.start_trial(name, **metadata)
-        interrupted = False
         try:
             yield path
-        except KeyboardInterrupt:
-            interrupted = True
+        except BaseException as exc:
+            self._stop_after(name, path, exc)
             raise
-        finally:
+        self.stop_trial()
+
+    def _stop_after(self, name: str, path: str, exc: BaseException) -> None:
+        """Stop trial `name` (log `path`), whose block raised `exc`, without hiding `exc`."""
+        try:
             done = self.stop_trial()
-            if interrupted:
-                frames = done.get("rows_written", {}).get("frames", 0)
-                print(f"trial {name!r} stopped by the interruption: its log {path} is closed and kept "
-                      f"({frames} frames)", file=sys.stderr, flush=True)
+        except RigError as stop:
+            print(f"trial {name!r} was not stopped ({stop}); the error in its block follows", file=sys.stderr,
+                  flush=True)
+            return
+        if isinstance(exc, KeyboardInterrupt):
+            frames = done.get("rows_written", {}).get("frames", 0)
+            print(f"trial {name!r} stopped by the interruption: its log {path} is closed and kept ({frames} frames)",
+                  file=sys.stderr, flush=True)
 
     def status(self) -> dict:
         return self.call("status")

@@ -2,6 +2,7 @@
 the ant's dome (the emulated distributor and panels in the ant's process) and reads the ant's ball from the bus,
 where the driver of the ant's emulated USB trackball publishes it; short mode (a few seconds)."""
 
+import json
 import math
 
 import numpy as np
@@ -55,6 +56,13 @@ def test_a_trained_ant_follows_its_route_on_the_served_rig_in_real_time(model_fi
     steps = np.hypot(np.diff(frames["x"]), np.diff(frames["y"]))
     walked = steps[steps < 0.05].sum()  # without the displacement to the release point (a set_pose command)
     assert walked == pytest.approx(summary["distance"], abs=0.05)
+    # each of the ant's decisions in served.json says where it was and the server's frame of that pose: the log agrees
+    decisions = [e for e in json.loads((tmp_path / "out" / "served.json").read_text())["events"]
+                 if e["kind"] == "ant_decision"]
+    row = {int(f): i for i, f in enumerate(frames["frame"])}
+    assert len(decisions) == summary["decisions"] and all(e["frame"] in row for e in decisions)
+    logged = np.array([(frames["x"][row[e["frame"]]], frames["y"][row[e["frame"]]]) for e in decisions])
+    np.testing.assert_allclose([(e["x"], e["y"]) for e in decisions], logged, atol=1e-9)
     # the ant's dome and ball, throughout: the ant is released only once the server has heard its dome answer
     assert frames["link_ok"].all()
     assert frames["locomotion_connected"].all()

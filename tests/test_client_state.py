@@ -93,3 +93,20 @@ def test_ctrl_c_in_a_trial_block_stops_the_trial_and_names_its_kept_log(tmp_path
     with h5py.File(path, "r") as f:
         assert frames >= 5 and len(f["frames"]) == frames
         assert f["events"]["kind"][-1].decode() == "trial_stopped"
+
+
+def test_an_error_in_a_trial_block_is_the_one_raised_when_the_stop_fails_too(tmp_path, capsys):
+    """The server gone inside `with rig.trial(...)`: the trial's stop failed too, and its RigError replaced the
+    block's own error (a served ant saw 'trial_stop: ... is gone' instead of why its walk ended)."""
+    config, server = _served(tmp_path, "tmask")
+    rig = antarium.Rig("tmask", config=config, timeout_s=3.0).connect()
+    try:
+        with pytest.raises(ValueError, match="the block's own error"), rig.trial("walk"):
+            server.stop()
+            assert wait_for(lambda: rig.latest() is None, 10.0)  # the Rig knows its server is gone
+            raise ValueError("the block's own error")
+    finally:
+        rig.close()
+        server.stop()
+    err = capsys.readouterr().err
+    assert "trial 'walk' was not stopped (" in err and "the error in its block follows" in err

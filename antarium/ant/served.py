@@ -147,8 +147,9 @@ class ServedLoop:
     `step()` waits for the next frame slot on `clock`, lets the ant's trackball driver read (and publish) every
     report due, then waits (bounded, `timeout_s`) for the pose of a frame the server began after that and, with
     `settle` (`DomeHost.settle`), until the ant's dome shows that frame;
-    `set_pose` is the rig's `set_pose` command; `event` keeps the ant's events (`events`) and hands them to
-    `on_event`.
+    `set_pose` is the rig's `set_pose` command; `event` keeps the ant's events (`events`), each with where the ant
+    was (`x`, `y` m, `heading` rad: world, as `VirtualAnt` says) and the server's frame of that pose (`frame`, the
+    trial log's frame number), and hands them to `on_event`.
     """
 
     def __init__(self, rig, legs: TrackballLegs, clock: Clock, rate_hz: float, tether: str, pose_every: int = 1,
@@ -164,6 +165,7 @@ class ServedLoop:
         self.on_event = on_event
         self.renderer = None  # the server renders
         self.frame = 0
+        self.pose_frame = -1  # the server's frame number of `pose` (-1: not from the stream)
         self.events: list[dict[str, Any]] = []
         self._next_t: float | None = None
         rig.tether(tether)
@@ -187,7 +189,10 @@ class ServedLoop:
         deadline = time.monotonic() + self.timeout_s
         while True:
             latest = self.rig.latest()
-            if latest is not None and latest.frame >= need:
+            if latest is None:  # none yet, or the server went away: `pose` raises RigError at once in that case
+                self.rig.pose(max(0.0, deadline - time.monotonic()))
+            elif latest.frame >= need:
+                self.pose_frame = latest.frame
                 return latest.pose
             if time.monotonic() > deadline:
                 raise RuntimeError(f"the served rig {self.rig.name!r} sent no new pose for {self.timeout_s} s; "
@@ -196,10 +201,12 @@ class ServedLoop:
 
     def set_pose(self, pose: Pose) -> None:
         self.rig.set_pose(pose.x, pose.y, math.degrees(pose.heading), pose.z)
-        self.pose = pose
+        self.pose, self.pose_frame = pose, -1
 
     def event(self, kind: str, **data: Any) -> None:
         t = self.clock.now()
+        heading = math.remainder(self.pose.heading + self.legs.yaw, math.tau)
+        data = {"x": self.pose.x, "y": self.pose.y, "heading": heading, "frame": self.pose_frame, **data}
         self.events.append({"t": t, "kind": kind, **data})
         if self.on_event is not None:
             self.on_event(t, kind, data)
@@ -265,7 +272,9 @@ def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out:
                trial: str = "virtual_ant", echo: Callable[[str], None] = print) -> dict[str, Any]:
     """Release the ant of `model_file` (written by `antarium ant learn`) at the start of its route on the served rig
     and let it follow the route in real time, inside a trial that the server logs. Writes `<out>/served.json`
-    (summary, the ant's decisions) and `<out>/served_paths.png`; returns the summary."""
+    (summary, the ant's decisions with its pose and the server's frame number) and `<out>/served_paths.png`; returns
+    the summary. A run stopped early (Ctrl-C, the server gone) still writes `served.json`: the decisions so far and,
+    under `summary`, why it stopped (`stopped`) and the trial log (`trial_log`, None if it had not started)."""
     from dataclasses import asdict
 
     from antarium.ant.agent import follow_route
@@ -284,10 +293,17 @@ def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out:
     step = getattr(model.params, "step", None) or model.params.k_v  # metres per decision at most
     limit = max_decisions or int(math.ceil(3.0 * route.length / step)) + 10
     with served_ant(model, cfg, eye_params) as ant:
-        with ant.loop.rig.trial(trial, model=model.kind, route=route.points.tolist()) as log:
-            t0 = time.monotonic()
-            result = follow_route(ant, route, limit, 0.1, start_offset=start_offset)
-            seconds = time.monotonic() - t0
+        log = None
+        try:
+            with ant.loop.rig.trial(trial, model=model.kind, route=route.points.tolist()) as log:
+                t0 = time.monotonic()
+                result = follow_route(ant, route, limit, 0.1, start_offset=start_offset)
+                seconds = time.monotonic() - t0
+        except BaseException as exc:  # Ctrl-C, the server gone: the ant's decisions so far are kept, then re-raised
+            stopped = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else str(exc) or type(exc).__name__
+            (out / "served.json").write_text(json_text({"summary": {"stopped": stopped, "trial_log": log},
+                                                        "events": ant.loop.events}))
+            raise
         events = ant.loop.events
     summary = {**asdict(result.summary), "trial_log": log, "seconds": seconds,
                "decisions_per_s": result.summary.decisions / seconds}
