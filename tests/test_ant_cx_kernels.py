@@ -49,7 +49,7 @@ class ReferenceCX:
         memory = 0.5 * cpu4[_CPU4_TO_CPU1]
         memory = memory - 0.5 * pontine[_PONTINE]
         if extra is not None:
-            memory = k * memory + (1.0 - k) * 0.5 * extra[_CPU4_TO_CPU1]
+            memory = k * memory + (1.0 - k) * (0.5 * extra[_CPU4_TO_CPU1] - 0.5 * extra[_PONTINE])
         self.cpu1 = self.sig(memory - np.tile(self.tb1, 2), p.cpu1_slope, p.cpu1_bias)
 
     def home_vector(self):

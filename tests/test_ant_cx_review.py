@@ -86,3 +86,21 @@ def test_cpu1_refuses_an_extra_input_it_cannot_use_and_keeps_its_output(extra, k
     with pytest.raises(ValueError, match="extra input"):
         cx.steering(extra, k)
     assert np.array_equal(cx.cpu1, before)
+
+
+@pytest.mark.parametrize("off_deg", [-150.0, -100.0, -60.0, -20.0, 20.0, 60.0, 100.0, 150.0])
+def test_the_mbons_alone_steer_towards_the_most_familiar_direction_from_any_heading(off_deg):
+    """CXMB's input at CPU1 (eqs. 2-3 laid out as `CXMBModel.mbon_input` lays them, k = 0, noise off): with one
+    MBON column most familiar, the motor turns towards that column's direction. It entered uncentred (no Pontine
+    counterpart, about 0.875 a column) and turned away from it at 100 and 150 deg off."""
+    from antarium.ant.central_complex import N_COLUMNS, PREFS
+
+    column = 2
+    responses = np.ones(N_COLUMNS)
+    responses[column] = 0.3  # the most familiar: the lowest response
+    extra = np.tile(np.roll(1.0 - responses / responses.sum(), N_COLUMNS // 2), 2)
+    cx = CentralComplex(CXParams(noise=0.0))
+    for _ in range(5):
+        cx.compass(PREFS[column] + math.radians(off_deg))
+    cx.steering(extra, 0.0)
+    assert math.copysign(1.0, cx.motor()) == -math.copysign(1.0, off_deg)  # > 0: left (CCW), towards it

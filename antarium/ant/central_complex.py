@@ -137,7 +137,8 @@ class CentralComplex:
         """CPU1 (16,) from the memory and TB1; `extra` (16,), laid out as CPU4, joins with weight 1 - k all that
         CPU1 gets from CPU4 (directly and through the Pontine cells), which gets weight k (Zhang's CXMB, Mitchell
         2019 eq. 4: k = 0 steers by `extra` alone); no extra: Stone's CX. Anything else is refused (ValueError).
-        CPU1 = rate(k (0.5 CPU4out (shifted) - 0.5 Pontine) + (1 - k) 0.5 extra (shifted) - TB1),
+        CPU1 = rate(k (0.5 CPU4out (shifted) - 0.5 Pontine) + (1 - k) 0.5 (extra (shifted) - extra (Pontine's
+        column)) - TB1): `extra` centred as CPU4's input is, so that a flat input adds no turn,
         CPU4out = rate(CPU4), Pontine = rate(CPU4out)."""
         use = extra is not None
         e = np.asarray(extra, np.float64) if use else self._no_extra

@@ -141,8 +141,9 @@ def cx_integrate(speed, tb1, cpu4, prm, z):
 @njit(cache=True)
 def cx_steering(tb1, cpu4, cpu1, extra, k, use_extra, to_cpu1, pontine_of, prm, z):
     """CPU1 in place from the memory, TB1 and (use_extra) `extra` (16,) weighed 1 - k against all that comes from
-    CPU4 (its direct input and the Pontine cells', weight k: k = 0 leaves CPU4 out); z (48,) noise: CPU4 output
-    (16), Pontine (16), CPU1 (16)."""
+    CPU4 (its direct input and the Pontine cells', weight k: k = 0 leaves CPU4 out); `extra` enters centred as CPU4
+    does (0.5 at the shifted column - 0.5 at the Pontine column); z (48,) noise: CPU4 output (16), Pontine (16),
+    CPU1 (16)."""
     n2 = cpu4.shape[0]
     n = n2 // 2
     out4 = np.empty(n2)
@@ -154,7 +155,8 @@ def cx_steering(tb1, cpu4, cpu1, extra, k, use_extra, to_cpu1, pontine_of, prm, 
     for i in range(n2):
         memory = 0.5 * out4[to_cpu1[i]] - 0.5 * pontine[pontine_of[i]]
         if use_extra:
-            memory = k * memory + (1.0 - k) * 0.5 * extra[to_cpu1[i]]
+            # centred as CPU4's input is (its Pontine column subtracted): a flat input adds no turn
+            memory = k * memory + (1.0 - k) * (0.5 * extra[to_cpu1[i]] - 0.5 * extra[pontine_of[i]])
         drive = memory - tb1[i % n]
         cpu1[i] = _rate(drive, prm[15], prm[16], z[2 * n2 + i])
 
