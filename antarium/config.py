@@ -152,12 +152,10 @@ class LinkSection(Section):
 
     @model_validator(mode="after")
     def _port_of_a_distributor(self) -> LinkSection:
-        from antarium.firmware_proto import DEFAULT_PORT
-
         if self.interface == "udp" and not self.spawn_emulator and self.port == 0:
             raise ValueError("port 0 needs spawn_emulator = true (the emulator's free port); allowed with "
-                             f"spawn_emulator = false: the distributor's UDP port 1..65535 ({DEFAULT_PORT} on the "
-                             "board)")
+                             "spawn_emulator = false: the distributor's UDP port 1..65535 (the board's is in "
+                             "docs/rig.real.example.toml)")
         return self
 
 

@@ -73,7 +73,8 @@ def test_port_0_without_a_spawned_emulator_is_refused_when_the_file_is_loaded(tm
     """It passed `load_config`, `serve --print-config` and `antarium check`'s config line; `serve` printed its
     start banner and only then refused it (a rule copied in the server, `antarium check` and the served ant)."""
     message = ("[link] port 0 needs spawn_emulator = true (the emulator's free port); allowed with "
-               "spawn_emulator = false: the distributor's UDP port 1..65535 (19055 on the board)")
+               "spawn_emulator = false: the distributor's UDP port 1..65535 (the board's is in "
+               "docs/rig.real.example.toml)")
     with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
         resolve({"link": {"spawn_emulator": False}})
     path = tmp_path / "rig.toml"
