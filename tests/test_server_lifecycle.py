@@ -445,9 +445,10 @@ def test_the_status_says_when_the_running_trial_started_and_its_metadata(tmp_pat
 
 
 @pytest.mark.parametrize("every", [0, 5])
-def test_the_status_says_how_often_the_led_stream_runs(every):
+def test_the_status_says_how_often_the_led_stream_runs(every, tmp_path):
     """`led_stream_every_frames` (0: no LED frames on the bus), so that a monitor can say why its dome is dark."""
     from antarium.server.status import rig_status
 
-    config = resolve({"rig": {"name": "tledstream"}, "monitor": {"leds_every_frames": every}})
+    config = resolve({"rig": {"name": "tledstream"}, "monitor": {"leds_every_frames": every},
+                      "log": {"dir": str(tmp_path)}})  # not ./trials in the working folder
     assert rig_status(Server(config, renderer_factory=None, link=False))["led_stream_every_frames"] == every
