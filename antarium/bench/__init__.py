@@ -8,8 +8,6 @@ says which of `antarium bench`'s options it takes and what each means there. Eac
 from __future__ import annotations
 
 import datetime
-import json
-import math
 import os
 import platform
 import sys
@@ -58,26 +56,15 @@ def progress(bench: str, text: str) -> None:
     print(f"bench {bench}: {text} ...", file=sys.stderr, flush=True)
 
 
-def _finite(value: Any) -> Any:
-    """`value` with every float that is not finite (NaN, inf: a figure that could not be measured) as None, in
-    nested dicts, lists and tuples (tuples as lists)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
-
-
 def write_json(path: str | os.PathLike, bench: str, result: dict[str, Any]) -> None:
     """Write benchmark `bench`'s `result` (a dict of its figures) to `path` as strict JSON (NaN and inf as null),
     with a "run" table beside the figures: the bench's name, the antarium version, the host's name, platform and
     CPU count, and the time it finished (UTC, ISO 8601). An existing file is overwritten."""
     from antarium import __version__
+    from antarium.ant.metrics import json_text
 
     run = {"bench": bench, "antarium": __version__, "host": platform.node(), "platform": platform.platform(),
            "cpus": os.cpu_count(),
            "finished_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")}
     with open(path, "w") as fh:
-        json.dump({"run": run, **_finite(result)}, fh, indent=2, allow_nan=False)
+        fh.write(json_text({"run": run, **result}))
