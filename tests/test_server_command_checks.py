@@ -66,8 +66,8 @@ def test_scene_edit_arguments_reach_the_renderer_in_its_units():
     assert _edit_kwargs("swap_green_blue", {"swap": False}) == {"swap": False}
 
 
-def test_a_new_origins_heading_is_wrapped_as_a_poses_is():
-    config = resolve({"bus": {"enabled": False}})
+def test_a_new_origins_heading_is_wrapped_as_a_poses_is(tmp_path):
+    config = resolve({"bus": {"enabled": False}, "log": {"dir": str(tmp_path)}})  # not ./trials
     server = Server(config, renderer_factory=None, link=False).start_thread()
     try:
         reply = server.command("reset_origin", {"x": 1.0, "y": 2.0, "heading_deg": 720.0 + 90.0})
@@ -109,14 +109,15 @@ def test_wait_refuses_what_is_not_a_duration_with_a_rig_error(seconds, shown):
 
 
 @pytest.fixture
-def uniform_server():
+def uniform_server(tmp_path):
     """A server with a small renderer (face 55) showing "uniform", on the virtual link, no bus."""
     def small_renderer(render_cfg, clock=None):
         from antarium.renderers import Renderer
 
         return Renderer(face_size=55, clock=clock)
 
-    config = resolve({"bus": {"enabled": False}, "link": {"interface": "virtual"}, "render": {"scene": "uniform"}})
+    config = resolve({"bus": {"enabled": False}, "link": {"interface": "virtual"}, "render": {"scene": "uniform"},
+                      "log": {"dir": str(tmp_path)}})  # not ./trials
     server = Server(config, renderer_factory=small_renderer).start_thread()
     yield server
     server.stop()
