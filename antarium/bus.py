@@ -98,9 +98,22 @@ def command_key(rig: str, name: str) -> str:
     return rig_key(rig, "cmd", check_key_chunk(name, "command name"))
 
 
+_ALIVE = ("alive", "server")
+
+
 def alive_key(rig: str) -> str:
     """The server's liveliness token."""
-    return rig_key(rig, "alive", "server")
+    return rig_key(rig, *_ALIVE)
+
+
+def any_alive_key() -> str:
+    """The key expression of every rig's server liveliness token (`rig_of` gives each one's rig name)."""
+    return "/".join((KEY_ROOT, "*", *_ALIVE))
+
+
+def rig_of(key: str) -> str:
+    """The rig name of a key `antarium/<rig>/...`."""
+    return str(key).split("/")[1]
 
 
 def session_config(bus: BusSection | dict[str, Any] | None, role: str = "server"):

@@ -153,10 +153,18 @@ class Rig:
             bus.alive_key(self.name), self._on_alive, history=True))
         if not self._alive.wait(self.timeout_s):
             where = self.bus_section.connect or self.bus_section.listen
+            others = self._rigs_answering()
             self.close()
+            seen = (f"servers answering there: rig {', '.join(map(repr, others))} (a misspelt name?)" if others
+                    else "no other antarium server answered there either")
             raise RigError(f"no antarium server for rig {self.name!r} answered within {self.timeout_s} s "
-                           f"(tried {where}); is `antarium serve` running?")
+                           f"(tried {where}); is `antarium serve` running? {seen}")
         return self
+
+    def _rigs_answering(self, wait_s: float = 0.5) -> list[str]:
+        """The names of the rigs whose servers' liveliness tokens answer on this session's bus, sorted."""
+        replies = self._session.liveliness().get(bus.any_alive_key(), timeout=wait_s)
+        return sorted({bus.rig_of(reply.ok.key_expr) for reply in replies if reply.ok is not None})
 
     def _on_alive(self, sample) -> None:
         """The server's liveliness token appeared or went away (a bus thread). Both after the first are told on

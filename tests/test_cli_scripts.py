@@ -68,6 +68,20 @@ def test_no_server_is_one_line_naming_the_configs_rig(tmp_path, capsys):
     assert not (tmp_path / "out").exists()  # made only once the rig answers
 
 
+def test_a_misspelt_rig_name_is_told_with_the_rigs_that_answer(tmp_path):
+    toml = _toml(tmp_path, "tclirealrig")
+    server = Server(load_config(toml), renderer_factory=None, link=False, echo=lambda line: None).start_thread()
+    try:
+        with pytest.raises(RigError) as err:
+            antarium.Rig("tclirelarig", config=toml, timeout_s=0.3).connect()
+    finally:
+        server.stop()
+    assert "no antarium server for rig 'tclirelarig' answered within 0.3 s" in str(err.value)
+    assert "servers answering there: rig 'tclirealrig' (a misspelt name?)" in str(err.value)
+    with pytest.raises(RigError, match="no other antarium server answered there either"):
+        antarium.Rig("tclirelarig", config=toml, timeout_s=0.3).connect()
+
+
 def _quick_server_toml(tmp_path, rig: str) -> tuple[Path, str]:
     """A rig config quick to serve here (virtual dome, small faces, a plain scene) and its bus endpoint."""
     toml = _toml(tmp_path, rig)
