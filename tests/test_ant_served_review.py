@@ -43,3 +43,16 @@ def test_a_server_stopped_mid_run_ends_the_ant_at_once_and_keeps_its_decisions(m
     assert kept["summary"]["trial_log"].endswith("_virtual_ant.h5")
     decisions = [e for e in kept["events"] if e["kind"] == "ant_decision"]
     assert decisions and all({"x", "y", "heading", "frame"} <= set(e) for e in decisions)
+
+
+def test_a_rig_that_never_answers_leaves_no_output_folder(model_file, tmp_path, capsys):  # noqa: F811
+    """Nothing served (the config's rig has no server): one RigError after `timeout_s`, and no `out` made."""
+    with pytest.raises(RigError, match="no antarium server for rig 'antserved' answered within 0.3 s"):
+        run_served(model_file, _config(tmp_path), tmp_path / "out", echo=lambda line: None, timeout_s=0.3)
+    assert not (tmp_path / "out").exists()
+    from antarium.cli import main
+
+    assert main(["ant", "serve", str(model_file), "--config", "rig.toml", "--out", str(tmp_path / "cli"),
+                 "--timeout", "0"]) == 2
+    assert "--timeout must be > 0 s" in capsys.readouterr().err
+    assert not (tmp_path / "cli").exists()

@@ -269,12 +269,14 @@ def _wait_for_link(rig, timeout_s: float) -> None:
 
 def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out: str | Path,
                start_offset: tuple[float, float] = (0.0, 0.0), max_decisions: int | None = None,
-               trial: str = "virtual_ant", echo: Callable[[str], None] = print) -> dict[str, Any]:
+               trial: str = "virtual_ant", echo: Callable[[str], None] = print,
+               timeout_s: float = 30.0) -> dict[str, Any]:
     """Release the ant of `model_file` (written by `antarium ant learn`) at the start of its route on the served rig
     and let it follow the route in real time, inside a trial that the server logs. Writes `<out>/served.json`
     (summary, the ant's decisions with its pose and the server's frame number) and `<out>/served_paths.png`; returns
     the summary. A run stopped early (Ctrl-C, the server gone) still writes `served.json`: the decisions so far and,
-    under `summary`, why it stopped (`stopped`) and the trial log (`trial_log`, None if it had not started)."""
+    under `summary`, why it stopped (`stopped`) and the trial log (`trial_log`, None if it had not started).
+    `out` is made once the server has answered (within `timeout_s`, s): a rig that never answers leaves nothing."""
     from dataclasses import asdict
 
     from antarium.ant.agent import follow_route
@@ -289,10 +291,10 @@ def run_served(model_file: str | Path, config: str | Path | dict[str, Any], out:
     route = Route(stored)
     cfg = served_config(config)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     step = getattr(model.params, "step", None) or model.params.k_v  # metres per decision at most
     limit = max_decisions or int(math.ceil(3.0 * route.length / step)) + 10
-    with served_ant(model, cfg, eye_params) as ant:
+    with served_ant(model, cfg, eye_params, timeout_s=timeout_s) as ant:
+        out.mkdir(parents=True, exist_ok=True)
         log = None
         try:
             with ant.loop.rig.trial(trial, model=model.kind, route=route.points.tolist()) as log:

@@ -90,6 +90,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
     p.add_argument("--max-decisions", type=int, default=None,
                    help="stop after this many steering decisions (default: the route's own limit)")
+    p.add_argument("--timeout", type=float, default=30.0,
+                   help="seconds to wait for the server and for each of its replies (default 30)")
     p = sub.add_parser("homing", help="Stone 2017's foraging task: random outbound routes, home by CX path "
                                       "integration; pictures and pi_homing_<compass>.json")
     _trips(p)
@@ -192,9 +194,10 @@ def run(args: argparse.Namespace) -> int:
 
         if args.max_decisions is not None:
             _positive("--max-decisions", args.max_decisions)
-
+        _positive("--timeout", args.timeout, "s")
         run_served(args.model_file, args.config, Path(args.out).resolve(),
-                   (args.lateral_cm / 100.0, math.radians(args.heading_deg)), args.max_decisions)
+                   (args.lateral_cm / 100.0, math.radians(args.heading_deg)), args.max_decisions,
+                   timeout_s=args.timeout)
         return 0
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
