@@ -194,6 +194,19 @@ def test_wire_refuses_a_quality_outside_0_to_1(quality):
         0.0, 1.0]
 
 
+@pytest.mark.parametrize("rotation", [(1e300, 0.0, 0.0), (0.0, -1000.5, 0.0), (0.0, 0.0, 2e3)])
+def test_wire_refuses_a_rotation_beyond_any_balls_motion_in_one_sample(rotation):
+    payload = wire.encode(BallSample(1.0, 1, rotation, 2.0, 1.0))
+    with pytest.raises(wire.LocomotionWireError, match=r"is beyond any ball's motion in one sample \(allowed: each "
+                                                        r"within \+-1000 rad\)"):
+        wire.decode(payload, 0.0)
+    src = BusSource()
+    src._on_sample(zenoh_sample(payload))
+    assert src.read() == [] and src.status()["malformed"] == 1
+    turn = (wire.MAX_ROTATION_RAD, -wire.MAX_ROTATION_RAD, 20.0)  # a 2 cm step on a 1 mm ball is 20 rad
+    assert wire.decode(wire.encode(BallSample(1.0, 1, turn, 2.0, 1.0)), 0.0).rotation == turn
+
+
 # --- 7: a duplicate USB report is dropped and counted, its motion counted once ---------------------------------
 def test_usb_duplicate_report_is_dropped_and_counted():
     backend = EmulatedTrackball(motion=constant(WALK), realtime=False, faults={100: "duplicate"})

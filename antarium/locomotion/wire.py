@@ -7,7 +7,7 @@
 | 2      | u16  | reserved  | 0 (else refused)                                      |
 | 4      | u32  | seq       | source sequence number (wraps at 2**32)               |
 | 8      | f64  | t_device  | device time, s (0 when flag bit 0 is clear)           |
-| 16     | f64  | rx, ry, rz| ball rotation increment, rad, dome frame (3 x f64)    |
+| 16     | f64  | rx, ry, rz| ball rotation increment, rad, dome frame, each <= 1,000   |
 | 40     | f32  | quality   | in [0, 1] (else refused)                              |
 
 The receiver stamps `t` with its own clock on arrival: clocks of different computers are not compared.
@@ -24,6 +24,9 @@ VERSION = 1
 _STRUCT = struct.Struct("<BBHIddddf")
 SIZE = _STRUCT.size  # 44 bytes
 _FLAG_DEVICE_TIME = 0x01
+#: the largest rotation increment about one axis in one sample (rad), in either sense: 160 turns of the ball, beyond
+#: any tracker and any virtual ant's step (a 2 cm step on a 1 mm ball is 20 rad); a larger value is a sender's bug
+MAX_ROTATION_RAD = 1000.0
 
 
 class LocomotionWireError(ValueError):
@@ -51,6 +54,9 @@ def decode(payload: bytes, t: float) -> BallSample:
         raise LocomotionWireError(f"locomotion payload reserved field must be 0, got 0x{reserved:04x}")
     if not all(math.isfinite(v) for v in (t_dev, rx, ry, rz, quality)):
         raise LocomotionWireError("locomotion payload holds a non-finite number")
+    if max(abs(rx), abs(ry), abs(rz)) > MAX_ROTATION_RAD:
+        raise LocomotionWireError(f"locomotion payload rotation ({rx:g}, {ry:g}, {rz:g}) rad is beyond any ball's "
+                                  f"motion in one sample (allowed: each within +-{MAX_ROTATION_RAD:g} rad)")
     if not 0.0 <= quality <= 1.0:
         raise LocomotionWireError(f"locomotion payload quality must be in [0, 1], got {quality:g}")
     return BallSample(t, seq, (rx, ry, rz), t_dev if flags & _FLAG_DEVICE_TIME else None, quality)
