@@ -196,14 +196,16 @@ def _calibrate(args: argparse.Namespace) -> int:
         raise ValueError(f"--axes must list some of {', '.join(calibration.AXES)}, got {args.axes!r}")
     if not args.turns > 0:
         raise ValueError(f"--turns must be > 0, got {args.turns}")
-    config = tbconfig.load(args.config)  # an existing file (`run` refused a missing one); None: the defaults
+    # an existing file (`run` refused a missing one); None: the defaults. A calibration made at another resolution
+    # than resolution_cpi is what this measures anew (the refusal's advice), not refused
+    config = tbconfig.load(args.config, recalibrating=True)
     backend = calibration.miscalibrated_emulator(config) if args.emulate else None
     driver = UsbTrackball(trackball=config, backend=backend)
     with driver:
         driver.wait_connected(5.0)
-        steps = [calibration.Step(axis, args.turns, tuple(
-            _turn_by_hand(driver, axis, args.turns) if backend is None
-            else calibration.turn_emulated(driver, backend, axis, args.turns))) for axis in axes]
+        turn = _turn_by_hand if backend is None else (
+            lambda driver, axis, turns: calibration.turn_emulated(driver, backend, axis, turns))
+        steps = [calibration.measure(driver, axis, args.turns, turn) for axis in axes]
     result = calibration.calibrate(config, steps)
     print(f"{'axis':6}{'old counts/mm':>15}{'new counts/mm':>15}{'sign':>6}{'spread':>9}")
     spread = result.spread()

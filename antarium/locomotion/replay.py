@@ -7,13 +7,16 @@ frame's `t_start`, when the original loop first read its source), so a replayed 
 as the original did (a source that delivered its first sample 2 s into the trial does so in the replay too).
 A CSV file (or a trial log without frames) knows no trial start: its first sample comes at `start()`, the
 others at their offsets from it. Looped, each lap's sequence
-numbers are the recorded ones + lap x (largest - smallest recorded + 1): gaps recur, numbers never repeat.
+numbers are the recorded ones + lap x (largest - smallest recorded + 1): gaps recur, numbers never repeat; a lap
+lasts the recording's span plus its median step, so a recording whose samples are all due at one time cannot be
+looped (refused).
 """
 
 from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -68,22 +71,32 @@ def load_samples(path: str | Path) -> np.ndarray:
             if "locomotion" not in f:
                 raise ValueError(f"{str(path)!r} has no 'locomotion' table; is it an antarium trial log?")
             data = f["locomotion"][:].astype(SAMPLE_DTYPE)
-        return _finite(data, f"replay file {str(path)!r} locomotion table row", 0)
+        return _finite(data, f"replay file {str(path)!r} locomotion table row", range(len(data)))
     if path.suffix.lower() != ".csv":
         raise ValueError(f"replay file {str(path)!r} must be .h5/.hdf5 (trial log) or .csv")
-    with path.open(newline="") as f:
-        reader = csv.DictReader(f)
-        missing = {"t", "rx", "ry", "rz"} - set(reader.fieldnames or ())
-        if missing:
-            raise ValueError(f"replay CSV {str(path)!r} lacks columns {sorted(missing)}; needs t, rx, ry, rz")
-        rows = []
-        for i, row in enumerate(reader):
-            try:
-                rows.append((float(row["t"]), int(row.get("seq") or i), float(row["rx"]), float(row["ry"]),
-                             float(row["rz"]), float(row.get("t_device") or "nan"), float(row.get("quality") or 1.0)))
-            except ValueError as exc:
-                raise ValueError(f"replay CSV {str(path)!r} line {i + 2}: {exc}") from None
-    return _finite(np.array(rows, dtype=SAMPLE_DTYPE), f"replay CSV {str(path)!r} line", 2)
+    rows, lines = [], []
+    try:
+        with path.open(newline="") as f:
+            reader = csv.DictReader(f)
+            missing = {"t", "rx", "ry", "rz"} - set(reader.fieldnames or ())
+            if missing:
+                raise ValueError(f"replay CSV {str(path)!r} lacks columns {sorted(missing)}; needs t, rx, ry, rz")
+            for i, row in enumerate(reader):
+                lines.append(reader.line_num)  # blank lines are skipped: count the file's lines
+                short = [k for k in reader.fieldnames if row[k] is None]
+                if short:
+                    raise ValueError(f"replay CSV {str(path)!r} line {reader.line_num}: columns {short} are missing "
+                                     "(a row cut short?)")
+                try:
+                    rows.append((float(row["t"]), int(row.get("seq") or i), float(row["rx"]), float(row["ry"]),
+                                 float(row["rz"]), float(row.get("t_device") or "nan"),
+                                 float(row.get("quality") or 1.0)))
+                except ValueError as exc:
+                    raise ValueError(f"replay CSV {str(path)!r} line {reader.line_num}: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"replay CSV {str(path)!r} is not UTF-8 text ({exc.reason} at byte {exc.start}); "
+                         "a replay file is a trial log (.h5) or a CSV file") from None
+    return _finite(np.array(rows, dtype=SAMPLE_DTYPE), f"replay CSV {str(path)!r} line", lines)
 
 
 #: a sample due within this many seconds after now is due now: a recorded time rounded just past the reading
@@ -94,14 +107,14 @@ DUE_EPS_S = 1e-12
 FINITE_COLUMNS = ("rx", "ry", "rz", "quality")
 
 
-def _finite(data: np.ndarray, where: str, first: int) -> np.ndarray:
+def _finite(data: np.ndarray, where: str, numbers: Sequence[int]) -> np.ndarray:
     """`data`, or ValueError naming the first sample with a non-finite `FINITE_COLUMNS` value: `where` then its
-    number counted from `first` (the file's row or line), the column and the value."""
+    number in `numbers` (each sample's row or line of the file), the column and the value."""
     bad = ~np.column_stack([np.isfinite(data[c]) for c in FINITE_COLUMNS])
     if bad.any():
         i, j = np.argwhere(bad)[0]
         column = FINITE_COLUMNS[j]
-        raise ValueError(f"{where} {i + first}: {column} must be a finite number, got {data[column][i]}")
+        raise ValueError(f"{where} {numbers[i]}: {column} must be a finite number, got {data[column][i]}")
     return data
 
 
@@ -123,6 +136,10 @@ class ReplaySource(LocomotionSource):
         self._offsets = np.maximum(self.data["t"] - anchor, 0.0) / self.speed
         self._span = float(self._offsets[-1]) + (float(np.median(np.diff(self._offsets))) if len(self.data) > 1
                                                   else 1.0)
+        if self.loop and self._span <= 0:  # every lap would be due at once: read() would never return
+            raise ValueError(f"replay file {path!r}: all {len(self.data)} samples are due at one time "
+                             f"(t = {float(self.data['t'][0]):g} s), so it cannot be looped; replay it once "
+                             "(loop = false)")
         seqs = self.data["seq"]
         self._lap_seq = int(seqs.max()) - int(seqs.min()) + 1  # a lap's sequence numbers follow the previous lap's
         self._t0: float | None = None

@@ -54,6 +54,9 @@ class ScriptedSource(LocomotionSource):
                 raise ValueError("scripted source path must be a list of (x, y) points in metres") from None
             if len(path) < 2:
                 raise ValueError(f"scripted source path needs at least 2 points, got {len(path)}")
+            bad = next((i for i, p in enumerate(path) if not all(map(math.isfinite, p))), None)
+            if bad is not None:
+                raise ValueError(f"scripted source path point #{bad} must be finite (x, y) metres, got {path[bad]}")
         self.speed, self.turn_rate, self.path, self.tether = float(speed), float(turn_rate), path, tether
         self.dt = 1.0 / float(rate_hz)
         self.meander, self.spurt_s, self.pause_fraction = float(meander), float(spurt_s), float(pause_fraction)

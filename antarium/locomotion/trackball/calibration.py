@@ -8,13 +8,15 @@ axis's surface travel, `BallSolver.readings(axis * 2 pi turns)` (metres), so
 
 An axis is calibrated by the steps where its predicted travel is at least `min_share` of the ball's
 circumference per turn; with the default placement, "z" calibrates both sensors' x axes, "y" sensor 0's
-y axis and "x" sensor 1's y axis.
+y axis and "x" sensor 1's y axis. `measure` refuses a turn during which the driver lost motion.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -52,6 +54,24 @@ def predicted_travel(config: TrackballConfig, axis: str, turns: float) -> np.nda
     if axis not in AXES:
         raise CalibrationError(f"calibration axis must be one of {', '.join(AXES)}, got {axis!r}")
     return config.solver().readings(np.array(AXES[axis]) * 2 * math.pi * turns)
+
+
+#: driver counters that grow when motion never reached its raw counts: the device lost or found again, reports
+#: lost on the way (a `seq` gap) or restarted, reports dropped as unreadable, a sensor past its tracking limit
+LOSS_COUNTERS = ("unplugs", "connects", "lost_reports", "seq_resets", "short_reports", "bad_reports", "overflows")
+
+
+def measure(driver, axis: str, turns: float, turn: Callable[[Any, str, float], list[int]]) -> Step:
+    """One calibration step: `turn(driver, axis, turns)` has the ball turned (by hand, or `turn_emulated`) and
+    returns the driver's raw counts (x0, y0, x1, y1). CalibrationError naming the `LOSS_COUNTERS` that grew
+    meanwhile: counts lost there would give too few counts per mm."""
+    before = {k: driver.counters[k] for k in LOSS_COUNTERS}
+    counts = turn(driver, axis, turns)
+    lost = [f"{k} +{driver.counters[k] - v}" for k, v in before.items() if driver.counters[k] != v]
+    if lost:
+        raise CalibrationError(f"the turn about {axis} lost motion: {', '.join(lost)} while its counts were summed "
+                               "(they would give too few counts per mm): repeat the calibration")
+    return Step(axis, turns, tuple(counts))
 
 
 def calibrate(config: TrackballConfig, steps: list[Step], min_share: float = 0.5, min_counts: int = 100) -> Result:

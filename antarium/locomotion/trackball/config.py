@@ -165,8 +165,12 @@ def _sensor(i: int, table: Any) -> SensorConfig:
     return SensorConfig(counts_per_mm=cpmm, signs=tuple(int(s) for s in signs), calibration_cpi=cal_cpi, **angles)
 
 
-def parse_section(section: dict[str, Any] | None) -> TrackballConfig:
-    """A `TrackballConfig` from a parsed `[trackball]` table (None or {} = all defaults)."""
+def parse_section(section: dict[str, Any] | None, recalibrating: bool = False) -> TrackballConfig:
+    """A `TrackballConfig` from a parsed `[trackball]` table (None or {} = all defaults).
+
+    recalibrating: a sensor calibrated at another resolution than `resolution_cpi` (`calibration_cpi`) takes the
+    nominal counts per mm instead of being refused: what `antarium trackball calibrate` reads before it measures
+    them anew at `resolution_cpi`."""
     section = section or {}
     if not isinstance(section, dict):
         raise TrackballConfigError(f"[trackball] must be a table, got {section!r}")
@@ -185,6 +189,10 @@ def parse_section(section: dict[str, Any] | None) -> TrackballConfig:
                 f"report), got {sensors!r}"
             )
         values["sensors"] = tuple(_sensor(i, t) for i, t in enumerate(sensors))
+        if recalibrating:
+            cpi = values.get("resolution_cpi", DEFAULT_CPI)
+            values["sensors"] = tuple(s if s.calibration_cpi in (None, cpi) else
+                                      replace(s, counts_per_mm=None, calibration_cpi=None) for s in values["sensors"])
     config = TrackballConfig(**values)
     try:
         config.solver()
@@ -211,21 +219,22 @@ def to_section(config: TrackballConfig) -> dict[str, Any]:
     }
 
 
-def load(source: str | Path | dict[str, Any] | TrackballConfig | None) -> TrackballConfig:
+def load(source: str | Path | dict[str, Any] | TrackballConfig | None, recalibrating: bool = False) -> TrackballConfig:
     """A `TrackballConfig` from a rig file path, a `[trackball]` table, a config, or None (defaults).
 
     A rig file's `[trackball]` without `ball_radius` takes the file's `[loop] ball_radius_m` (one ball, one radius).
+    recalibrating: see `parse_section`.
     """
     if source is None or isinstance(source, TrackballConfig):
         return source or TrackballConfig()
     if isinstance(source, dict):
-        return parse_section(source)
+        return parse_section(source, recalibrating)
     if not isinstance(source, str | Path):
         raise TrackballConfigError(f"trackball config must be a rig file's path or a [trackball] table, got "
                                    f"{source!r}")
     from antarium.config import read_toml
 
-    return parse_section(trackball_table(read_toml(Path(source))))
+    return parse_section(trackball_table(read_toml(Path(source))), recalibrating)
 
 
 def write_section(path: str | Path, config: TrackballConfig) -> Path | None:
@@ -268,7 +277,7 @@ def _edit_calibration(text: str, doc: dict[str, Any], config: TrackballConfig) -
     """`text` with the sensors' counts_per_mm and signs of `config` written in place, or None when the file's
     [trackball] differs from `config` in more than those, or its layout is not one edited safely here."""
     try:
-        old = parse_section(trackball_table(doc))
+        old = parse_section(trackball_table(doc), recalibrating=True)  # (a calibration at a new resolution)
     except TrackballConfigError:
         return None
     try:
