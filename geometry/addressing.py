@@ -81,14 +81,21 @@ def led_to_driver(local, led):
 def driver_to_led(chain, chip_in_chain, channel):
     """(chain, chip_in_chain, channel) -> (local pixel, led). Unused channels raise ValueError."""
     chain = _check_range("chain", chain, len(CHIPS_PER_CHAIN))
-    chips_in = np.asarray(CHIPS_PER_CHAIN)[chain]
-    chip_in_chain = np.asarray(chip_in_chain)
-    if np.any((chip_in_chain < 0) | (chip_in_chain >= chips_in)):
-        raise ValueError(f"chip_in_chain out of range for chain {chain!r}: allowed 0..{chips_in - 1}")
+    chip_in_chain = _check_range("chip_in_chain", chip_in_chain, max(CHIPS_PER_CHAIN))
     channel = _check_range("channel", channel, CHANNELS_PER_CHIP)
+    chain, chip_in_chain, channel = np.broadcast_arrays(chain, chip_in_chain, channel)
+    short = chip_in_chain >= np.asarray(CHIPS_PER_CHAIN)[chain]
+    if np.any(short):
+        i = np.flatnonzero(short)[0]
+        c = int(chain.flat[i])
+        raise ValueError(f"chip_in_chain out of range: chain {c} has chips 0..{CHIPS_PER_CHAIN[c] - 1}, "
+                         f"got {int(chip_in_chain.flat[i])}")
     k = (_CHAIN_START[chain] + chip_in_chain) * CHANNELS_PER_CHIP + channel
     if np.any(k >= LEDS_PER_PANEL):
-        raise ValueError(f"driver channel is not connected: LED index {k!r} >= {LEDS_PER_PANEL}")
+        i = np.flatnonzero(k >= LEDS_PER_PANEL)[0]
+        raise ValueError(f"driver channel is not connected: chain {int(chain.flat[i])}, chip "
+                         f"{int(chip_in_chain.flat[i])}, channel {int(channel.flat[i])} (LED index {int(k.flat[i])}; "
+                         f"allowed up to {LEDS_PER_PANEL - 1})")
     return k // LEDS_PER_PIXEL, k % LEDS_PER_PIXEL
 
 

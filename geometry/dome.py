@@ -14,7 +14,7 @@ import numpy as np
 
 from . import addressing
 from .constants import GB_PER_PANEL, N_PANELS, N_PIXELS, PIXELS_PER_PANEL
-from .layout import PanelLayout, load_layout, to_dome
+from .layout import SHIPPED_LAYOUT, PanelLayout, load_layout, to_dome
 from .photometry import DEFAULT_HALF_INTENSITY_DEG, compensation_gain, emission_angle
 from .solid import PanelFrames, Solid, dome_panels
 
@@ -126,7 +126,19 @@ class Dome:
         return np.arange(panel * PIXELS_PER_PANEL, (panel + 1) * PIXELS_PER_PANEL)
 
 
-@lru_cache(maxsize=4)
 def load_dome(layout_path: str | Path | None = None) -> Dome:
-    """The dome built from a layout file (default: the shipped layout), cached per path."""
-    return Dome(Solid(), load_layout(layout_path))
+    """The dome built from a layout file (default: the shipped layout), cached per file: a file rewritten since
+    (another modification time or size) is read again."""
+    path = SHIPPED_LAYOUT if layout_path is None else Path(layout_path)
+    try:
+        stat = path.stat()
+        stamp = (stat.st_mtime_ns, stat.st_size)
+    except OSError:  # load_layout says what is wrong with the path
+        stamp = None
+    return _dome_of_file(path.resolve(), stamp)
+
+
+@lru_cache(maxsize=4)
+def _dome_of_file(path: Path, stamp: tuple[int, int] | None) -> Dome:
+    """`load_dome`'s cache, keyed by the file and its (modification time in ns, size in bytes)."""
+    return Dome(Solid(), load_layout(path))

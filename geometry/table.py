@@ -22,7 +22,7 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "x_m": ("float", "position, m"),
     "y_m": ("float", "position, m"),
     "z_m": ("float", "position, m"),
-    "azimuth_deg": ("float", "deg, 0 along +x, counter-clockwise from above"),
+    "azimuth_deg": ("float", "deg in (-180, 180], 0 along +x, counter-clockwise from above"),
     "elevation_deg": ("float", "deg above the horizon"),
     "distance_m": ("float", "m from the dome centre"),
     "emission_angle_deg": ("float", "deg between LED axis and the ray to the centre"),
@@ -87,19 +87,28 @@ def export_table(dome, path: str | Path) -> Path:
 
 
 def read_table(path: str | Path) -> dict[str, np.ndarray]:
-    """Read a table written by `export_table` back into column arrays."""
+    """Read a table written by `export_table` back into column arrays (ValueError naming the file for a table
+    without rows, a CSV row of the wrong length or a JSON table without all of `COLUMNS`)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"LED table not found: {path}")
     if path.suffix.lower() == ".csv":
         with path.open(newline="") as f:
             rows = list(csv.reader(f))
+        if len(rows) < 2:
+            raise ValueError(f"{path}: no rows; an LED table has a header and one row per pixel")
         header, body = rows[0], rows[1:]
         if header != list(COLUMNS):
             raise ValueError(f"{path}: columns {header} do not match the LED table columns {list(COLUMNS)}")
+        for line, row in enumerate(body, start=2):
+            if len(row) != len(header):
+                raise ValueError(f"{path}: row {line} has {len(row)} fields; allowed {len(header)}")
         raw = dict(zip(header, zip(*body, strict=True), strict=True))
     elif path.suffix.lower() == ".json":
         raw = json.loads(path.read_text())["data"]
+        missing = [c for c in COLUMNS if c not in raw]
+        if missing:
+            raise ValueError(f"{path}: the table lacks the columns {missing}")
     else:
         raise ValueError(f"LED table must end in .csv or .json, got {path.name!r}")
     conv = {"int": np.int64, "float": np.float64, "str": str}

@@ -63,8 +63,9 @@ def run(args: argparse.Namespace) -> int:
     from antarium.geometry.spacing import layout_summary
 
     # every output checked before the work: the search, the summary and the pictures are not thrown away
-    if args.export:
-        check_output(args.export, "--export", suffixes=(".csv", ".json"), make_folders=False)
+    # an empty name is bad input, not "not given"; the writers get the names as checked (`~` expanded)
+    if args.export is not None:
+        export_path = check_output(args.export, "--export", suffixes=(".csv", ".json"), make_folders=False)
     if args.layout_out is not None and not args.regenerate:
         raise ValueError("--layout-out applies only with --regenerate")
     if args.regenerate:
@@ -79,9 +80,9 @@ def run(args: argparse.Namespace) -> int:
         layout_path = check_output(args.layout_out, "--layout-out", suffixes=(".npz",))
     elif args.margin_mm is not None or args.min_pitch_mm is not None:
         raise ValueError("--margin-mm and --min-pitch-mm apply only with --regenerate")
-    pictures = not args.no_pictures and (args.out is not None or not (args.export or args.regenerate))
+    pictures = not args.no_pictures and (args.out is not None or not (args.export is not None or args.regenerate))
     if pictures:
-        out = check_output(args.out or ".", "--out", folder=True)
+        out = check_output("." if args.out is None else args.out, "--out", folder=True)
     if args.regenerate:
         layout = generate_layout(LayoutParams(**kw), progress=True)
         layout_path.parent.mkdir(parents=True, exist_ok=True)
@@ -95,10 +96,10 @@ def run(args: argparse.Namespace) -> int:
     load_ms = (time.perf_counter() - t0) * 1e3
     print_summary(layout_summary(dome))
     print(f"  layout load time {load_ms:.1f} ms")
-    if args.export:
+    if args.export is not None:
         from antarium.geometry.table import export_table
 
-        print(f"per-LED table: {export_table(dome, args.export)}")
+        print(f"per-LED table: {export_table(dome, export_path)}")
     if pictures:
         from antarium.plots.layout import dome_3d, mollweide_map
 
