@@ -100,34 +100,52 @@ def _objective(local_xy: np.ndarray, frames: PanelFrames) -> float:
     return float(a.std() / a.mean())
 
 
+def _pitch_windows(n: int, min_pitch: float, solid: Solid, margin: float) -> list[tuple[float, float]]:
+    """Pitch ranges (lo, hi) in m to search for n points, in order, each 0.7..1.3 x the pitch at which n points
+    tile an area (`lo` raised to `min_pitch`; a range with nothing above it left out): first the estimate the
+    shipped layout was searched with (kept so that it is found again: a rough inset that shrinks too fast beyond
+    a margin of about 12 mm), then the triangle inset by `margin` (the area times (1 - margin / inradius)^2)."""
+    area = 0.5 * solid.base_edge * solid.height
+    inradius = 2 * area / (solid.base_edge + 2 * solid.leg)
+    areas = (area * max(1 - 4 * margin * (1 / solid.base_edge + 1 / solid.height), 0.0) ** 2,
+             area * max(1 - margin / inradius, 0.0) ** 2)
+    windows = []
+    for inset in areas:
+        p_fit = np.sqrt(2 * inset / (np.sqrt(3) * n))
+        if min_pitch <= 1.3 * p_fit and p_fit > 0:
+            windows.append((max(min_pitch, 0.7 * p_fit), 1.3 * p_fit))
+    return windows
+
+
+def _grid(n: int, lo: float, hi: float, params: LayoutParams, solid: Solid) -> list[Lattice]:
+    """The lattices of the (pitch, offset) grid over pitches lo..hi (m) that hold exactly n points."""
+    pitches = np.linspace(lo, hi, params.grid_pitches).tolist()
+    found = []
+    for variant in VARIANTS:
+        period = max(pitches) * (1.0 if variant == "columns" else np.sqrt(3) / 2)
+        offsets = np.linspace(0, period, params.grid_offsets, endpoint=False)
+        counts = count_grid(np.array(pitches), offsets, variant, solid.base_edge, solid.height, params.margin)
+        for i, j in zip(*np.nonzero(counts == n), strict=True):
+            found.append(Lattice(variant, pitches[i], float(offsets[j])))
+    return found
+
+
 def _search(
     n: int, min_pitch: float, params: LayoutParams, solid: Solid, frames: PanelFrames, name: str,
     valid=lambda pts: True, progress: bool = False,
 ) -> tuple[Lattice, np.ndarray]:
-    """Best lattice holding exactly n points (see module docstring)."""
+    """Best lattice holding exactly n points (see module docstring): the grid over the first of
+    `_pitch_windows` where a lattice holds them (and is `valid`), then the refinement."""
+    from tqdm import tqdm
+
     base, height, margin = solid.base_edge, solid.height, params.margin
-    inset_area = 0.5 * base * height * (1 - 2 * margin * (1 / base + 1 / height) * 2) ** 2
-    p_fit = np.sqrt(2 * max(inset_area, 0) / (np.sqrt(3) * n))  # pitch at which n points tile the area
-    hi = 1.3 * p_fit
-    if min_pitch > hi:
+    windows = _pitch_windows(n, min_pitch, solid, margin)
+    if not windows:
         raise ValueError(
             f"{n} {name} pixels do not fit at min_pitch {min_pitch * 1e3:.1f} mm with margin "
-            f"{margin * 1e3:.1f} mm: the triangle holds them only at pitches up to about {hi * 1e3:.1f} mm"
+            f"{margin * 1e3:.1f} mm: the triangle holds them only at pitches up to about "
+            f"{max((hi for _, hi in _pitch_windows(n, 0.0, solid, margin)), default=0.0) * 1e3:.1f} mm"
         )
-    pitches = np.linspace(max(min_pitch, 0.7 * p_fit), hi, params.grid_pitches).tolist()
-    candidates = []
-    for variant in VARIANTS:
-        period = max(pitches) * (1.0 if variant == "columns" else np.sqrt(3) / 2)
-        offsets = np.linspace(0, period, params.grid_offsets, endpoint=False)
-        counts = count_grid(np.array(pitches), offsets, variant, base, height, margin)
-        for i, j in zip(*np.nonzero(counts == n), strict=True):
-            candidates.append(Lattice(variant, pitches[i], float(offsets[j])))
-    if not candidates:
-        raise ValueError(
-            f"no symmetric hexagonal lattice holds exactly {n} {name} pixels with margin {margin * 1e3:.1f} mm "
-            f"and pitch >= {min_pitch * 1e3:.1f} mm; allowed: a smaller margin or min_pitch"
-        )
-    rng = np.random.default_rng(params.seed)
 
     def score(lat: Lattice) -> float:
         pts = points_in_triangle(lat.pitch, lat.offset, lat.variant, base, height, margin)
@@ -135,21 +153,28 @@ def _search(
             return np.inf
         return _objective(pts, frames)
 
-    from tqdm import tqdm
-
-    bar = tqdm(total=len(candidates) + params.refine_steps, desc=f"{name} layout", disable=not progress, leave=False)
-    best, best_score = None, np.inf
-    for lat in candidates:
-        s = score(lat)
-        bar.update()
-        if s < best_score:
-            best, best_score = lat, s
+    best, best_score, held = None, np.inf, False
+    for lo, hi in windows:
+        candidates = _grid(n, lo, hi, params, solid)
+        held = held or bool(candidates)
+        for lat in tqdm(candidates, desc=f"{name} layout", disable=not progress, leave=False):
+            s = score(lat)
+            if s < best_score:
+                best, best_score = lat, s
+        if best is not None:
+            break
+    if not held:
+        raise ValueError(
+            f"no symmetric hexagonal lattice holds exactly {n} {name} pixels with margin {margin * 1e3:.1f} mm "
+            f"and pitch >= {min_pitch * 1e3:.1f} mm; allowed: a smaller margin or min_pitch"
+        )
     if best is None:
         raise ValueError(
             f"no lattice of {n} {name} pixels keeps uv_clearance {params.uv_clearance * 1e3:.1f} mm from the GB "
             "pixels; allowed: a smaller uv_clearance"
         )
-    step_p, step_o = (hi - pitches[0]) / params.grid_pitches, best.pitch / params.grid_offsets
+    rng = np.random.default_rng(params.seed)
+    step_p, step_o = (hi - lo) / params.grid_pitches, best.pitch / params.grid_offsets
     for k in range(params.refine_steps):
         shrink = 1.0 - k / params.refine_steps
         trial = Lattice(
@@ -161,8 +186,6 @@ def _search(
             s = score(trial)
             if s < best_score:
                 best, best_score = trial, s
-        bar.update()
-    bar.close()
     return best, points_in_triangle(best.pitch, best.offset, best.variant, base, height, margin)
 
 

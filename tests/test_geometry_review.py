@@ -106,3 +106,17 @@ def test_load_dome_reads_a_rewritten_layout_file_again(tmp_path):
     np.testing.assert_array_equal(again.layout.gb, shrunk.gb)
     assert not np.array_equal(again.positions, first)
     assert load_dome(path) is again  # an unchanged file stays cached
+
+
+def test_the_layout_search_finds_a_board_with_a_wide_margin():
+    """At a 20 mm margin lattices of exactly 361 GB pixels exist (pitch 9.9-10.3 mm); the search window the shipped
+    layout was found in shrank too fast there and the search said none existed."""
+    from scipy.spatial.distance import cdist, pdist
+
+    from antarium.geometry.layout import LayoutParams, generate_layout
+
+    params = LayoutParams(margin=0.020)
+    layout = generate_layout(params)
+    assert layout.gb.shape == (361, 2) and layout.uv.shape == (9, 2)
+    assert pdist(layout.gb).min() >= params.gb_min_pitch and pdist(layout.uv).min() >= params.uv_min_pitch
+    assert cdist(layout.uv, layout.gb).min() >= params.uv_clearance
