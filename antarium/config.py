@@ -139,6 +139,8 @@ class LinkSection(Section):
         "the panels' global LED current limit, sent at start and again to a distributor that rebooted"))
     dot_correction: int | str = Field(100, description=(
         "per-LED current percent, sent with brightness_percent: one for every LED, or a .npy file of them"))
+    speed_mbit_s: float = _finite(1.0, 100_000.0, 100.0, "the dome link's line rate, Mbit/s: the frames' and "
+                                  "polariser updates' bit budget (docs/protocol.md section 1)")
     ALLOWED: ClassVar[dict[str, str]] = {
         "dot_correction": "a whole percent 0..100 for every LED, or the path of a .npy file of percents, shape "
                           "(55, 740) or (20350, 2)"}

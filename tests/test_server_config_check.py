@@ -21,8 +21,11 @@ def _write(tmp_path, text: str) -> str:
     ('[render]\nscene = "/nonexistent/world.glb"\n', "[render] scene file '/nonexistent/world.glb' (path) does not"),
     ('[render]\nscene = {scene = "horizon", panorama = "/no/pano.png"}\n', "(panorama) does not exist"),
     ('[locomotion]\nsource = "scriptd"\n', "[locomotion] source 'scriptd' is unknown; allowed: ant, bus, fictrac"),
-    ('[loop]\nrate_hz = 192.0\n', "[loop] rate_hz = 192 leaves no room on the 100 Mbit/s dome link for a polariser "
-     "update (the polarisers would never move); allowed: at most 191.1 frames/s"),
+    ('[loop]\nrate_hz = 192.0\n', "[loop] rate_hz = 192 leaves no room on the 100 Mbit/s dome link ([link] "
+     "speed_mbit_s) for a polariser update (the polarisers would never move); allowed: at most 191.1 frames/s"),
+    ('[loop]\nrate_hz = 1920.0\n[link]\nspeed_mbit_s = 1000\n', "[loop] rate_hz = 1920 leaves no room on the 1000 "
+     "Mbit/s dome link ([link] speed_mbit_s) for a polariser update (the polarisers would never move); allowed: at "
+     "most 1911.2 frames/s"),
     ('[render]\nface_size_px = 7\n', "[render] face_size_px = 7 is not a face size the renderer accepts; allowed: 55"),
     ('[locomotion]\nsource = "scripted"\nsped = 0.03\n',
      "[locomotion] source 'scripted' has no option 'sped'; allowed: ball_radius, clock, duration, heading_deg, "
@@ -97,3 +100,27 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def test_the_link_budget_follows_the_configured_line_rate():
+    """`[link] speed_mbit_s`: the frame loop's polariser budget is that link's (a gigabit distributor carries an
+    update in every period at 190 frames/s, where the board's 100 Mbit/s defers about one in seven)."""
+    from antarium.config import LinkSection
+    from antarium.firmware_proto.budget import DEFAULT_LINK_BPS
+    from antarium.server.server import Server
+
+    assert LinkSection().speed_mbit_s * 1e6 == DEFAULT_LINK_BPS
+    check_config(resolve({"loop": {"rate_hz": 192.0}, "link": {"speed_mbit_s": 1000.0}}), ports=False)
+    for speed, deferred in ((100.0, True), (1000.0, False)):
+        config = resolve({"link": {"interface": "virtual", "speed_mbit_s": speed}, "bus": {"enabled": False}})
+        server = Server(config, renderer_factory=None, echo=lambda line: None)
+        server.run(seconds=0.0)
+        budget = server.loop.link_budget
+        assert budget.period_bits == pytest.approx(speed * 1e6 / 190.0)
+        for _ in range(70):  # an update every period, as when the angles change every frame
+            sent = budget.update_fits()
+            budget.deferred += not sent
+            budget.period(sent)
+        assert (budget.deferred > 0) == deferred
+    with pytest.raises(ConfigError, match=r"\[link\] speed_mbit_s"):
+        resolve({"link": {"speed_mbit_s": 0.5}})

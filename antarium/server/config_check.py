@@ -25,7 +25,7 @@ def check_config(config: RigConfig, *, ports: bool = True) -> RigConfig:
     also refuse a bus endpoint or emulator port that something on this computer holds now."""
     _check_scene(config.render.scene)
     _check_face_size(config.render.face_size_px)
-    _check_rate(config.loop.rate_hz)
+    _check_rate(config.loop.rate_hz, config.link.speed_mbit_s)
     _check_dot_correction(config.link.dot_correction)
     if config.link.interface == "udp":
         check_link_host(config.link.host)
@@ -116,16 +116,18 @@ def face_size_range() -> tuple[int, int]:
     return smallest_face_size(), MAX_FACE_SIZE
 
 
-def _check_rate(rate_hz: float) -> None:
-    """A rate whose frames fit the dome link but leave no room for a polariser update: the polarisers would never
-    move (`LinkBudget`). Above the link's frame limit the budget is off (no real dome: emulated benchmarks)."""
+def _check_rate(rate_hz: float, speed_mbit_s: float) -> None:
+    """A rate whose frames fit the dome link of `speed_mbit_s` but leave no room for a polariser update: the
+    polarisers would never move (`LinkBudget`). Above the link's frame limit the budget is off (no real dome:
+    emulated benchmarks)."""
     from antarium.firmware_proto.budget import max_frame_rate, max_rate_with_polarisers
 
-    with_polarisers, frames_only = max_rate_with_polarisers(), max_frame_rate()
+    bps = speed_mbit_s * 1e6
+    with_polarisers, frames_only = max_rate_with_polarisers(bps), max_frame_rate(bps)
     if with_polarisers < rate_hz <= frames_only:
-        raise ConfigError(f"[loop] rate_hz = {rate_hz:g} leaves no room on the 100 Mbit/s dome link for a polariser "
-                          f"update (the polarisers would never move); allowed: at most {with_polarisers:.1f} frames/s "
-                          f"(190 is the dome's rate)")
+        raise ConfigError(f"[loop] rate_hz = {rate_hz:g} leaves no room on the {speed_mbit_s:g} Mbit/s dome link "
+                          f"([link] speed_mbit_s) for a polariser update (the polarisers would never move); allowed: "
+                          f"at most {with_polarisers:.1f} frames/s (190 is the dome's rate)")
 
 
 def _check_face_size(size: int) -> None:

@@ -37,7 +37,7 @@ from antarium.core.ball import BALL_RADIUS_M, arc_step, check_tether, pole_motio
 from antarium.core.clock import Clock
 from antarium.core.pose import Pose
 from antarium.core.rates import DOME_RATE_HZ
-from antarium.firmware_proto.budget import LinkBudget, max_frame_rate
+from antarium.firmware_proto.budget import DEFAULT_LINK_BPS, LinkBudget, max_frame_rate
 from antarium.firmware_proto.polariser import wrap_angles
 from antarium.locomotion import LocomotionSource
 from antarium.trial_log import FRAME_DTYPE
@@ -130,6 +130,7 @@ class FrameLoop:
                  rate_hz: float = DOME_RATE_HZ, closed_loop: bool = True, tether: str = "free_yaw",
                  gain_translation: float = 1.0, gain_rotation: float = 1.0, origin: Pose | None = None,
                  ball_radius: float = BALL_RADIUS_M, keep_gpu_busy: bool | str = "auto", log=None,
+                 link_bps: float = DEFAULT_LINK_BPS,
                  on_frame: Callable[[FrameRecord], None] | None = None,
                  on_event: Callable[[float, str, dict], None] | None = None) -> None:
         if not isinstance(rate_hz, (int, float)) or not 1.0 <= rate_hz <= 2000.0:
@@ -196,8 +197,8 @@ class FrameLoop:
         self.transient_link_failures = 0  # polls that saw failed datagrams without an outage
         self._t_first: float | None = None
         self._polariser_heading: float | None = None
-        #: the dome link's bit budget at 100 Mbit/s (None where the frames alone exceed it: nothing to share)
-        self.link_budget = LinkBudget(rate_hz) if rate_hz <= max_frame_rate() else None
+        #: the dome link's bit budget at `link_bps` bits/s (None where the frames alone exceed it: nothing to share)
+        self.link_budget = LinkBudget(rate_hz, link_bps) if rate_hz <= max_frame_rate(link_bps) else None
         self._polarisers_dirty = False
         self._sky_present = False
         if renderer is not None:

@@ -497,7 +497,7 @@ class Server:
             if folder and not Path(folder).is_absolute():
                 raise CommandError(f"trial_start: parameter 'folder' must be an absolute path, got {_shown(folder)}")
             try:
-                path = log_path(check_log_dir(folder) if folder else self.log_dir, self.rig_name, name)
+                path = log_path(check_log_dir(folder or self.log_dir), self.rig_name, name)  # made again if removed
                 log = TrialLog(path, self.config.to_toml_dict(), name, metadata, flush_s=self.config.log.flush_s,
                                clock=self.clock.now)
             except LogError as exc:
@@ -656,7 +656,8 @@ class Server:
                 else None
             self.loop = FrameLoop.from_config(
                 loop_cfg, clock=self.clock, source=self.source, renderer=self.renderer, link=self.link,
-                log=self.trial_log, on_frame=self._on_frame, on_event=self._publish_event)
+                log=self.trial_log, on_frame=self._on_frame, on_event=self._publish_event,
+                link_bps=self.config.link.speed_mbit_s * 1e6)
             if self.renderer is not None:
                 self.load_scene(self.config.render.scene)
                 if hasattr(self.renderer, "wait_far_layer") and not self.renderer.wait_far_layer(self.loop.pose):
