@@ -165,7 +165,10 @@ void main() {
     float a = max(p.x, 0.0) * gain[i].x;
     float b = max(p.y, 0.0) * gain[i].y;
     if (uv) {
-        a = min(a, FULL);
+        if (a > FULL) {  // a UV above full drive: both scaled, the degree of polarisation kept
+            b *= FULL / a;
+            a = FULL;
+        }
         b = min(b, a);
         a = a - b;
     } else if (a + b > FULL) {

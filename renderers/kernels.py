@@ -105,7 +105,8 @@ def convert_pairs(pairs, gain, is_uv, swap, out):  # pragma: no cover - compiled
 
     gain (n, 2) float32: 65535 * per-LED gain * brightness * channel gain of each output column.
     GB pixel: (G, B) (swapped if `swap`) * gain, both scaled down together if their sum exceeds 65535.
-    UV pixel: plain = (UV - polarised) * gain, polarised * gain, polarised clipped to [0, UV].
+    UV pixel: plain = (UV - polarised) * gain, polarised * gain, polarised clipped to [0, UV]; a UV above 65535
+    (a UV channel gain above 1) scales both down together, so the degree of polarisation stays.
     Values are truncated, so every pair's sum stays <= 65535.
     """
     for i in range(pairs.shape[0]):
@@ -116,7 +117,9 @@ def convert_pairs(pairs, gain, is_uv, swap, out):  # pragma: no cover - compiled
         a = max(p0, 0.0) * gain[i, 0]
         b = max(p1, 0.0) * gain[i, 1]
         if is_uv[i]:
-            a = min(a, FULL)
+            if a > FULL:
+                b *= FULL / a
+                a = FULL
             b = min(b, a)
             a = a - b
         else:

@@ -4,7 +4,8 @@ Sampled radiance per LED is a pair in [0, 1] (1 = full drive at gain 1): [green,
 [UV, polarised UV] for a UV pixel. GB pixel: (G, B) * 65535 * gain * brightness * channel gain; if G + B
 exceeds 65535 both are scaled by the same factor (hue kept; a pixel never draws more than one LED's current).
 UV pixel: total UV radiance I with polarised share P: plain LED = I - P, polarised LED = P, so their sum is
-I <= 65535 and the degree of polarisation is P / I. This split assumes the polarised LED seen through its polariser
+I <= 65535 and the degree of polarisation is P / I (a UV above 65535 after the gains scales both down together,
+as a GB pair is, so the degree stays). This split assumes the polarised LED seen through its polariser
 emits the same UV radiance per drive unit as the plain LED; the polariser's transmission is not modelled. A real
 polariser passes at most half of unpolarised light (an ideal one: a requested degree 0.75 would come out as 0.60 and
 the pixel's UV at 62.5 % to 100 % of the request), so a rig must measure, per UV pixel, the ratio of the two LEDs'

@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from antarium.core.numbers import check_number
+from antarium.core.numbers import as_real, check_number
 from antarium.core.pose import Pose
 from antarium.geometry.constants import N_PANELS, N_PIXELS, UV_PER_PANEL
 
@@ -132,10 +132,10 @@ class Renderer:
 
     dome: `antarium.geometry.Dome` (default: `load_dome()`); face_size: cube face side in texels (default
     from the LED pitch); footprint_deg: FWHM of each LED's acceptance; brightness: global drive scale
-    in [0, 1]; near, far: clip planes (m); far_face_size: side of the far-field cube texture; chunk_size:
-    cell (m) of the culling grid of large meshes; lod_texels: level-of-detail bound in texels, twice the most a
-    merged vertex moves (0: full detail always); clock: an `antarium.core.clock` clock for drifting stimuli
-    when `render` gets no time;
+    in [0, 1]; near, far: clip planes (m); far_face_size: side of the far-field cube texture (16..2048 texels,
+    default face_size); chunk_size: cell (m, > 0) of the culling grid of large meshes; lod_texels: level-of-detail
+    bound in texels, twice the most a merged vertex moves (0: full detail always); clock: an `antarium.core.clock`
+    clock for drifting stimuli when `render` gets no time;
     fast_far_field: take static far fields from a footprint-integrated table (`farfield`) instead of drawing
     them into the cube map every frame; far_layer: "off", "sync" or "async": draw only the meshes within
     `near_radius` (m) every frame, the rest from a layer rendered from a recent eye position while its
@@ -156,19 +156,23 @@ class Renderer:
         path = check_path(path)
         if far_layer not in (*MODES, "auto"):
             raise ValueError(f"far_layer must be one of {', '.join(MODES)} or auto, got {far_layer!r}")
-        if not (np.isfinite(near_radius) and near_radius > 0):
+        if not (math.isfinite(as_real(near_radius)) and near_radius > 0):
             raise ValueError(f"near_radius must be a positive number of metres, got {near_radius!r}")
-        if not (np.isfinite(far_layer_error_deg) and 0 < far_layer_error_deg <= 5):
+        if not (math.isfinite(as_real(far_layer_error_deg)) and 0 < far_layer_error_deg <= 5):
             raise ValueError(f"far_layer_error_deg must be in (0, 5], got {far_layer_error_deg!r}")
-        if not (np.isfinite(footprint_deg) and 0 < footprint_deg < footprint.MAX_FWHM_DEG):
+        if not (math.isfinite(as_real(chunk_size)) and chunk_size > 0):
+            raise ValueError(f"chunk_size must be a positive number of metres, got {chunk_size!r}")
+        if far_face_size is not None:
+            _check_face_size("far_face_size", far_face_size)
+        if not (math.isfinite(as_real(footprint_deg)) and 0 < footprint_deg < footprint.MAX_FWHM_DEG):
             raise ValueError(f"footprint_deg must be in (0, {footprint.MAX_FWHM_DEG:g}), got {footprint_deg!r}")
         if face_size is not None or far_layer != "auto":  # else the default depends on the path: checked below
             _check_face_size("face_size", _default_face_size(face_size, far_layer), footprint_deg)
         m = DEFAULT_FACE_SIZE if layer_face_size is None else layer_face_size
         _check_face_size("layer_face_size", m)
-        if not (0 < near < far and np.isfinite(far)):
+        if not (0 < as_real(near) < as_real(far) < math.inf):
             raise ValueError(f"clip planes must satisfy 0 < near < far, got near={near!r}, far={far!r}")
-        if not (np.isfinite(lod_texels) and lod_texels >= 0):
+        if not (math.isfinite(as_real(lod_texels)) and lod_texels >= 0):
             raise ValueError(f"lod_texels must be a non-negative number, got {lod_texels!r}")
         if dome is None:
             from antarium.geometry import load_dome
@@ -199,7 +203,7 @@ class Renderer:
         self.layer_face_size = int(layer_face_size)
         self.dome = dome
         self.face_size = n
-        self.far_face_size = int(far_face_size or n)
+        self.far_face_size = n if far_face_size is None else int(far_face_size)
         self.footprint_deg = float(footprint_deg)
         self.near, self.far = float(near), float(far)
         self.chunk_size = float(chunk_size)
