@@ -102,7 +102,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_the_link_budget_follows_the_configured_line_rate():
+def test_the_link_budget_follows_the_configured_line_rate(tmp_path):
     """`[link] speed_mbit_s`: the frame loop's polariser budget is that link's (a gigabit distributor carries an
     update in every period at 190 frames/s, where the board's 100 Mbit/s defers about one in seven)."""
     from antarium.config import LinkSection
@@ -112,7 +112,8 @@ def test_the_link_budget_follows_the_configured_line_rate():
     assert LinkSection().speed_mbit_s * 1e6 == DEFAULT_LINK_BPS
     check_config(resolve({"loop": {"rate_hz": 192.0}, "link": {"speed_mbit_s": 1000.0}}), ports=False)
     for speed, deferred in ((100.0, True), (1000.0, False)):
-        config = resolve({"link": {"interface": "virtual", "speed_mbit_s": speed}, "bus": {"enabled": False}})
+        config = resolve({"link": {"interface": "virtual", "speed_mbit_s": speed}, "bus": {"enabled": False},
+                          "log": {"dir": str(tmp_path / "trials")}})
         server = Server(config, renderer_factory=None, echo=lambda line: None)
         server.run(seconds=0.0)
         budget = server.loop.link_budget
