@@ -642,7 +642,11 @@ def _create(conn, path: str, attrs: dict[str, Any], dtypes: dict[str, np.dtype])
 
     try:
         f = h5py.File(path, "w-", libver=LIBVER, locking=False)
-    except (OSError, ValueError) as exc:  # it exists, or its folder is missing or not writable
+    except FileExistsError as exc:  # another's file: it stays
+        conn.send(("error", str(exc)))
+        return
+    except (OSError, ValueError) as exc:  # its folder missing or not writable, or a full disk (an empty file made)
+        Path(path).unlink(missing_ok=True)
         conn.send(("error", str(exc)))
         return
     try:
@@ -717,6 +721,7 @@ def _write(conn, path: str, dtypes: dict[str, np.dtype], written: dict[str, int]
                     lost += len(bad)
                     error = (f"trial log {path!r}: {len(bad)} row(s) of table {table!r} not written, the first "
                              f"{bad[0]}; allowed: values of the table's column types (docs/logs.md)")
+            f = None
             try:  # the rows fit their tables: only HDF5 can fail here (disk full)
                 f = _open_for_append(path)
                 for table, data in arrays.items():
@@ -724,16 +729,17 @@ def _write(conn, path: str, dtypes: dict[str, np.dtype], written: dict[str, int]
                     n = ds.shape[0]
                     ds.resize((n + len(data),))
                     ds[n:] = data
-                f.close()  # flushes: only now is the batch in the file
+                    ds.flush()  # a full disk fails here or at f.flush(), never in a dataset's or the file's close,
+                    # where HDF5 only prints the error and can then crash (SIGSEGV) at the next call
+                f.flush()
+                f.close()  # only now is the batch in the file
                 _fsync(path)  # and only now on the disk
                 for table, data in arrays.items():
                     written[table] += len(data)
             except (OSError, RuntimeError, ValueError, TypeError) as exc:  # `f` stays open and referenced until
                 # os._exit below: closing a file whose write failed (even by garbage collection) can crash HDF5
                 failed = True
-                error = (f"writing trial log {path!r} failed: {exc}; what was written before stays, but the file "
-                         "stays marked open for writing: open_log() reads it, plain HDF5 readers (MATLAB) only after "
-                         f"`h5clear -s {path}` (package hdf5-tools)")
+                error = f"writing trial log {path!r} failed: {exc}; " + (_unopened if f is None else _marked_open)(path)
                 lost += sum(len(data) for data in arrays.values())
         try:
             conn.send(("written", {"batch": number, "rows_written": written, "rows_lost": lost, "error": error,
@@ -745,6 +751,20 @@ def _write(conn, path: str, dtypes: dict[str, np.dtype], written: dict[str, int]
     if failed:  # HDF5 cannot shut down after a failed write without risking a crash: what is on disk stays
         # (readable as after a crash), the parent has been told, leave without HDF5's shutdown
         os._exit(0)
+
+
+def _marked_open(path: str) -> str:
+    """What a write that failed (disk full) leaves: the error's end."""
+    return ("what was written before stays, but the file stays marked open for writing: open_log() reads it, plain "
+            f"HDF5 readers (MATLAB) only after `h5clear -s {path}` (package hdf5-tools)")
+
+
+def _unopened(path: str) -> str:
+    """What a file that could not be opened for a batch is: the error's end (no more rows are written to it)."""
+    if not os.path.exists(path):
+        return ("no file is at that path any more (it, or its folder, was removed or moved): the rows written "
+                "before went with it")
+    return "nothing was written to it: it stays as the batches before left it, closed and readable"
 
 
 def _take_waiting(conn, number: int, batch: dict[str, list]) -> tuple[bool, int]:
