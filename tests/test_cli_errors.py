@@ -134,6 +134,14 @@ def test_demo_out_the_system_refuses_is_named_before_the_work(monkeypatch, capsy
     assert "--out '/proc/antarium-demo-out': " in _one_line(capsys, "demo")
 
 
+def test_layout_out_the_system_refuses_is_named_before_the_work(capsys):
+    """The same for `layout --out` (its summary was printed, then the pictures failed without naming --out)."""
+    assert main(["layout", "--out", "/proc/antarium-layout-out"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1
+    assert "--out '/proc/antarium-layout-out': cannot make the folder" in err
+
+
 def test_layout_export_below_a_file_says_so(fake_png, capsys):
     assert main(["layout", "--export", str(fake_png / "leds.csv")]) == 2
     line = _one_line(capsys, "layout")

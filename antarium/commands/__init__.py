@@ -81,4 +81,13 @@ def check_output(path: str | os.PathLike, option: str, *, suffixes: Sequence[str
                              "where files can be made") from None
         if not existed:
             target.unlink()
+    if folder and not target.exists():  # tried the same way: made, then removed again (with what it made)
+        made = [p for p in (target, *target.parents) if not p.exists()]
+        try:
+            target.mkdir(parents=True)
+        except OSError as exc:
+            raise ValueError(f"{option} {text!r}: cannot make the folder ({exc.strerror}); give a folder where "
+                             "folders can be made") from None
+        for p in made:
+            p.rmdir()
     return target

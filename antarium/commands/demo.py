@@ -31,12 +31,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0 <= args.rig_seconds <= 3600:
         raise ValueError(f"--rig-seconds must be in [0, 3600], got {args.rig_seconds:g}")
-    out = check_output(args.out, "--out", folder=True)
-    try:  # made before any work: a folder the system refuses (/proc/x; root passes the permission check) is said now
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"--out {args.out!r}: cannot make the folder ({exc.strerror}); give a folder this user can "
-                         "write in") from None
+    out = check_output(args.out, "--out", folder=True)  # a folder the system refuses (/proc/x) is said now
+    out.mkdir(parents=True, exist_ok=True)
     code = layout.run(argparse.Namespace(out=args.out, no_pictures=False, export=None, regenerate=False,
                                          layout_out=None, margin_mm=None, min_pitch_mm=None))
     if code:
