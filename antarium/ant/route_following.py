@@ -47,8 +47,8 @@ DEMO_ROUTE_SEED = 1
 
 
 def parse_route(spec: str, length: float = 10.0) -> Route:
-    """A route from `curved:SEED` (seeded curved route of `length` m from the origin), a path file
-    (CSV/whitespace x_m, y_m) or an earlier trial log (.h5: the pose's x, y of every frame)."""
+    """A route from `curved:SEED` (seeded curved route of `length` m from the origin), a route file (`Route.load`:
+    CSV/whitespace x_m, y_m[, heading_deg]) or an earlier trial log (.h5: the pose's x, y of every frame)."""
     if spec.startswith("curved:"):
         try:
             seed = int(spec.split(":", 1)[1])
@@ -58,9 +58,9 @@ def parse_route(spec: str, length: float = 10.0) -> Route:
             raise RouteError(f"route {spec!r}: use curved:SEED with an integer seed >= 0")
         return curved_route(seed, length=length)
     path = Path(spec)
-    if not path.exists():
+    if not path.is_file():
         raise FileNotFoundError(f"route file {spec!r} not found (or use curved:SEED)")
-    if path.suffix in (".h5", ".hdf5"):
+    if path.suffix.lower() in (".h5", ".hdf5"):
         return route_from_log(path)
     return Route.load(path)
 
@@ -168,7 +168,8 @@ def train_and_follow(kind: str, route: Route, out_dir: str | Path | None, name: 
         top = scene_top_view(ant.loop.renderer.scene)
     picture = _outputs(out, name, route, kind, result.track, top)
     if out is not None and save:
-        save_model(out / f"{name}_model.npz", model, eye_params, route.points)
+        save_model(out / f"{name}_model.npz", model, eye_params, route.points,
+                   scene=scene if isinstance(scene, str) else None)
     pi = memory_pi_error(model, kept) if hasattr(model, "lambda_diff") else math.nan
     outcome = TrialOutcome(kind, name, asdict(result.summary), wall, model_ms, model.learned_views,
                            mbon_bytes(model), pi, str(log_path) if log_path else None, picture)

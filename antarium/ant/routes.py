@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from antarium.core.numbers import is_float_text
+
 
 class RouteError(ValueError):
     """A route that cannot be followed: fewer than two distinct points, or non-finite coordinates."""
@@ -22,16 +24,19 @@ class Route:
             raise RouteError(f"a route must be an (n, 2) array of x, y in metres, got shape {pts.shape}")
         if not np.all(np.isfinite(pts)):
             raise RouteError("route coordinates must be finite numbers (metres)")
-        keep = np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0, axis=1)])
-        pts = pts[keep]
+        pts = pts[np.concatenate([[True], np.any(pts[1:] != pts[:-1], axis=1)])]
         if pts.shape[0] < 2:
             raise RouteError(f"a route needs at least two distinct points, got {pts.shape[0]}")
         self.points = pts
-        seg = np.diff(pts, axis=0)
+        with np.errstate(over="ignore"):  # coordinates too far apart: refused below by their length
+            seg = np.diff(pts, axis=0)
+            self._seg_len = np.hypot(seg[:, 0], seg[:, 1])
         self._seg = seg
-        self._seg_len = np.hypot(seg[:, 0], seg[:, 1])
         self._seg_heading = np.arctan2(seg[:, 1], seg[:, 0])
         self.cumulative = np.concatenate([[0.0], np.cumsum(self._seg_len)])
+        if not math.isfinite(self.length):
+            raise RouteError(f"a route's length must be a finite number of metres, got {self.length} from "
+                             f"coordinates up to {np.abs(pts).max():.3g} m")
 
     @property
     def length(self) -> float:
@@ -85,19 +90,76 @@ class Route:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Route:
-        """Read a CSV or whitespace path file with columns x, y in metres (a header line is allowed)."""
-        path = Path(path)
-        text = path.read_text()
-        delimiter = "," if "," in text else None
-        first = text.lstrip().split("\n", 1)[0]
-        has_header = any(c.isalpha() and c not in "eE" for c in first)
-        try:
-            pts = np.loadtxt(path, delimiter=delimiter, skiprows=int(has_header), ndmin=2)
-        except ValueError as exc:
-            raise RouteError(f"{path}: not a path file of x, y metres ({exc})") from None
-        if pts.shape[1] < 2:
-            raise RouteError(f"{path}: a path file needs two columns (x_m, y_m), got {pts.shape[1]}")
-        return cls(pts[:, :2])
+        """Read a route file: CSV or whitespace x_m, y_m[, heading_deg] (metres; a header row naming the columns,
+        blank lines and # comments allowed), the one reader of `antarium ant experiment`'s route sets
+        (`read_route_file`); a heading_deg column is not part of the route. RouteError naming the
+        file and line of anything else."""
+        return read_route_file(Path(path))[0]
+
+
+#: the columns a route file's header may name (case aside): x_m and y_m required, heading_deg optional
+ROUTE_COLUMNS = ("x_m", "y_m", "heading_deg")
+
+
+def _header(path: Path, names: list[str]) -> list[int]:
+    """Column indices of x_m, y_m and heading_deg (-1: none) named by a header row (`ROUTE_COLUMNS`)."""
+    names = [n.strip().strip("\"'").lower() for n in names]
+    other = [n for n in names if n not in ROUTE_COLUMNS]
+    twice = [n for n in ROUTE_COLUMNS if names.count(n) > 1]
+    if other or twice or "x_m" not in names or "y_m" not in names:
+        raise RouteError(f"{path}: header {', '.join(names)!r} — a route file's header names the columns x_m, y_m "
+                         "(metres) and optionally heading_deg (degrees), each once, and no others")
+    return [names.index(n) if n in names else -1 for n in ROUTE_COLUMNS]
+
+
+def read_route_csv(path: Path) -> tuple[np.ndarray, float | None]:
+    """(P, 2) float64 x, y (m) and the release heading (rad, or None) of a CSV / whitespace route file.
+
+    A header is a first row with a field that is not a number (float() refuses it); it names its columns
+    (`ROUTE_COLUMNS`). Without one the columns are x_m, y_m[, heading_deg] in that order. Every value is a
+    finite number. Raises RouteError naming the file and line."""
+    lines = [(n, ln) for n, ln in enumerate(path.read_text(encoding="utf-8-sig").splitlines(), 1)
+             if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        raise RouteError(f"{path}: empty route file; expected columns x_m, y_m (and optionally heading_deg)")
+    delimiter = "," if any("," in ln for _, ln in lines) else None
+    first = [f.strip() for f in lines[0][1].split(delimiter)]
+    has_header = not all(is_float_text(f) for f in first)
+    if has_header:
+        x, y, h = _header(path, first)
+    rows = []
+    for n, line in lines[int(has_header):]:
+        row = []
+        for field in (f.strip() for f in line.split(delimiter)):
+            if not is_float_text(field) or not math.isfinite(float(field)):
+                raise RouteError(f"{path}, line {n}: {field!r} is not a {'finite ' * is_float_text(field)}number; a "
+                                 "route file holds x_m, y_m[, heading_deg] numbers (metres, degrees), finite, with an "
+                                 "optional header row")
+            row.append(float(field))
+        rows.append(row)
+        width = len(first) if has_header else len(rows[0])
+        if len(row) != width:
+            raise RouteError(f"{path}, line {n}: {len(row)} columns where the "
+                             f"{'header names' if has_header else 'rows before have'} {width}")
+    if not rows:
+        raise RouteError(f"{path}: a header and no points; expected rows of x_m, y_m (and optionally heading_deg)")
+    if not has_header:
+        if not 2 <= len(rows[0]) <= 3:
+            raise RouteError(f"{path}: a route file needs columns x_m, y_m (metres), got {len(rows[0])} column(s) "
+                             "(without a header: x_m, y_m and optionally heading_deg, in that order)")
+        x, y, h = 0, 1, 2 if len(rows[0]) == 3 else -1
+    data = np.array(rows, np.float64)
+    return data[:, [x, y]], math.radians(float(data[0, h])) if h >= 0 else None
+
+
+def read_route_file(path: Path) -> tuple[Route, float | None]:
+    """The route of a CSV / whitespace route file (`read_route_csv`) and its release heading (rad, or None).
+    Raises RouteError naming the file."""
+    xy, heading = read_route_csv(path)
+    try:
+        return Route(xy), heading
+    except RouteError as exc:
+        raise RouteError(f"{path}: {exc}") from None
 
 
 def curved_route(seed: int, length: float = 10.0, start=(0.0, 0.0), heading: float | None = None,

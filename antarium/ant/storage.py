@@ -14,6 +14,7 @@
 | learned_views    | int                   | views learned                                                  |
 | cpu4             | float64 (16,)         | the CX's CPU4 memory (cx, cxmb, one_ring; version >= 3)        |
 | route            | float64 (n, 2)        | the learned route, metres (optional)                           |
+| scene            | str                   | the scene it learned in, as `--scene` names it (optional)      |
 """
 
 from __future__ import annotations
@@ -44,8 +45,10 @@ class ModelFileError(ValueError):
     """A model file that is not a valid antarium ant model of a readable version and shape."""
 
 
-def save_model(path: str | os.PathLike, model, eye_params: EyeParams, route: np.ndarray | None = None) -> Path:
-    """Write `model` to `path` (.npz); the file is written beside and renamed, so a crash loses nothing."""
+def save_model(path: str | os.PathLike, model, eye_params: EyeParams, route: np.ndarray | None = None,
+               scene: str | None = None) -> Path:
+    """Write `model` to `path` (.npz); the file is written beside and renamed, so a crash loses nothing (a folder
+    is refused; nothing is left beside it on failure)."""
     path = Path(path)
     arrays: dict[str, np.ndarray] = {
         "format": np.array(FORMAT), "version": np.array(FORMAT_VERSION), "kind": np.array(model.kind),
@@ -62,10 +65,17 @@ def save_model(path: str | os.PathLike, model, eye_params: EyeParams, route: np.
         arrays["cpu4"] = model.cx.memory()
     if route is not None:
         arrays["route"] = np.asarray(route, np.float64)
+    if scene is not None:
+        arrays["scene"] = np.array(scene)
+    if path.is_dir():
+        raise IsADirectoryError(f"{str(path)!r} is a folder; give the model file to write (e.g. ant.npz)")
     tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return path
 
 
@@ -81,6 +91,9 @@ def load_model(path: str | os.PathLike):
     except (OSError, ValueError):  # numpy's own message would suggest unpickling an untrusted file
         raise ModelFileError(f"{path}: not an antarium ant model file (not a NumPy .npz archive; "
                              f"write one with `antarium ant learn`)") from None
+    if not isinstance(data, np.lib.npyio.NpzFile):  # a single array (.npy), whatever the file's name
+        raise ModelFileError(f"{path}: not an antarium ant model file (a single NumPy array, .npy, not a .npz "
+                             f"archive; write one with `antarium ant learn`)")
     try:
         with data:
             return _read(path, data)
@@ -101,6 +114,13 @@ def load_route_model(path: str | os.PathLike):
                              f"({', '.join(ROUTE_MODELS)}); the central-complex models home by path integration: "
                              f"`antarium ant homing | arena | displace`")
     return model, eye_params, route
+
+
+def learned_scene(path: str | os.PathLike) -> str | None:
+    """The scene the model of a file `load_model` read learned in (`save_model`'s `scene`); None when the file
+    does not say (files before 2026-11-28, or a scene given as an object)."""
+    with np.load(path, allow_pickle=False) as data:
+        return _scalar(Path(path), data, "scene", str) if "scene" in data.files else None
 
 
 def _entry(path: Path, data, key: str, kind: str = "") -> np.ndarray:

@@ -34,8 +34,15 @@ def _positive(option: str, value: float | int, unit: str = "") -> float | int:
     return value
 
 
-def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--scene", default="habitat", help="scene shown by the dome (name or file; default: habitat)")
+def _finite(option: str, value: float, what: str) -> float:
+    """`value` of `option` when it is a finite number; else one ValueError naming it and `what` it means."""
+    if not math.isfinite(value):
+        raise ValueError(f"{option} must be a finite number ({what}), got {value}")
+    return value
+
+
+def _common(p: argparse.ArgumentParser, scene_help: str = "default: habitat") -> None:
+    p.add_argument("--scene", default=None, help=f"scene shown by the dome (name or file; {scene_help})")
     p.add_argument("--tether", choices=("free_yaw", "fixed"), default="free_yaw",
                    help="free_yaw: the ant turns inside the dome; fixed: the scene turns (default free_yaw)")
 
@@ -62,7 +69,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--lateral-cm", type=float, default=0.0, help="release this far left of the route start (cm)")
     p.add_argument("--heading-deg", type=float, default=0.0, help="release turned this much CCW off the route")
     p.add_argument("--out", required=True, help="folder for run.h5, run_paths.png, run_traces.png, run.json")
-    _common(p)
+    _common(p, "default: the one the model learned in, as its file says, else habitat")
     p = sub.add_parser("evaluate", help="each model learns and follows seeded curved routes; writes a table")
     p.add_argument("--routes", type=int, default=10, help="number of seeded curved routes per model (default 10)")
     p.add_argument("--length", type=float, default=10.0, help="route length (m, default 10)")
@@ -240,15 +247,20 @@ def _learn(args: argparse.Namespace) -> int:
     out = Path(args.out).resolve()
     if not out.parent.is_dir():
         raise FileNotFoundError(f"folder {str(out.parent)!r} for the model file does not exist")
+    if out.is_dir():  # refused before the walk, not after it
+        raise IsADirectoryError(f"--out {args.out!r} is a folder; give the model file to write (e.g. ant.npz)")
+    scene = args.scene or "habitat"
+    if Path(scene).is_file():  # a scene file is stored by its absolute path: `ant run` finds it from any folder
+        scene = str(Path(scene).resolve())
     eye_params = MODEL_EYES[args.model]
     model = make_model(args.model, eye_params.n_pn, **{**MODEL_PARAMS[args.model], **_params(args.param, args.model)})
     spacing = LEARN_SPACING_M[args.model] if args.spacing is None else _positive("--spacing", args.spacing, "m")
     bar = _bar("learning walk", total=int(math.ceil(route.length / spacing)) + 1)
-    with virtual_rig(model, scene=args.scene, eye_params=eye_params, tether=args.tether, log_path=args.log,
+    with virtual_rig(model, scene=scene, eye_params=eye_params, tether=args.tether, log_path=args.log,
                      renderer_kwargs={"face_size": FACE_SIZE}) as ant:
         views = learning_walk(ant, route, spacing, place_length=PLACE_LENGTH_M, progress=bar.update)
     bar.close()
-    save_model(out, model, eye_params, route.points)
+    save_model(out, model, eye_params, route.points, scene=scene)
     print(f"learned {views} views along {route.length:.2f} m; memory {mbon_bytes(model)} bytes; wrote {out}")
     return 0
 
@@ -256,10 +268,12 @@ def _learn(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from antarium.ant.route_following import follow_saved, parse_route
     from antarium.ant.routes import Route
-    from antarium.ant.storage import load_route_model
+    from antarium.ant.storage import learned_scene, load_route_model
 
     if args.max_decisions is not None:
         _positive("--max-decisions", args.max_decisions)
+    _finite("--lateral-cm", args.lateral_cm, "cm left of the route start; negative: right")
+    _finite("--heading-deg", args.heading_deg, "degrees CCW off the route")
     model, eye_params, stored = load_route_model(args.model_file)
     if args.route is not None:
         route = parse_route(args.route, args.length)
@@ -267,14 +281,15 @@ def _run(args: argparse.Namespace) -> int:
         route = Route(stored)
     else:
         raise ValueError(f"{args.model_file} holds no route; give --route")
+    scene = args.scene or learned_scene(args.model_file) or "habitat"
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     bar = _bar("closed loop")
-    outcome, _ = follow_saved(model, eye_params, route, out, scene=args.scene, tether=args.tether,
+    outcome, _ = follow_saved(model, eye_params, route, out, scene=scene, tether=args.tether,
                               max_decisions=args.max_decisions,
                               start_offset=(args.lateral_cm / 100.0, math.radians(args.heading_deg)),
                               progress=bar.update)
     bar.close()
     print(_outcome_line(outcome))
-    print(f"  log: {outcome.log}\n  picture: {outcome.picture}")
+    print(f"  scene: {scene}\n  log: {outcome.log}\n  picture: {outcome.picture}")
     return 0

@@ -2,7 +2,7 @@
 height) and route sets (a folder or glob of route files), each route checked against the world it is run in.
 
 Route files: CSV (or whitespace) with `x_m, y_m` and an optional `heading_deg` column (a header row allowed: it
-names these columns and no others, `ROUTE_COLUMNS`; without one they come in that order), or a trial log (.h5:
+names these columns and no others, `routes.ROUTE_COLUMNS`; without one they come in that order), or a trial log (.h5:
 the pose's x, y of every frame). `heading_deg` of the first row is the heading the ant is released with (degrees
 CCW from +x); otherwise the route's own.
 
@@ -23,8 +23,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from antarium.ant.routes import Route, RouteError
-from antarium.core.numbers import is_float_text
+from antarium.ant.routes import Route, RouteError, read_route_file
 
 ROUTE_SUFFIXES = (".csv", ".txt", ".tsv", ".h5", ".hdf5")
 UP_AXES = ("z", "y")
@@ -322,61 +321,6 @@ class RouteInput:
         return route_digest(self.route)
 
 
-#: the columns a route file's header may name (case aside): x_m and y_m required, heading_deg optional
-ROUTE_COLUMNS = ("x_m", "y_m", "heading_deg")
-
-
-def _header(path: Path, names: list[str]) -> list[int]:
-    """Column indices of x_m, y_m and heading_deg (-1: none) named by a header row (`ROUTE_COLUMNS`)."""
-    names = [n.strip().strip("\"'").lower() for n in names]
-    other = [n for n in names if n not in ROUTE_COLUMNS]
-    twice = [n for n in ROUTE_COLUMNS if names.count(n) > 1]
-    if other or twice or "x_m" not in names or "y_m" not in names:
-        raise RouteError(f"{path}: header {', '.join(names)!r} — a route file's header names the columns x_m, y_m "
-                         "(metres) and optionally heading_deg (degrees), each once, and no others")
-    return [names.index(n) if n in names else -1 for n in ROUTE_COLUMNS]
-
-
-def _read_csv(path: Path) -> tuple[np.ndarray, float | None]:
-    """(P, 2) float64 x, y (m) and the release heading (rad, or None) of a CSV / whitespace route file.
-
-    A header is a first row with a field that is not a number (float() refuses it); it names its columns
-    (`ROUTE_COLUMNS`). Without one the columns are x_m, y_m[, heading_deg] in that order. Every value is a
-    finite number. Raises RouteError naming the file and line."""
-    lines = [(n, ln) for n, ln in enumerate(path.read_text(encoding="utf-8-sig").splitlines(), 1)
-             if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
-        raise RouteError(f"{path}: empty route file; expected columns x_m, y_m (and optionally heading_deg)")
-    delimiter = "," if any("," in ln for _, ln in lines) else None
-    first = [f.strip() for f in lines[0][1].split(delimiter)]
-    has_header = not all(is_float_text(f) for f in first)
-    if has_header:
-        x, y, h = _header(path, first)
-    rows = []
-    for n, line in lines[int(has_header):]:
-        row = []
-        for field in (f.strip() for f in line.split(delimiter)):
-            if not is_float_text(field) or not math.isfinite(float(field)):
-                raise RouteError(f"{path}, line {n}: {field!r} is not a {'finite ' * is_float_text(field)}number; a "
-                                 "route file holds x_m, y_m[, heading_deg] numbers (metres, degrees), finite, with an "
-                                 "optional header row")
-            row.append(float(field))
-        rows.append(row)
-        width = len(first) if has_header else len(rows[0])
-        if len(row) != width:
-            raise RouteError(f"{path}, line {n}: {len(row)} columns where the "
-                             f"{'header names' if has_header else 'rows before have'} {width}")
-    if not rows:
-        raise RouteError(f"{path}: a header and no points; expected rows of x_m, y_m (and optionally heading_deg)")
-    if not has_header:
-        if not 2 <= len(rows[0]) <= 3:
-            raise RouteError(f"{path}: a route file needs columns x_m, y_m (metres), got {len(rows[0])} column(s) "
-                             "(without a header: x_m, y_m and optionally heading_deg, in that order)")
-        x, y, h = 0, 1, 2 if len(rows[0]) == 3 else -1
-    data = np.array(rows, np.float64)
-    return data[:, [x, y]], math.radians(float(data[0, h])) if h >= 0 else None
-
-
 def load_route(path: str | Path, name: str | None = None) -> RouteInput:
     """One route file (CSV/whitespace x_m, y_m[, heading_deg] or a trial log .h5), named `name` (default: the file's
     stem). Raises RouteError naming it."""
@@ -391,11 +335,7 @@ def load_route(path: str | Path, name: str | None = None) -> RouteInput:
             return RouteInput(name, str(path), route_from_log(path))
         except (KeyError, ValueError, OSError) as exc:
             raise RouteError(f"{path}: not a trial log with a frames table of poses ({exc})") from None
-    xy, heading = _read_csv(path)
-    try:
-        route = Route(xy)
-    except RouteError as exc:
-        raise RouteError(f"{path}: {exc}") from None
+    route, heading = read_route_file(path)
     return RouteInput(name, str(path), route, heading)
 
 
