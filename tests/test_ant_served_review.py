@@ -55,4 +55,8 @@ def test_a_rig_that_never_answers_leaves_no_output_folder(model_file, tmp_path, 
     assert main(["ant", "serve", str(model_file), "--config", "rig.toml", "--out", str(tmp_path / "cli"),
                  "--timeout", "0"]) == 2
     assert "--timeout must be > 0 s" in capsys.readouterr().err
+    for option in ("--lateral-cm", "--heading-deg"):
+        assert main(["ant", "serve", str(model_file), "--config", "rig.toml", "--out", str(tmp_path / "cli"),
+                     option, "nan"]) == 2
+        assert f"{option} must be a finite number" in capsys.readouterr().err
     assert not (tmp_path / "cli").exists()

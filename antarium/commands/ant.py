@@ -202,6 +202,8 @@ def run(args: argparse.Namespace) -> int:
         if args.max_decisions is not None:
             _positive("--max-decisions", args.max_decisions)
         _positive("--timeout", args.timeout, "s")
+        _finite("--lateral-cm", args.lateral_cm, "cm left of the route start; negative: right")
+        _finite("--heading-deg", args.heading_deg, "degrees CCW off the route")
         run_served(args.model_file, args.config, Path(args.out).resolve(),
                    (args.lateral_cm / 100.0, math.radians(args.heading_deg)), args.max_decisions,
                    timeout_s=args.timeout)
