@@ -60,3 +60,28 @@ def test_a_rig_that_never_answers_leaves_no_output_folder(model_file, tmp_path, 
                      option, "nan"]) == 2
         assert f"{option} must be a finite number" in capsys.readouterr().err
     assert not (tmp_path / "cli").exists()
+
+
+def test_the_dome_settles_when_its_first_hello_is_lost():
+    """The dome's socket dropped the settle's HELLO (overflowing with a loaded server's frames): settle sends it
+    again until answered instead of waiting out its whole timeout."""
+    from antarium.ant.served import DomeHost
+    from antarium.firmware_proto.control import encode_hello
+    from antarium.server.emulator_process import free_udp_port
+
+    dome = DomeHost("127.0.0.1", free_udp_port("127.0.0.1"))
+    handle, dropped = dome.handle_datagram, []
+
+    def lose_the_first_hello(payload):
+        if not dropped and bytes(payload) == encode_hello(dome._tag):
+            dropped.append(payload)
+            return []
+        return handle(payload)
+
+    dome.handle_datagram = lose_the_first_hello
+    dome.start()
+    try:
+        dome.settle(3.0)
+    finally:
+        dome.stop()
+    assert len(dropped) == 1

@@ -60,6 +60,10 @@ def served_config(config: str | Path | dict[str, Any] | RigConfig) -> RigConfig:
     return cfg
 
 
+#: how often `DomeHost.settle` sends its HELLO again while no answer came (s)
+SETTLE_RESEND_S = 0.25
+
+
 class DomeHost:
     """The dome the server drives, in this process: the emulated distributor and panels answering datagrams on UDP
     `host:port` in a thread (`antarium.firmware_proto.server.serve`); `led_values()` is what its panels show."""
@@ -112,22 +116,26 @@ class DomeHost:
 
     def settle(self, timeout_s: float) -> None:
         """Wait until the dome has handled every datagram that reached it before this call: it answers the HELLO
-        sent here only after them (one socket, read in order). Raises RuntimeError after `timeout_s`."""
+        sent here only after them (one socket, read in order). The HELLO goes again every `SETTLE_RESEND_S` until
+        answered: on a loaded machine the dome's socket overflows with the server's frames and drops it (a reply to
+        any of them says the same). Raises RuntimeError after `timeout_s`."""
         from antarium.firmware_proto.control import encode_hello
         from antarium.firmware_proto.errors import ProtocolError
         from antarium.firmware_proto.replies import decode_reply
         from antarium.firmware_proto.udp import MAX_DATAGRAM
 
         self._tag = (self._tag + 1) % 256
-        self._probe.send(encode_hello(self._tag))
+        hello = encode_hello(self._tag)
         deadline = time.monotonic() + timeout_s
-        while (left := deadline - time.monotonic()) > 0:
-            self._probe.settimeout(left)
+        resend = 0.0
+        while (now := time.monotonic()) < deadline:
+            if now >= resend:
+                self._probe.send(hello)
+                resend = now + SETTLE_RESEND_S
+            self._probe.settimeout(max(1e-3, min(deadline, resend) - now))
             try:
                 reply = decode_reply(self._probe.recv(MAX_DATAGRAM))
-            except TimeoutError:
-                break
-            except ProtocolError:
+            except (TimeoutError, ProtocolError):
                 continue
             if reply.tag == self._tag:
                 return
