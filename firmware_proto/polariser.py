@@ -39,26 +39,38 @@ class PolariserMessage(NamedTuple):
     codes: np.ndarray  # (n_panels, 9) uint16 angle codes; n_panels = 1 or 55
 
 
+def _radians(angles) -> np.ndarray:
+    """`angles` as a float64 array (radians); ValueError naming the polariser angles when they are not real numbers
+    (a string, a complex number; None becomes NaN, which `angles_to_codes` refuses)."""
+    if np.iscomplexobj(angles):
+        raise ValueError(f"polariser angles must be real numbers (radians), got complex values {angles!r:.80}")
+    try:
+        return np.asarray(angles, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"polariser angles must be real numbers (radians), got {angles!r:.80}") from None
+
+
 def wrap_angles(angles) -> np.ndarray:
     """Finite angles in radians, any value -> the same e-vector axes in [0, pi) (float64, a new array).
 
     An e-vector is an axis, so angles are taken modulo pi; a remainder that rounds to pi itself (np.mod of a tiny
-    negative angle) is 0, the same axis, so the result always passes `angles_to_codes`.
+    negative angle) is 0, the same axis, so the result always passes `angles_to_codes`. Raises ValueError for
+    values that are not real numbers.
     """
-    a = np.mod(np.asarray(angles, dtype=np.float64), np.pi)
+    a = np.mod(_radians(angles), np.pi)
     return np.where(a >= np.pi, 0.0, a)
 
 
 def angles_to_codes(angles) -> np.ndarray:
     """Angles in radians, each in [0, pi) -> uint16 codes round(angle * 65536 / pi) mod 65536.
 
-    Raises ValueError naming the first non-finite or out-of-range angle.
+    Raises ValueError naming the first non-finite or out-of-range angle (or values that are not real numbers).
     """
-    a = np.asarray(angles, dtype=np.float64)
+    a = _radians(angles)
     bad = ~np.isfinite(a) | (a < 0) | (a >= np.pi)
     if bad.any():
         i = np.unravel_index(int(np.argmax(bad)), a.shape)
-        raise ValueError(f"polariser angle at {tuple(int(v) for v in i)} is {a[i]!r} rad: allowed [0, pi)")
+        raise ValueError(f"polariser angle at {tuple(int(v) for v in i)} is {float(a[i])!r} rad: allowed [0, pi)")
     return (np.rint(a * (CODES_PER_PI / np.pi)).astype(np.int64) % CODES_PER_PI).astype(np.uint16)
 
 
@@ -68,8 +80,11 @@ def codes_to_angles(codes) -> np.ndarray:
 
 
 def encode_polarisers(angles, panel: int | None = None) -> bytes:
-    """(55, 9) angles for the whole dome (panel None), or (9,) angles for one `panel` -> one datagram."""
-    a = np.asarray(angles, dtype=np.float64)
+    """(55, 9) angles (rad, [0, pi)) for the whole dome (panel None), or (9,) angles for one `panel` (0..54; the
+    whole-dome address 63 takes 55 x 9) -> one datagram. Raises ValueError (a PanelError for the panel)."""
+    if panel is not None:
+        check_address(panel, allow_all=False)
+    a = _radians(angles)
     expected = (N_PANELS, N_ACTUATORS) if panel is None else (N_ACTUATORS,)
     if a.shape != expected:
         raise ValueError(f"polariser angles must have shape {expected}, got {a.shape}")
