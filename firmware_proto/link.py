@@ -18,7 +18,7 @@ from .config import check_percent, dot_correction_table, encode_brightness, enco
 from .control import encode_hello, encode_latch, encode_status_request
 from .errors import ProtocolError
 from .header import ADDR_ALL, PROTOCOL_VERSION, SEQ_MODULO, split_td
-from .polariser import OP_POLARISER, angles_to_codes, encode_polarisers
+from .polariser import OP_POLARISER, angles_to_codes, codes_to_angles, encode_polarisers
 from .replies import (
     OP_ACTUATORS,
     OP_COUNTERS,
@@ -254,8 +254,9 @@ class Link(ABC):
         `wait_s` seconds (0: only what has already arrived; never blocks). Keys: "link" (this side's counters),
         "connected" (an answer ever arrived) and, once the distributor has answered: "age_s" (since the last
         reply), "counters", "temperature_c", "current_a", "faults", "fault_total", "polariser_codes",
-        "polariser_angles", "holding", "version" (protocol, firmware, panels, capabilities and their names; from a
-        distributor of another protocol version only "protocol_version") once HELLO was answered, "hello"
+        "polariser_angles_deg" (the polarisers' angles reported, degrees), "holding", "version" (protocol, firmware,
+        panels, capabilities and their names; from a distributor of another protocol version only
+        "protocol_version") once HELLO was answered, "hello"
         ("waiting" until then and after an outage, else "answered"), "incompatible" (the reason) when the
         distributor's protocol version is not ours, and "mismatch" (one line: what it reports and what the dome
         requires) when its VERSION reports other than 55 panels of 370 pixels or lacks a required capability.
@@ -360,7 +361,7 @@ class Link(ABC):
             s["faults"], s["fault_total"] = f["faults"], f["total"]
         elif opcode == OP_ACTUATORS:
             s["polariser_codes"] = f["angle_codes"]
-            s["polariser_angles"] = (np.asarray(f["angle_codes"]) * (np.pi / 65536)).tolist()
+            s["polariser_angles_deg"] = np.degrees(codes_to_angles(f["angle_codes"])).tolist()  # the bus' unit
             s["holding"] = f["holding"]
 
     def close(self) -> None:

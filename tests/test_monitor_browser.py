@@ -192,6 +192,16 @@ def test_the_page_shows_the_dome_the_path_and_the_stats_live(browser, rig):
         agree = (np.abs(seen - got[facing_now]).max(axis=1) <= 1).mean()
         assert agree >= 0.9, f"turned, the 3D view agrees with the map at {agree:.0%} of the LEDs it faces"
 
+        # the polarisers' angles from the link's telemetry (degrees on the bus) drawn as bars over the UV pixels
+        _wait(lambda: browser.execute_script("return Array.isArray(status && status.telemetry && "
+                                             "status.telemetry.polariser_angles_deg)"), 30,
+              "the status carries the polarisers' angles in degrees")
+        bars = browser.execute_script(
+            "document.getElementById('uvov').checked = true; polShown = null; drawPolarisers(); "
+            "const c = document.getElementById('pol'), d = c.getContext('2d').getImageData(0, 0, c.width, c.height)"
+            ".data; let n = 0; for (let k = 3; k < d.length; k += 4) n += d[k] > 0; return n;")
+        assert bars > 495, bars  # a bar of several pixels over each of the 495 UV pixels
+
         # the path grows while the walker moves, the stats update
         before = _state(browser)
         # waited for, not slept: on a loaded machine 1.5 s once passed without a new path point drawn

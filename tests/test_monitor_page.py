@@ -98,7 +98,7 @@ def test_a_pose_without_position_and_status_of_the_wrong_types_never_stop_the_pa
     _wait(lambda: "–, 0.000" in page_browser.find_element("id", "poseinfo").text, 30, "x shown as –")
     _shows_led_frame(page_browser, rig, 20)  # the page still draws
     # status fields of types the page does not expect
-    rig.status = {**rig.status, "telemetry": {"polariser_angles": "broken"}, "alarms": "disk <b>full</b>",
+    rig.status = {**rig.status, "telemetry": {"polariser_angles_deg": "broken"}, "alarms": "disk <b>full</b>",
                   "frame_rate_hz": "fast", "latency": [1, 2]}
     _wait(lambda: page_browser.find_element("id", "alarms").text == "disk <b>full</b>", 30, "the alarm shown")
     _shows_led_frame(page_browser, rig, 30)

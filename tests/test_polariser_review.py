@@ -85,7 +85,7 @@ def test_an_e_vector_across_0_and_180_deg_turns_the_short_way():
     assert np.allclose(np.degrees(link.emulator.actuators.target - rotor), -1.0, atol=0.01)
     clock.advance(1.0)
     t = link.telemetry(wait_s=0.1)
-    assert axis_error_deg(t["polariser_angles"], np.full((55, 9), math.radians(179.5))) < 0.01
+    assert axis_error_deg(np.radians(t["polariser_angles_deg"]), np.full((55, 9), math.radians(179.5))) < 0.01
     assert np.asarray(t["holding"]).all()
 
 

@@ -261,7 +261,7 @@ class TestActuators:
             assert a[1, 1] < 0 and a[0, 0] > 0  # 3.0 is reached by turning back through 0
             clock.advance(0.25)
             t = link.telemetry()
-            got = np.array(t["polariser_angles"])
+            got = np.radians(t["polariser_angles_deg"])
             assert np.abs(np.angle(np.exp(2j * (got - target)))).max() / 2 < np.radians(0.2)
             assert not np.array(t["holding"]).any()
             clock.advance(1.0)

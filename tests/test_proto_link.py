@@ -64,7 +64,7 @@ class TestEveryBackend:
         link.send_frame(pattern(1))
         t = link.telemetry(wait_s=WAIT_S)
         assert len(t["temperature_c"]) == 55 and len(t["current_a"]) == 55
-        assert np.array(t["polariser_angles"]).shape == (55, 9) and t["faults"] == []
+        assert np.array(t["polariser_angles_deg"]).shape == (55, 9) and t["faults"] == []
         assert t["age_s"] < WAIT_S
 
     def test_polling_telemetry_does_not_flood_the_board(self, dome):

@@ -86,7 +86,7 @@ def test_failed_scene_load_keeps_the_previous_scene(tmp_path):
             rig.sky(sun_azimuth_deg=90, sun_elevation_deg=30)
             assert server.renderer.scene.sky.sun_azimuth == pytest.approx(1.5707963)
             rig.polarisers([[10.0] * 9] * 55)
-            assert wait_for(lambda: server.link.telemetry(wait_s=0.1).get("polariser_angles") is not None, 5.0)
+            assert wait_for(lambda: server.link.telemetry(wait_s=0.1).get("polariser_angles_deg") is not None, 5.0)
             with pytest.raises(RigError, match="55 lists of 9 numbers"):
                 rig.polarisers([[10.0] * 9] * 54)
     finally:
