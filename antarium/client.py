@@ -124,8 +124,9 @@ class Rig:
             except ConfigError as exc:
                 raise RigError(f"connect: {exc}") from None
         value = as_real(timeout_s)
-        if not (math.isfinite(value) and value > 0):
-            raise RigError(f"timeout_s must be a positive number of seconds, got {_shown(timeout_s)}")
+        if not (0 < value <= WAIT_MAX_S):  # longer overflows the waits of threading and zenoh
+            raise RigError(f"timeout_s must be a positive number of seconds (at most {WAIT_MAX_S:g}), got "
+                           f"{_shown(timeout_s)}")
         self.timeout_s = value
         self.log_dir = None if log_dir is None else Path(log_dir).expanduser().resolve()
         self._session = session
@@ -154,9 +155,17 @@ class Rig:
         if not self._alive.wait(self.timeout_s):
             where = self.bus_section.connect or self.bus_section.listen
             others = self._rigs_answering()
+            info = self._session.info
+            reached = [str(zid) for zid in (*info.routers_zid(), *info.peers_zid())]
             self.close()
-            seen = (f"servers answering there: rig {', '.join(map(repr, others))} (a misspelt name?)" if others
-                    else "no other antarium server answered there either")
+            if others:
+                seen = f"servers answering there: rig {', '.join(map(repr, others))} (a misspelt name?)"
+            elif reached:  # a connection, but no token seen: a router without the server, or a server's refusal
+                seen = (f"this computer reached the zenoh session(s) {', '.join(reached)} there, which shows no "
+                        "antarium server: the server is not running, or its bus access control ([bus] access_control) "
+                        "refuses this computer")
+            else:
+                seen = "no other antarium server answered there either"
             raise RigError(f"no antarium server for rig {self.name!r} answered within {self.timeout_s} s "
                            f"(tried {where}); is `antarium serve` running? {seen}")
         return self
@@ -229,6 +238,7 @@ class Rig:
         self._check_server(command, "the command was not sent")
         key = bus.command_key(self.name, command)
         wait_s = self.reply_s(command)
+        sent = time.monotonic()
         replies = self._session.get(key, payload=payload, timeout=wait_s)
         for reply in replies:
             if reply.ok is not None:
@@ -237,6 +247,12 @@ class Rig:
             raw = reply.err.payload.to_bytes()
             error = RigTimeout if raw.decode(errors="replace").strip().lower() == "timeout" else RigError
             raise error(self._error_message(command, raw))
+        waited = time.monotonic() - sent
+        if waited < 0.9 * wait_s:  # the bus ended the query before its time: nobody to answer, not a slow server
+            raise RigError(f"{command}: no reply from rig {self.name!r}: the bus ended the query after {waited:.1f} s "
+                           f"(of {wait_s:g} s) without one: refused by the bus's access control (the rig is unchanged; "
+                           "this computer may not command it, status() included), or the server went away during "
+                           "it (it may have run: check status() once the server is back)")
         raise RigTimeout(f"{command}: no reply from rig {self.name!r} within {wait_s:g} s "
                          "(server gone, or the command was refused by the bus's access control); it may have run: "
                          "check status() before sending it again")
@@ -331,8 +347,10 @@ class Rig:
         folder = {} if self.log_dir is None else {"folder": str(self.log_dir)}
         return self.call("trial_start", name=name, metadata=metadata, **folder)["path"]
 
-    def stop_trial(self) -> dict:
-        return self.call("trial_stop")
+    def stop_trial(self, path: str | Path | None = None) -> dict:
+        """Stop the running trial; with `path` (`start_trial`'s), only that one: RigError, nothing stopped, when
+        another client's trial is running instead."""
+        return self.call("trial_stop", **({} if path is None else {"path": str(path)}))
 
     @contextlib.contextmanager
     def trial(self, name: str, **metadata: Any) -> Iterator[str]:
@@ -345,12 +363,12 @@ class Rig:
         except BaseException as exc:
             self._stop_after(name, path, exc)
             raise
-        self.stop_trial()
+        self.stop_trial(path)
 
     def _stop_after(self, name: str, path: str, exc: BaseException) -> None:
         """Stop trial `name` (log `path`), whose block raised `exc`, without hiding `exc`."""
         try:
-            done = self.stop_trial()
+            done = self.stop_trial(path)
         except RigError as stop:
             print(f"trial {name!r} was not stopped ({stop}); the error in its block follows", file=sys.stderr,
                   flush=True)

@@ -277,7 +277,10 @@ COMMANDS: dict[str, Command] = {
         "folder": Param("str", False, "", doc="absolute folder for this trial's log on the server's computer "
                                                "(default: [log] dir)"),
     }, lambda server, p: server.trial_start(p["name"], p["metadata"], p["folder"]), in_loop=False),
-    "trial_stop": Command({}, lambda server, p: server.trial_stop(), in_loop=False),
+    "trial_stop": Command({
+        "path": Param("str", False, None, doc="stop only the trial recording into this log (trial_start's reply: a "
+                                               "script never stops another script's trial)"),
+    }, lambda server, p: server.trial_stop(p["path"]), in_loop=False),
     "sky": Command({
         "sun_azimuth_deg": Param("number", False, None, lo=-360, hi=360),
         "sun_elevation_deg": Param("number", False, None, lo=-90, hi=90),
@@ -294,6 +297,13 @@ COMMANDS: dict[str, Command] = {
 def _shown(value: Any) -> str:
     """`value` as a refusal shows it: its repr, cut to 60 characters."""
     return _brief(repr(value), 60)
+
+
+def slow_command(name: str) -> bool:
+    """A command whose work takes long (it prepares beside the loop, or a client waits `reply_s` for it): the bus
+    answers such commands on a worker of their own (`Server._on_query`)."""
+    command = COMMANDS.get(name)
+    return command is not None and (command.prepare is not None or command.reply_s is not None)
 
 
 def _brief(text: str, limit: int = 300) -> str:

@@ -15,6 +15,7 @@ import datetime as _dt
 import gc
 import json
 import math
+import queue
 import sys
 import threading
 import time
@@ -26,7 +27,7 @@ import numpy as np
 
 from antarium import bus
 from antarium.core.clock import Clock, MonotonicClock
-from antarium.server.commands import COMMANDS, CommandError, _brief, _shown, parse_command
+from antarium.server.commands import COMMANDS, CommandError, _brief, _shown, parse_command, slow_command
 from antarium.server.emulator_process import EmulatorProcess
 from antarium.server.frame_loop import FrameLoop, FrameRecord, LoopClosed
 from antarium.server.placement import LoopPlacement
@@ -140,6 +141,8 @@ class Server:
         self._command_log_lock = threading.Lock()  # orders the commands table's rows by their time
         self._in_flight = 0  # bus queries being answered (zenoh's threads): the shutdown waits for them
         self._in_flight_done = threading.Condition()
+        self._slow_queries: queue.SimpleQueue = queue.SimpleQueue()  # for `_answer_slow_queries` (None: end)
+        self._slow_worker: threading.Thread | None = None
         self._thread: threading.Thread | None = None
         self._status_thread: threading.Thread | None = None
         self._start_error: BaseException | None = None
@@ -216,20 +219,50 @@ class Server:
     # -- bus traffic -----------------------------------------------------------------------------------
     def _on_query(self, query) -> None:
         """A command query (zenoh thread): JSON in, JSON reply or an error reply naming what was wrong. Counted in
-        flight until it returns, so that the shutdown does not end (and the interpreter exit) under it."""
+        flight until it is answered, so that the shutdown does not end (and the interpreter exit) under it.
+
+        zenoh runs a queryable's callbacks one after another: a command that takes long (`slow_command`: a scene
+        load, an edit, the sky; seconds) is handed to one worker thread that answers such commands in the order
+        they came, so that every other client's command (status, pose, trials) is answered meanwhile."""
         with self._in_flight_done:
             self._in_flight += 1
+        if slow_command(str(query.key_expr).rsplit("/", 1)[-1]):
+            with self._in_flight_done:  # (the condition's lock also guards the worker's start)
+                if self._slow_worker is None:
+                    self._slow_worker = threading.Thread(target=self._answer_slow_queries, name="slow-commands",
+                                                         daemon=True)
+                    self._slow_worker.start()
+            self._slow_queries.put(query)
+            return
         try:
             self._answer(query)
         finally:
-            with self._in_flight_done:
-                self._in_flight -= 1
-                self._in_flight_done.notify_all()
+            self._query_answered()
+
+    def _answer_slow_queries(self) -> None:
+        """The slow commands' worker: answers each query it is handed, then drops it (its final reply goes then),
+        until it is handed None (the shutdown, once no query is in flight)."""
+        while (query := self._slow_queries.get()) is not None:
+            try:
+                with query:
+                    self._answer(query)
+            except Exception as exc:  # noqa: BLE001 - a bus error (a reply to a client gone) ends no other command
+                self.echo(f"antarium serve: answering a command failed on the bus: {exc}")
+            finally:
+                self._query_answered()
+
+    def _query_answered(self) -> None:
+        with self._in_flight_done:
+            self._in_flight -= 1
+            self._in_flight_done.notify_all()
 
     def _await_queries(self) -> None:
         """Wait (at most COMMAND_TIMEOUT_S) until no bus query is being answered; RuntimeError naming how many are
         still running after that. Called once the queryable is undeclared: no new query comes."""
         with self._in_flight_done:
+            if self._slow_worker is not None:  # it ends once the queries handed to it are answered
+                self._slow_queries.put(None)
+                self._slow_worker = None
             if not self._in_flight_done.wait_for(lambda: self._in_flight == 0, COMMAND_TIMEOUT_S):
                 raise RuntimeError(f"{self._in_flight} bus command(s) still running after {COMMAND_TIMEOUT_S:g} s")
 
@@ -571,12 +604,18 @@ class Server:
         monotonic, utc = self.clock.now(), _dt.datetime.now(_dt.UTC)
         return {"utc": utc.isoformat(), "monotonic": monotonic}
 
-    def trial_stop(self) -> dict[str, Any]:
+    def trial_stop(self, path: str | None = None) -> dict[str, Any]:
+        """Stop the running trial; with `path`, only when it is the one recording into that log (RuntimeError naming
+        the running one otherwise, nothing stopped: a script's trial block never stops another script's trial)."""
         if self._stopping_elsewhere():  # detaching the log from here could lose the loop's last frame
             return self._trial_closed_by_shutdown()
-        with self._trial_lock:
+        with self._trial_lock:  # checked and stopped under one lock: no trial starts between the two
             if self.trial_log is None:
                 raise RuntimeError("trial_stop: no trial is running")
+            if path is not None and str(self.trial_log.path) != path:
+                raise RuntimeError(f"trial_stop: the trial of log {_brief(path)!r} is not running (stopped by another "
+                                   f"client?); the running trial {self.trial_name!r} ({self.trial_log.path}) was not "
+                                   "stopped")
             return self._close_trial()
 
     def _close_trial(self) -> dict[str, Any]:
