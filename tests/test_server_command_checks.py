@@ -32,7 +32,9 @@ ANGLES = [[10.0] * 9 for _ in range(55)]
     ("polarisers", {"angles_deg": [["10"] * 9] * 55}, "panel 0, polariser 0 is '10'"),
     ("polarisers", {"angles_deg": [[True] * 9] * 55}, "panel 0, polariser 0 is True"),
     ("polarisers", {"angles_deg": [[1e300] * 9] * 55}, "55 lists of 9 numbers in [-3600, 3600] (degrees)"),
-    ("polarisers", {"angles_deg": [[1.0] * 9] * 54 + [[1.0] * 8]}, "got lists of lengths (55, 8, 9)"),
+    ("polarisers", {"angles_deg": [[1.0] * 9] * 54 + [[1.0] * 8]}, "got 55 lists of lengths (8, 9)"),
+    ("polarisers", {"angles_deg": [1.0] * 495}, "item 0 is 1.0, not a list of 9"),
+    ("polarisers", {"angles_deg": [[1.0] * 9] * 3 + ["x"] * 52}, "item 3 is 'x', not a list of 9"),
 ])
 def test_parameters_are_refused_not_coerced(command, params, message):
     with pytest.raises(CommandError) as info:

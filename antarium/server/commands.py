@@ -395,11 +395,16 @@ def parse_command(command: str, params: Any) -> dict[str, Any]:
         import numpy as np
 
         rows = out["angles_deg"]
-        angles = [[as_real(v) for v in row] if isinstance(row, list) else [] for row in rows]
-        shape = (len(angles), *sorted({len(row) for row in angles}))
         wanted = "55 lists of 9 numbers in [-3600, 3600] (degrees)"
+        flat = next((i for i, row in enumerate(rows) if not isinstance(row, list)), None)
+        if flat is not None:
+            raise CommandError(f"polarisers: 'angles_deg' must be {wanted}; item {flat} is {_shown(rows[flat])}, "
+                               f"not a list of 9")
+        angles = [[as_real(v) for v in row] for row in rows]
+        shape = (len(angles), *sorted({len(row) for row in angles}))
         if shape != (55, 9):
-            raise CommandError(f"polarisers: 'angles_deg' must be {wanted}, got lists of lengths {shape}")
+            raise CommandError(f"polarisers: 'angles_deg' must be {wanted}, got {len(angles)} lists of lengths "
+                               f"{shape[1:]}")
         for i, row in enumerate(angles):
             for j, v in enumerate(row):
                 if not abs(v) <= 3600:
