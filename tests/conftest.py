@@ -73,6 +73,28 @@ def renderer(request, dome):
 
 
 @pytest.fixture
+def emulated_hands(monkeypatch):
+    """`antarium trackball calibrate` without --emulate, the driver's USB backend replaced by the miscalibrated
+    emulator and the operator's turns by the emulated ones. Returns the emulator's `faults` table of the driver
+    made next (report number -> fault), for a test to fill before it runs the command."""
+    from antarium.commands import trackball as command
+    from antarium.locomotion.trackball import calibration
+    from antarium.locomotion.trackball import driver as driver_module
+
+    real, faults = driver_module.UsbTrackball, {}
+
+    def driver(trackball, backend):
+        emulated = calibration.miscalibrated_emulator(trackball, realtime=False)
+        emulated.faults.update(faults)
+        return real(trackball=trackball, backend=emulated)
+
+    monkeypatch.setattr(driver_module, "UsbTrackball", driver)
+    monkeypatch.setattr(command, "_turn_by_hand", lambda driver, axis, turns: calibration.turn_emulated(
+        driver, driver.backend, axis, turns))
+    return faults
+
+
+@pytest.fixture
 def bus_endpoint() -> str:
     """A zenoh endpoint on loopback that no other test uses."""
     return f"tcp/127.0.0.1:{free_tcp_port()}"

@@ -20,24 +20,12 @@ resolution_cpi = 1200
 """
 
 
-def test_cli_calibrate_refuses_a_turn_whose_reports_were_lost_and_writes_nothing(tmp_path, capsys, monkeypatch):
+def test_cli_calibrate_refuses_a_turn_whose_reports_were_lost_and_writes_nothing(tmp_path, capsys, emulated_hands):
     """Reports lost during a turn take their counts with them: the counts per mm would come out too low. The
     command names the loss, returns 2 and leaves the rig file as it was."""
-    from antarium.commands import trackball as command
-    from antarium.locomotion.trackball import driver as driver_module
-
     rig = tmp_path / "rig.toml"
     rig.write_text(RIG)
-    real = driver_module.UsbTrackball
-
-    def lossy(trackball, backend):
-        emulated = calibration.miscalibrated_emulator(trackball, realtime=False)
-        emulated.faults.update({n: "drop" for n in range(100, 140)})  # 40 reports of the first turn lost
-        return real(trackball=trackball, backend=emulated)
-
-    monkeypatch.setattr(driver_module, "UsbTrackball", lossy)
-    monkeypatch.setattr(command, "_turn_by_hand", lambda driver, axis, turns: calibration.turn_emulated(
-        driver, driver.backend, axis, turns))
+    emulated_hands.update({n: "drop" for n in range(100, 140)})  # 40 reports of the first turn lost
     assert main(["trackball", "calibrate", "--config", str(rig), "--turns", "0.25"]) == 2
     err = capsys.readouterr().err
     assert "turn about z" in err and "lost_reports +40" in err, err
@@ -138,20 +126,12 @@ calibration_cpi = 1200
 """
 
 
-def test_cli_calibrate_measures_a_rig_calibrated_at_another_resolution_anew(tmp_path, capsys, monkeypatch):
+def test_cli_calibrate_measures_a_rig_calibrated_at_another_resolution_anew(tmp_path, capsys, emulated_hands):
     """Loading such a rig is refused with 'calibrate again'; calibrate itself must then work, not refuse it too."""
-    from antarium.commands import trackball as command
-    from antarium.locomotion.trackball import driver as driver_module
-
     rig = tmp_path / "rig.toml"
     rig.write_text(STALE)
     with pytest.raises(tbconfig.TrackballConfigError, match="calibrate again"):
         tbconfig.load(rig)
-    real = driver_module.UsbTrackball
-    monkeypatch.setattr(driver_module, "UsbTrackball", lambda trackball, backend: real(
-        trackball=trackball, backend=calibration.miscalibrated_emulator(trackball, realtime=False)))
-    monkeypatch.setattr(command, "_turn_by_hand", lambda driver, axis, turns: calibration.turn_emulated(
-        driver, driver.backend, axis, turns))
     assert main(["trackball", "calibrate", "--config", str(rig), "--turns", "0.25"]) == 0, capsys.readouterr().err
     assert "every other line is unchanged" in capsys.readouterr().out
     text = rig.read_text()

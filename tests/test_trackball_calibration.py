@@ -187,19 +187,11 @@ def test_write_section_backs_up_a_file_it_cannot_edit_in_place(tmp_path):
     assert tbconfig.load(rig) == new and tomllib.loads(rig.read_text())["monitor"]["allow"][1] == "10.1.2.0/24"
 
 
-def test_cli_calibrate_writes_the_rig_config_keeping_its_comments(tmp_path, capsys, monkeypatch):
+def test_cli_calibrate_writes_the_rig_config_keeping_its_comments(tmp_path, capsys, emulated_hands):
     """Without --emulate (the driver's USB backend replaced by the miscalibrated emulator, the operator's turns by
     the emulated ones) the results go into the file; its comments stay."""
-    from antarium.commands import trackball as command
-    from antarium.locomotion.trackball import driver as driver_module
-
     rig = tmp_path / "rig.toml"
     rig.write_text(COMMENTED)
-    real = driver_module.UsbTrackball
-    monkeypatch.setattr(driver_module, "UsbTrackball", lambda trackball, backend: real(
-        trackball=trackball, backend=calibration.miscalibrated_emulator(trackball, realtime=False)))
-    monkeypatch.setattr(command, "_turn_by_hand", lambda driver, axis, turns: calibration.turn_emulated(
-        driver, driver.backend, axis, turns))
     assert main(["trackball", "calibrate", "--config", str(rig), "--turns", "0.25"]) == 0
     out = capsys.readouterr().out
     assert "every other line is unchanged" in out
