@@ -20,7 +20,7 @@ TETHERS: dict[str, str] = {
 
 def check_tether(tether: object, what: str = "tether") -> str:
     """`tether` if it is one of `TETHERS`, else ValueError naming the allowed ones."""
-    if tether not in TETHERS:
+    if not isinstance(tether, str) or tether not in TETHERS:
         raise ValueError(f"{what} must be one of {', '.join(map(repr, TETHERS))}, got {tether!r}")
     return tether
 

@@ -6,7 +6,9 @@ so tests and simulated ants run the same code faster than real time.
 
 from __future__ import annotations
 
+import math
 import time
+from numbers import Real
 from typing import Protocol
 
 
@@ -46,6 +48,8 @@ class SimulatedClock:
     realtime = False
 
     def __init__(self, start: float = 0.0) -> None:
+        if isinstance(start, bool) or not isinstance(start, Real) or not math.isfinite(start):
+            raise ValueError(f"start must be a finite number of seconds, got {start!r}")
         self._t = float(start)
 
     def now(self) -> float:
@@ -55,6 +59,7 @@ class SimulatedClock:
         self._t = max(self._t, float(t))
 
     def advance(self, dt: float) -> None:
-        if dt < 0:
-            raise ValueError(f"dt must be >= 0 seconds, got {dt}")
-        self._t += dt
+        """Move the clock forward by `dt` seconds (finite, >= 0)."""
+        if isinstance(dt, bool) or not isinstance(dt, Real) or not 0.0 <= dt < math.inf:
+            raise ValueError(f"dt must be a finite number of seconds >= 0, got {dt!r}")
+        self._t += float(dt)

@@ -18,6 +18,11 @@ Pose conventions (SI, radians): `pose.heading` is the world azimuth of the dome'
 "free_yaw": the ant turns on its pin, the ball gives translation in the dome frame, the heading changes only
 by command. Tether "fixed": the ball gives yaw too, the heading turns with the ant (the scene rotates).
 Rotating the scene by +a (counter-clockwise, as the ant sees it) turns the heading by -a.
+
+A control change (set_pose, reset_origin, rotate_scene, closed loop, tether, gains; any `call_soon` command) applies
+when it runs, between frames: the samples that arrived before it move the pose first, under the state before it, so
+the next frame shows a pose set or reset exactly, and motion walked in open loop never moves it. Those samples are
+the next frame's (its `sample_seq`, `latency`, the log's locomotion rows).
 """
 
 from __future__ import annotations
@@ -158,6 +163,7 @@ class FrameLoop:
         self.late_frames = 0
         self.skipped_frames = 0
         self.samples_used = 0
+        self._caught_up: list = []  # samples read by `_catch_up` since the last frame, in order
         self.locomotion_connected = True
         self.locomotion_losses = 0  # how often the source was lost (read() raising, or status() not connected)
         self._loco_reported = True  # the state the last locomotion event told
@@ -261,6 +267,8 @@ class FrameLoop:
                 limit -= 1
             if not future.set_running_or_notify_cancel():
                 continue
+            if calls is self._pending:  # a command reads the state as it is now (the pose after the samples so far)
+                self._catch_up()
             try:
                 future.set_result(fn(*args, **kwargs))
             except BaseException as exc:  # handed to the caller, who replies with the error
@@ -271,6 +279,7 @@ class FrameLoop:
         """Virtual displacement: put the eye at `pose` now (heading = world azimuth of the dome's +x)."""
         if not isinstance(pose, Pose):
             raise ValueError(f"set_pose needs an antarium.core.pose.Pose, got {type(pose).__name__}")
+        self._catch_up()
         self.pose = pose
         self.event("pose_set", x=pose.x, y=pose.y, z=pose.z, heading=pose.heading)
 
@@ -278,6 +287,7 @@ class FrameLoop:
         """Put the eye back at the virtual origin (or make `origin` the new origin and go there)."""
         if origin is not None and not isinstance(origin, Pose):
             raise ValueError(f"reset_origin needs an antarium.core.pose.Pose or None, got {type(origin).__name__}")
+        self._catch_up()
         self.origin = origin or self.origin
         self.pose = self.origin
         self.scene_rotation = 0.0
@@ -288,6 +298,7 @@ class FrameLoop:
         """Rotate the scene instantly by `angle` rad, counter-clockwise as seen from above."""
         if isinstance(angle, bool) or not isinstance(angle, (int, float)) or not math.isfinite(angle):
             raise ValueError(f"scene rotation must be a finite angle in radians, got {angle!r}")
+        self._catch_up()
         self.scene_rotation = math.remainder(self.scene_rotation + angle, math.tau)
         self.pose = self.pose.moved(dheading=-angle)
         self.event("scene_rotated", angle=float(angle), total=self.scene_rotation)
@@ -295,16 +306,20 @@ class FrameLoop:
     def set_closed_loop(self, on: bool) -> None:
         if not isinstance(on, bool):
             raise ValueError(f"closed_loop must be true or false, got {on!r}")
+        self._catch_up()
         self.closed_loop = on
         self.event("closed_loop", on=on)
 
     def set_tether(self, tether: str) -> None:
-        self.tether = check_tether(tether)
+        check_tether(tether)
+        self._catch_up()
+        self.tether = tether
         self.event("tether", tether=tether)
 
     def set_gains(self, translation: float | None = None, rotation: float | None = None) -> None:
         t = self.gain_translation if translation is None else _check_gain("gain translation", translation)
         r = self.gain_rotation if rotation is None else _check_gain("gain rotation", rotation)
+        self._catch_up()
         self.gain_translation, self.gain_rotation = t, r
         self.event("gains", translation=t, rotation=r)
 
@@ -456,6 +471,27 @@ class FrameLoop:
         self.last_link_error = f"the distributor has not answered in {now - self._t_first:.2f} s"
         self.event("link_outage", error=self.last_link_error)
 
+    def _take_samples(self, t: float) -> list:
+        """Read the source's new samples at `t` (s, loop clock), log them and move the pose by them (closed loop,
+        source connected); returns them."""
+        samples = self._read_source(t)
+        if samples:
+            self.samples_used += len(samples)
+            if self.log is not None:
+                self.log.add_samples(samples)
+            if not self.locomotion_connected and not self._source_failing:
+                self._check_locomotion(t)  # samples again: a replugged source is taken at once
+            moved = samples if self.locomotion_connected else self._before_loss(samples)
+            if self.closed_loop and moved:
+                self._integrate(moved, t)
+        return samples
+
+    def _catch_up(self) -> None:
+        """Before a control change between frames: the samples that arrived so far were measured under the old
+        state (pose, mode, tether, gains) and move the pose by it; the next frame's record counts them."""
+        if self._t_first is not None:  # before the first frame the source may not be started: the frame reads it
+            self._caught_up += self._take_samples(self.clock.now())
+
     def _read_source(self, t: float) -> list:
         """The source's new samples; a source that raises is reported as disconnected, never stops the loop."""
         if self.source is None:
@@ -543,17 +579,8 @@ class FrameLoop:
         if self.frame % LOCOMOTION_CHECK_EVERY == 0:
             self._check_locomotion(t_start)
         self._check_link(t_start)
-        samples = self._read_source(t_start)
+        samples, self._caught_up = self._caught_up + self._take_samples(t_start), []
         newest = samples[-1] if samples else None
-        if samples:
-            self.samples_used += len(samples)
-            if self.log is not None:
-                self.log.add_samples(samples)
-            if not self.locomotion_connected and not self._source_failing:
-                self._check_locomotion(t_start)  # samples again: a replugged source is taken at once
-            moved = samples if self.locomotion_connected else self._before_loss(samples)
-            if self.closed_loop and moved:
-                self._integrate(moved, t_start)
         if self.locomotion_connected != self._loco_reported:  # a change held back: told once a second has passed
             self._report_locomotion(t_start)
         pose = self.pose
@@ -614,15 +641,21 @@ class FrameLoop:
         if late:
             self._late_since_event += 1
             self._worst_overrun = max(self._worst_overrun, t_sent - slot_end)
-            if t_sent - self._last_late_event_t >= 1.0:  # at most one event a second, summing up
-                self.event("late_frames", count=self._late_since_event, total=self.late_frames,
-                           worst_overrun=self._worst_overrun, skipped_total=self.skipped_frames)
-                self._last_late_event_t, self._late_since_event, self._worst_overrun = t_sent, 0, 0.0
+        self._report_late(t_sent)
         if self.on_frame is not None:
             self.on_frame(rec)
         if self._next_t - clock.now() >= IDLE_MARGIN_S:
             self._run_pending(self._idle, limit=1)
         return rec
+
+    def _report_late(self, t: float, now: bool = False) -> None:
+        """A late_frames event for the late frames not told yet, when the last one is a second old (`now`: at once):
+        `count` of them, the `total`, their `worst_overrun` (s), `skipped_total`."""
+        if not self._late_since_event or (not now and t - self._last_late_event_t < 1.0):
+            return
+        self.event("late_frames", count=self._late_since_event, total=self.late_frames,
+                   worst_overrun=self._worst_overrun, skipped_total=self.skipped_frames)
+        self._last_late_event_t, self._late_since_event, self._worst_overrun = t, 0, 0.0
 
     def run(self, until: float | None = None, frames: int | None = None) -> int:
         """Run frames until the clock reads `until` (s), `frames` frames were run, or `stop()`; returns the count."""
@@ -640,6 +673,7 @@ class FrameLoop:
             self._run_pending()
             self._report_unanswered(self.clock.now())  # a run shorter than LINK_STARTUP_S with the dome dark
             self._report_locomotion(self.clock.now(), now=True)  # the log's last word is the state at the end
+            self._report_late(self.clock.now(), now=True)  # late frames held back are told before the run ends
         return n
 
     def stop(self) -> None:
