@@ -95,7 +95,8 @@ class LoopSection(Section):
     gain_rotation: float = _finite(-100.0, 100.0, 1.0)
     start_x_m: float = _finite(-1e6, 1e6, 0.0, "virtual origin")
     start_y_m: float = _finite(-1e6, 1e6, 0.0)
-    eye_height_m: float = _finite(0.0, 1000.0, 0.01, "above the ground")
+    eye_height_m: float = _finite(0.0, 1000.0, 0.01, "the eye's z in the world (m): its height above a ground at "
+                                  "z = 0 (a mesh scene's origin puts its ground there)")
     start_heading_deg: float = _finite(-3600.0, 3600.0, 0.0)
     ball_radius_m: float = _finite(1e-3, 1.0, BALL_RADIUS_M)
     stats_every_frames: int = Field(19, ge=1, le=100_000, description="publish frame statistics every N frames")

@@ -117,7 +117,7 @@ def _mesh_world(p):
     if "path" not in p:
         raise ValueError("a mesh scene needs 'path' (OBJ, PLY, GLB/GLTF or STL)")
     path = _path(p, "path")
-    units = {k: p.pop(k) for k in ("scale", "up") if k in p}
+    units = {k: p.pop(k) for k in ("scale", "up", "origin") if k in p}
     far = [_sky(p)]
     if "panorama" in p:
         far.append(Panorama(_path(p, "panorama")))

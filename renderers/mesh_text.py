@@ -8,6 +8,7 @@ names can change), and handed to trimesh as UTF-8.
 from __future__ import annotations
 
 import io
+import os
 import re
 from pathlib import Path
 
@@ -173,9 +174,19 @@ def load_text_mesh(path: Path):
     refused: list[MeshTextError] = []  # trimesh skips a material file whose reading raises: raised after it
 
     class _Utf8Resolver(trimesh.resolvers.FilePathResolver):
+        def raw(self, name: str) -> bytes:
+            """The bytes of the file `name`, else of the file whose name is the bytes that `name` was read from
+            as Latin-1 (an 8-bit, not UTF-8, name in an 8-bit text; `decode_mesh_text`)."""
+            try:
+                return super().get(name)
+            except OSError:
+                if name.isascii() or max(map(ord, name)) > 0xFF:  # no 8-bit name read as Latin-1
+                    raise
+                return super().get(os.fsdecode(name.encode("latin-1")))
+
         def get(self, name: str) -> bytes:
             try:
-                data = super().get(name)
+                data = self.raw(name)
             except OSError as exc:  # trimesh would draw the materials of a missing MTL grey, unsaid
                 if Path(name).suffix.lower() == ".mtl":
                     refused.append(MeshTextError(f"{path}: cannot read its material file {name!r} "
@@ -188,7 +199,7 @@ def load_text_mesh(path: Path):
                     if Path(name).suffix.lower() == ".mtl":
                         try:
                             text, stated = read_mtl(text)
-                            check_textures(text, super().get)
+                            check_textures(text, self.raw)
                         except MeshTextError as exc:
                             raise MeshTextError(f"{path.parent / name}: {exc}") from exc
                         kd.update(stated)

@@ -19,9 +19,11 @@ from urllib.parse import unquote
 
 import numpy as np
 
+from antarium.core.numbers import as_real
+
 from .channels import rgb_to_gbu, srgb_to_linear
 from .mesh_text import TEXT_SUFFIXES, MeshTextError, load_text_mesh
-from .scene import MAX_TEXTURE_SIDE, MeshData, SceneObject
+from .scene import MAX_COORDINATE_M, MAX_TEXTURE_SIDE, MeshData, SceneObject
 
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl")
 DEFAULT_GREY = 0.5
@@ -184,16 +186,23 @@ def check_gltf_textures(path: Path) -> None:
                              f"a texture index into textures whose source indexes images, the image file present")
 
 
-def load_mesh_objects(path: str | Path, scale: float = 1.0, up: str | None = None) -> dict[str, SceneObject]:
+def load_mesh_objects(path: str | Path, scale: float = 1.0, up: str | None = None,
+                      origin=None) -> dict[str, SceneObject]:
     """Named objects of a mesh file in metres, +z up: `scale` metres per file unit (0.001: millimetres), `up` the
     file's up axis, "z" or "y" (default: "y" for GLB/GLTF, +y up by their specification, else "z"; GLB/GLTF take
-    "y" only). Raises FileNotFoundError or ValueError naming the file and the problem."""
+    "y" only); `origin` (3,) m, the point (in the world's axes, after scale and up) that becomes (0, 0, 0), e.g. a
+    georeferenced scan's ground under the start (the rig's eye stays within 1000 km of (0, 0), its height taken
+    from z = 0); None: (0, 0, 0). Raises FileNotFoundError or ValueError naming the file and the problem."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"mesh file not found: {path}")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise ValueError(f"unsupported mesh format {path.suffix!r} ({path}); allowed: {', '.join(MESH_SUFFIXES)}")
     gltf = path.suffix.lower() in (".glb", ".gltf")
+    if not gltf and path.name != path.name.encode("utf-8", "replace").decode("utf-8"):
+        # trimesh names the objects of OBJ, PLY and STL files by the file's name and fails on one that is not UTF-8
+        raise ValueError(f"mesh file name {ascii(path.name)} is not UTF-8 text (its bytes in another encoding); "
+                         f"allowed: a file name in UTF-8 (rename the file)")
     up = ("y" if gltf else "z") if up is None else up
     if not isinstance(up, str) or up not in UP_AXES or (gltf and up != "y"):
         allowed = '"y" (GLB/GLTF are +y up by their specification)' if gltf else '"z" or "y"'
@@ -201,6 +210,11 @@ def load_mesh_objects(path: str | Path, scale: float = 1.0, up: str | None = Non
     if not (isinstance(scale, (int, float)) and not isinstance(scale, bool) and np.isfinite(scale) and scale > 0):
         raise ValueError(f"{path}: scale must be a positive number of metres per file unit (0.001: millimetres), "
                          f"got {repr(scale)[:60]}")
+    moved = np.zeros(3) if origin is None else np.array(
+        [as_real(v) for v in origin] if isinstance(origin, (list, tuple, np.ndarray)) else [np.nan])
+    if moved.shape != (3,) or not np.all(np.abs(moved) <= MAX_COORDINATE_M):
+        raise ValueError(f"{path}: origin must be 3 finite numbers (m) within {MAX_COORDINATE_M:g} m of (0, 0, 0), "
+                         f"the file's point that becomes (0, 0, 0); got {repr(origin)[:60]}")
     to_world = UP_AXES[up] @ np.diag([scale, scale, scale, 1.0])
     import trimesh
 
@@ -236,7 +250,12 @@ def load_mesh_objects(path: str | Path, scale: float = 1.0, up: str | None = Non
             mesh.validate(name)
         except ValueError as exc:
             raise ValueError(f"{path}: {exc}") from exc
-        objects[name] = SceneObject(mesh, position=tuple(t[:3, 3] + shift))
+        position = t[:3, 3] + shift - moved
+        if not np.abs(position).max() <= MAX_COORDINATE_M:  # SceneObject would refuse it naming neither
+            raise ValueError(f"{path}: object {name!r} lies at {np.round(position, 1).tolist()} m; allowed: within "
+                             f"{MAX_COORDINATE_M:g} m of (0, 0, 0) (a file in millimetres: scale 0.001; a far point "
+                             f"of the file to (0, 0, 0): origin)")
+        objects[name] = SceneObject(mesh, position=tuple(position))
     if not objects:
         raise ValueError(f"mesh file {path} contains no triangles (empty or not a triangle mesh)")
     return objects

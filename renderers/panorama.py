@@ -25,12 +25,14 @@ MAX_IMAGE_SIDE = 16384
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".tif", ".tiff", ".hdr")
 
 
-def _read_exr(path: Path) -> np.ndarray:
-    """(H, W, C) float32 BGR(A) pixels of an OpenEXR file (RGB, RGBA or luminance Y)."""
+def _read_exr(data: bytes, path: Path) -> np.ndarray:
+    """(H, W, C) float32 BGR(A) pixels of an OpenEXR file's bytes `data` (RGB, RGBA or luminance Y)."""
+    import io
+
     import OpenEXR
 
     try:
-        with OpenEXR.File(str(path)) as f:
+        with OpenEXR.File(io.BytesIO(data)) as f:
             channels = {name: np.asarray(c.pixels) for name, c in f.channels().items()}
     except Exception as exc:  # the bindings raise RuntimeError/OSError for corrupt files
         raise ValueError(f"cannot decode EXR image {path}: {exc}") from exc
@@ -52,12 +54,16 @@ def read_image(path: str | Path) -> tuple[np.ndarray, bool]:
         raise FileNotFoundError(f"panorama image not found: {path}")
     if path.suffix.lower() not in IMAGE_SUFFIXES:
         raise ValueError(f"unsupported panorama format {path.suffix!r} ({path}); allowed: {', '.join(IMAGE_SUFFIXES)}")
+    # the bytes are read here: OpenCV's imread of a name that is not UTF-8 ended the process (a segmentation
+    # fault), OpenEXR refused it
+    data = path.read_bytes()
     if path.suffix.lower() == ".exr":
-        img = _read_exr(path)
+        img = _read_exr(data, path)
     else:
         import cv2
 
-        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH |
+                           cv2.IMREAD_ANYCOLOR) if data else None
         if img is None or img.size == 0:
             raise ValueError(f"cannot decode image {path} (corrupt, empty or unsupported by OpenCV)")
     if max(img.shape[:2]) > MAX_IMAGE_SIDE:
