@@ -62,7 +62,9 @@ class LinkBudget:
         spill = self.backlog + FRAME_BITS + POLARISER_BITS - self.period_bits
         return spill + FRAME_BITS <= self.period_bits
 
-    def period(self, update_sent: bool) -> None:
-        """Account one frame period: its frame, and the update if one went out."""
-        sent = FRAME_BITS + (POLARISER_BITS if update_sent else 0)
+    def period(self, update_sent: bool, extra_bits: float = 0.0) -> None:
+        """Account one frame period: its frame, the update if one went out, and `extra_bits` more sent in it (the
+        held state the link sent again to a distributor that may have lost it: `Link.counters`'
+        `state_resent_bits`), which the next frames wait behind."""
+        sent = FRAME_BITS + (POLARISER_BITS if update_sent else 0) + extra_bits
         self.backlog = max(0.0, self.backlog + sent - self.period_bits)

@@ -14,6 +14,7 @@ import numpy as np
 
 from antarium.geometry.constants import N_ACTUATORS, N_PANELS
 
+from .budget import wire_bits
 from .config import check_percent, dot_correction_table, encode_brightness, encode_dot_correction
 from .control import encode_hello, encode_latch, encode_status_request
 from .errors import ProtocolError
@@ -103,7 +104,8 @@ class Link(ABC):
         self._last_reply_t: float | None = None
         self._last_request_t: float | None = None
         self.counters = {"frames_sent": 0, "datagrams_sent": 0, "datagrams_failed": 0,
-                         "replies_received": 0, "replies_rejected": 0, "state_resent": 0}
+                         "replies_received": 0, "replies_rejected": 0, "state_resent": 0,
+                         "state_resent_bits": 0}
         self.closed = False
         self.last_timings: dict[str, float] = {}
         self.hello_pending = True           # no VERSION since the link opened or since the last outage
@@ -216,6 +218,7 @@ class Link(ABC):
         for key in [k for k in self._held if k in self._unsure]:
             if self._send_held(self._held[key]):
                 self.counters["state_resent"] += 1
+                self.counters["state_resent_bits"] += wire_bits(len(self._held[key]))  # for the frames' budget
 
     def _distributor_may_have_rebooted(self) -> None:
         """Everything held is sent again with the next `telemetry` or `hello`, and VERSION asked for again."""

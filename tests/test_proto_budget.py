@@ -108,3 +108,31 @@ def test_the_frame_loop_defers_polariser_updates_the_link_cannot_carry():
         loop.step()
     assert 190 < link.updates < 380 and loop.link_budget.deferred == 380 - link.updates
     assert not math.isnan(loop.link_budget.backlog)
+
+
+def test_held_state_sent_again_after_a_reboot_counts_in_the_frames_budget():
+    """A distributor that rebooted gets the dot correction, brightness and polarisers again (57 datagrams, 0.70 of a
+    frame) inside one period: the budget's backlog holds them, so the next polariser updates wait behind them (they were
+    sent beside the budget, which stayed at 0 while the next frames would have run late on a real line)."""
+    from antarium.firmware_proto.config import encode_brightness, encode_dot_correction
+    from antarium.firmware_proto.emulator import Emulator
+    from antarium.firmware_proto.link import open_link
+
+    clock = SimulatedClock()
+    link = open_link("virtual", clock=clock)
+    link.send_config(dot_correction=50, brightness=40)
+    loop = FrameLoop(clock=clock, source=None, renderer=_SkyRenderer(), link=link, rate_hz=190.0)
+    for _ in range(40):
+        loop.step()
+    assert loop.link_budget.backlog == 0.0 and link.counters["state_resent"] == 0
+    link.emulator = Emulator()  # rebooted: its counters start again, its panels at 100 %
+    backlog = []
+    for _ in range(200):
+        loop.step()
+        backlog.append(loop.link_budget.backlog)
+    resent = link.counters["state_resent_bits"]
+    one_panel, brightness = encode_dot_correction(0, np.full(740, 50)), encode_brightness(40)
+    assert link.counters["state_resent"] == 57  # the dot corrections, the brightness and the polarisers
+    assert resent == 55 * wire_bits(len(one_panel)) + wire_bits(len(brightness)) + POLARISER_BITS
+    assert (link.emulator.dot == 50).all()
+    assert max(backlog) == pytest.approx(resent + FRAME_BITS - 100e6 / 190.0)

@@ -205,6 +205,7 @@ class FrameLoop:
         self._polariser_heading: float | None = None
         #: the dome link's bit budget at `link_bps` bits/s (None where the frames alone exceed it: nothing to share)
         self.link_budget = LinkBudget(rate_hz, link_bps) if rate_hz <= max_frame_rate(link_bps) else None
+        self._resent_bits = 0  # the link's `state_resent_bits` the budget has counted
         self._polarisers_dirty = False
         self._sky_present = False
         if renderer is not None:
@@ -609,8 +610,10 @@ class FrameLoop:
             update_sent = False
             if self.renderer is not None and hasattr(self.renderer, "polariser_angles"):
                 update_sent = self._send_polarisers(pose)
-            if self.link_budget is not None:
-                self.link_budget.period(update_sent)
+            if self.link_budget is not None:  # with the held state the link sent again this period (a reboot)
+                resent = getattr(self.link, "counters", {}).get("state_resent_bits", 0)
+                self.link_budget.period(update_sent, resent - self._resent_bits)
+                self._resent_bits = resent
             t1 = clock.now()
             link_timings = getattr(self.link, "last_timings", None) or {}
             encode = link_timings.get("encode", math.nan)
