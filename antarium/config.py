@@ -233,9 +233,16 @@ class BusSection(Section):
 
 class LogSection(Section):
     NAME: ClassVar[str] = "log"
-    dir: str = "trials"
+    dir: str = Field("trials", description="the trial logs' folder; relative: to the server's working folder")
     flush_s: float = _finite(0.01, 1.0, 0.25, "seconds between flushes to disk")
     record: bool = False
+
+    @field_validator("dir")
+    @classmethod
+    def _a_folder(cls, v: str) -> str:
+        if not v.strip():  # "" would be the working folder, unsaid
+            raise ValueError("must name a folder (\".\" for the server's working folder)")
+        return v
 
 
 class MonitorSection(Section):

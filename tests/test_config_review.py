@@ -69,6 +69,15 @@ def test_an_unknown_array_of_tables_is_still_an_unknown_section():
         resolve({"ant": [{"model": "mb"}]})
 
 
+@pytest.mark.parametrize("folder", ["", "  "])
+def test_an_empty_log_folder_is_refused_naming_the_working_folder_form(folder):
+    """`[log] dir = ""` wrote the trials into the server's working folder without a word."""
+    message = '[log] dir must name a folder ("." for the server\'s working folder)'
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}"):
+        resolve({"log": {"dir": folder}})
+    assert resolve({"log": {"dir": "."}}).log.dir == "."
+
+
 def test_port_0_without_a_spawned_emulator_is_refused_when_the_file_is_loaded(tmp_path, capsys):
     """It passed `load_config`, `serve --print-config` and `antarium check`'s config line; `serve` printed its
     start banner and only then refused it (a rule copied in the server, `antarium check` and the served ant)."""
