@@ -91,7 +91,8 @@ def run(args: argparse.Namespace) -> int:
         # one ball, one tether: the loop's, as `antarium serve` passes them
         options = {"tether": config.loop.tether, "ball_radius": config.loop.ball_radius_m, **locomotion.options}
     try:
-        src = open_source("servosphere", clock=clock, process=False, **options)  # the loop here: its rig, its rows
+        # the loop here, in a thread of this process (its rig, its rows), whatever the config's `process` says
+        src = open_source("servosphere", **{**options, "clock": clock, "process": False})
     except ValueError as exc:  # the simulated rig's own range checks: name the option that set the value
         option = next((o for key, o in SIMULATE_OPTIONS.items() if args.simulate and f" {key} " in f" {exc} "), None)
         raise ValueError(f"{option}: {exc}" if option else str(exc)) from None

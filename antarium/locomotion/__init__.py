@@ -82,7 +82,10 @@ class BufferedSource(LocomotionSource):
     count it. `_lock` may also guard the subclass's own counters.
     """
 
-    def __init__(self, max_pending: int = 100_000) -> None:
+    def __init__(self, max_pending: int = 100_000, option: str = "max_pending") -> None:
+        if isinstance(max_pending, bool) or not isinstance(max_pending, int) or max_pending < 1:
+            raise ValueError(f"{option} must be an integer >= 1 (samples that may wait for read()), got "
+                             f"{max_pending!r}")
         self._lock = threading.Lock()
         self._pending: deque[BallSample] = deque(maxlen=max_pending)
 
@@ -110,8 +113,8 @@ class ReaderSource(BufferedSource):
 
     thread_name = "locomotion-reader"
 
-    def __init__(self, max_pending: int = 100_000) -> None:
-        super().__init__(max_pending)
+    def __init__(self, max_pending: int = 100_000, option: str = "max_pending") -> None:
+        super().__init__(max_pending, option)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 

@@ -41,7 +41,7 @@ class BusSource(BufferedSource):
         self.timeout_s = positive(timeout_s, "bus source timeout_s", "s without samples before it is not connected")
         self._session = session
         self._own_session = session is None
-        super().__init__(max_pending)
+        super().__init__(max_pending, "bus source max_pending")
         self._sub = None
         self._events_sub = None
         self._device_lost = False

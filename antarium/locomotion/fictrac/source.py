@@ -99,7 +99,7 @@ class FicTracSource(ReaderSource):
         self.timeout_s = positive(timeout_s, "FicTrac timeout_s", "s without frames before it is not connected")
         self.retry_s = positive(retry_s, "FicTrac retry_s", "s between tries to connect to FicTrac over tcp")
         self._stats = _Counters(_max_match_error(max_match_error))
-        super().__init__(max_queue)
+        super().__init__(max_queue, "FicTrac max_queue")
         self._sock: socket.socket | None = None
         self._last_frame: float | None = None
         self._tcp_connected = False

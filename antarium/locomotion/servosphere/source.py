@@ -258,8 +258,11 @@ class ServosphereSource(BufferedSource):
                 raise ValueError("servosphere simulation options are for the simulated rig (camera and link "
                                  f"'simulated'), not camera {camera!r} with link {link!r}; allowed with a real rig: "
                                  "port, baudrate, camera_index, calibration")
+            if link == "serial" and not port:
+                raise ValueError("servosphere link 'serial' needs [locomotion] port: the firmware's serial device "
+                                 "(e.g. '/dev/ttyACM0') or a pyserial URL")
             cam = open_camera(camera, index=0 if camera_index is None else camera_index, clock=self.clock)
-            motor = open_motor_link(link, url=port or "", baudrate=1_000_000 if baudrate is None else baudrate)
+            motor = open_motor_link(link, url=port, baudrate=1_000_000 if baudrate is None else baudrate)
             cal = _calibration(calibration)
         self.calibration = cal
         tracker = Tracker(cal, threshold=threshold, area_mm2=tuple(area_mm2))
