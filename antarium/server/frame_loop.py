@@ -164,6 +164,7 @@ class FrameLoop:
         self.skipped_frames = 0
         self.samples_used = 0
         self._caught_up: list = []  # samples read by `_catch_up` since the last frame, in order
+        self._caught_up_log = None  # the log they went into (a trial started or stopped between frames changes it)
         self.locomotion_connected = True
         self.locomotion_losses = 0  # how often the source was lost (read() raising, or status() not connected)
         self._loco_reported = True  # the state the last locomotion event told
@@ -205,7 +206,8 @@ class FrameLoop:
         self._polariser_heading: float | None = None
         #: the dome link's bit budget at `link_bps` bits/s (None where the frames alone exceed it: nothing to share)
         self.link_budget = LinkBudget(rate_hz, link_bps) if rate_hz <= max_frame_rate(link_bps) else None
-        self._resent_bits = 0  # the link's `state_resent_bits` the budget has counted
+        #: the link's `state_resent_bits` the budget has counted (a link may have resent under an earlier loop)
+        self._resent_bits = getattr(link, "counters", {}).get("state_resent_bits", 0)
         self._polarisers_dirty = False
         self._sky_present = False
         if renderer is not None:
@@ -268,12 +270,16 @@ class FrameLoop:
                 limit -= 1
             if not future.set_running_or_notify_cancel():
                 continue
-            if calls is self._pending:  # a command reads the state as it is now (the pose after the samples so far)
-                self._catch_up()
+            caught_up = False
             try:
+                if calls is self._pending:  # a command reads the state as it is now (the pose after the samples so far)
+                    self._catch_up()
+                caught_up = True
                 future.set_result(fn(*args, **kwargs))
             except BaseException as exc:  # handed to the caller, who replies with the error
                 future.set_exception(exc)
+                if not caught_up:  # the samples before it end the loop, as they would in the next frame
+                    raise
 
     # -- control (loop thread) -------------------------------------------------------------------------
     def set_pose(self, pose: Pose) -> None:
@@ -491,6 +497,8 @@ class FrameLoop:
         """Before a control change between frames: the samples that arrived so far were measured under the old
         state (pose, mode, tether, gains) and move the pose by it; the next frame's record counts them."""
         if self._t_first is not None:  # before the first frame the source may not be started: the frame reads it
+            if self.log is not self._caught_up_log:  # those read so far went into another log (or none)
+                self._caught_up, self._caught_up_log = [], self.log
             self._caught_up += self._take_samples(self.clock.now())
 
     def _read_source(self, t: float) -> list:
@@ -580,7 +588,8 @@ class FrameLoop:
         if self.frame % LOCOMOTION_CHECK_EVERY == 0:
             self._check_locomotion(t_start)
         self._check_link(t_start)
-        samples, self._caught_up = self._caught_up + self._take_samples(t_start), []
+        caught_up = self._caught_up if self._caught_up_log is self.log else []  # a frames row names its log's samples
+        samples, self._caught_up = caught_up + self._take_samples(t_start), []
         newest = samples[-1] if samples else None
         if self.locomotion_connected != self._loco_reported:  # a change held back: told once a second has passed
             self._report_locomotion(t_start)

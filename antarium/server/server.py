@@ -143,6 +143,7 @@ class Server:
         self._in_flight_done = threading.Condition()
         self._slow_queries: queue.SimpleQueue = queue.SimpleQueue()  # for `_answer_slow_queries` (None: end)
         self._slow_worker: threading.Thread | None = None
+        self._queries_ended = False  # `_await_queries` ran: no worker starts any more
         self._thread: threading.Thread | None = None
         self._status_thread: threading.Thread | None = None
         self._start_error: BaseException | None = None
@@ -227,13 +228,16 @@ class Server:
         with self._in_flight_done:
             self._in_flight += 1
         if slow_command(str(query.key_expr).rsplit("/", 1)[-1]):
-            with self._in_flight_done:  # (the condition's lock also guards the worker's start)
-                if self._slow_worker is None:
-                    self._slow_worker = threading.Thread(target=self._answer_slow_queries, name="slow-commands",
-                                                         daemon=True)
-                    self._slow_worker.start()
-            self._slow_queries.put(query)
-            return
+            with self._in_flight_done:  # (the condition's lock also guards the worker's start and its end)
+                handed = not self._queries_ended  # one zenoh hands over after the shutdown is answered here
+                if handed:
+                    if self._slow_worker is None:
+                        self._slow_worker = threading.Thread(target=self._answer_slow_queries,
+                                                             name="slow-commands", daemon=True)
+                        self._slow_worker.start()
+                    self._slow_queries.put(query)
+            if handed:
+                return
         try:
             self._answer(query)
         finally:
@@ -260,6 +264,7 @@ class Server:
         """Wait (at most COMMAND_TIMEOUT_S) until no bus query is being answered; RuntimeError naming how many are
         still running after that. Called once the queryable is undeclared: no new query comes."""
         with self._in_flight_done:
+            self._queries_ended = True
             if self._slow_worker is not None:  # it ends once the queries handed to it are answered
                 self._slow_queries.put(None)
                 self._slow_worker = None
@@ -608,14 +613,11 @@ class Server:
         """Stop the running trial; with `path`, only when it is the one recording into that log (RuntimeError naming
         the running one otherwise, nothing stopped: a script's trial block never stops another script's trial)."""
         if self._stopping_elsewhere():  # detaching the log from here could lose the loop's last frame
-            return self._trial_closed_by_shutdown()
+            return self._trial_closed_by_shutdown(path)
         with self._trial_lock:  # checked and stopped under one lock: no trial starts between the two
             if self.trial_log is None:
                 raise RuntimeError("trial_stop: no trial is running")
-            if path is not None and str(self.trial_log.path) != path:
-                raise RuntimeError(f"trial_stop: the trial of log {_brief(path)!r} is not running (stopped by another "
-                                   f"client?); the running trial {self.trial_name!r} ({self.trial_log.path}) was not "
-                                   "stopped")
+            _check_trial_path(self.trial_log, self.trial_name, path)
             return self._close_trial()
 
     def _close_trial(self) -> dict[str, Any]:
@@ -652,12 +654,13 @@ class Server:
         t = self._loop_thread
         return self._stopping.is_set() and t is not None and t is not threading.current_thread() and t.is_alive()
 
-    def _trial_closed_by_shutdown(self) -> dict[str, Any]:
+    def _trial_closed_by_shutdown(self, path: str | None = None) -> dict[str, Any]:
         """trial_stop while the server stops: its shutdown closes the trial after the loop's last frame; wait for
         that (at most COMMAND_TIMEOUT_S) and reply as trial_stop does."""
         log, name = self.trial_log, self.trial_name
         if log is None:
             raise RuntimeError("trial_stop: no trial is running")
+        _check_trial_path(log, name, path)
         deadline = time.monotonic() + COMMAND_TIMEOUT_S
         while self.trial_log is log and self._loop_thread.is_alive() and time.monotonic() < deadline:
             time.sleep(0.005)
@@ -884,6 +887,13 @@ class Server:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def _check_trial_path(log, name: str | None, path: str | None) -> None:
+    """RuntimeError, nothing stopped, when `path` is given and is not the running trial's log (`log`, trial `name`)."""
+    if path is not None and str(log.path) != path:
+        raise RuntimeError(f"trial_stop: the trial of log {_brief(path)!r} is not running (stopped by another "
+                           f"client?); the running trial {name!r} ({log.path}) was not stopped")
 
 
 def _alarm_key(alarm: str) -> str:
