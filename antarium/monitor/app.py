@@ -87,6 +87,34 @@ def world_top_view(scene: str) -> dict[str, Any]:
     return {"scene": scene, "points": np.round(top[:, :2], 3).ravel().tolist()}
 
 
+#: scenes whose top views the monitor keeps (each up to WORLD_POINTS points, about 1 MB): a script that loads a
+#: scene of new parameters for each trial (a new scene name each time) would otherwise grow the monitor without end
+WORLDS_KEPT = 4
+
+
+class TopViews:
+    """`world_top_view` of the `kept` scenes asked for last, each built once (in a worker thread) while kept."""
+
+    def __init__(self, kept: int = WORLDS_KEPT) -> None:
+        self.kept = kept
+        self._views: dict[str, dict[str, Any]] = {}  # oldest first
+
+    @property
+    def names(self) -> list[str]:
+        """The scenes kept, the one asked for last at the end."""
+        return list(self._views)
+
+    async def get(self, scene: str) -> dict[str, Any]:
+        view = self._views.pop(scene, None)
+        if view is None:
+            view = await asyncio.get_running_loop().run_in_executor(None, world_top_view, scene)
+            self._views.pop(scene, None)  # built meanwhile for another page
+        self._views[scene] = view
+        while len(self._views) > self.kept:
+            del self._views[next(iter(self._views))]
+        return view
+
+
 def refusal(address: str | None, rig: str, allow: list[str]) -> str:
     return (f"antarium monitor: the address {address} may not open the monitor of rig {rig!r}; allowed: "
             f"{', '.join(allow)} ([monitor] allow in the rig config)")
@@ -149,16 +177,14 @@ def make_app(session, rig: str, settings: MonitorSection):
             clients.pop(ws, None)
         return ws
 
-    worlds: dict[str, dict] = {}
+    worlds = TopViews()
 
     async def world_json(request):
         """The current scene's objects seen from above (for the path view), built once per scene name."""
         name = (hub.status or {}).get("scene")
-        if name is None:
+        if not isinstance(name, str):  # none loaded (or a status of another shape)
             return web.json_response({"scene": None, "points": []})
-        if name not in worlds:
-            worlds[name] = await asyncio.get_running_loop().run_in_executor(None, world_top_view, name)
-        return web.json_response(worlds[name])
+        return web.json_response(await worlds.get(name))
 
     async def command(request):
         name = request.match_info["name"]
