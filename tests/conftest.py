@@ -72,6 +72,19 @@ def renderer(request, dome):
     r.release()
 
 
+@pytest.fixture(autouse=True)
+def _no_default_log_folder_made():
+    """A test's server that takes the default `[log] dir` makes ./trials in the working folder (a stray folder in
+    every clone that runs the suite): the test that made it fails, and the folder goes (when it is empty)."""
+    folder = Path("trials")
+    existed = folder.exists()
+    yield
+    if not existed and folder.is_dir():
+        if not any(folder.iterdir()):
+            folder.rmdir()
+        pytest.fail("this test made ./trials in the working folder: give its server [log] dir under tmp_path")
+
+
 @pytest.fixture
 def emulated_hands(monkeypatch):
     """`antarium trackball calibrate` without --emulate, the driver's USB backend replaced by the miscalibrated

@@ -31,12 +31,13 @@ def test_a_bus_message_that_is_not_a_json_object_is_skipped():
         assert bus.json_object(payload) is None
 
 
-def test_malformed_events_never_reach_a_scripts_callback():
+def test_malformed_events_never_reach_a_scripts_callback(tmp_path):
     from antarium.client import Rig
     from antarium.config import resolve
     from antarium.server import Server
 
-    config = resolve({"rig": {"name": "tev"}, "bus": {"listen": [bus.free_tcp_endpoint()]}})
+    config = resolve({"rig": {"name": "tev"}, "bus": {"listen": [bus.free_tcp_endpoint()]},
+                      "log": {"dir": str(tmp_path / "trials")}})
     server = Server(config, renderer_factory=None, link=False).start_thread()
     got = []
     try:

@@ -192,12 +192,12 @@ def test_a_looped_replay_never_repeats_sequence_numbers(tmp_path):
 
 
 @pytest.mark.parametrize("radius", [0.05, 0.1])
-def test_the_scripted_walker_walks_its_speed_whatever_the_ball_radius(radius):
+def test_the_scripted_walker_walks_its_speed_whatever_the_ball_radius(radius, tmp_path):
     from antarium.config import resolve
     from antarium.server.server import Server
 
     config = resolve({"loop": {"ball_radius_m": radius, "rate_hz": 100.0, "realtime_priority": 0, "cpu": "off"},
-                      "bus": {"enabled": False}, "link": {"interface": "virtual"},
+                      "bus": {"enabled": False}, "link": {"interface": "virtual"}, "log": {"dir": str(tmp_path)},
                       "locomotion": {"source": "scripted", "speed": 0.03}})
     server = Server(config, clock=SimulatedClock(), renderer_factory=None, echo=lambda line: None)
     server.run(seconds=2.0)
