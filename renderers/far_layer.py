@@ -47,6 +47,9 @@ VELOCITY_SMOOTHING = 0.05
 #: async: shared tables: the layer in use, one held for a coming displacement or edit, and the one being built
 #: (so that a held layer, which the eye may never reach, never stops the frames' own from being renewed)
 TABLE_SLOTS = 3
+#: async: a builder that has not answered a build this long (s) is taken as hung: it is killed and reported (`error`),
+#: and frames are drawn in full, as when it dies (a build takes ~0.1 s; a new scene's first, with its uploads, a few s)
+BUILD_TIMEOUT_S = 60.0
 
 
 def builder_nice() -> int:
@@ -468,6 +471,7 @@ class _Worker:
         self._conn = self._child.conn
         names = [s.name for s in self._shm]
         self.busy = False
+        self._asked = 0.0  # when the build in progress was sent (time.monotonic(), s)
         self.error: str | None = None
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
         self._failed: list[str] = []  # the sending thread's error
@@ -495,7 +499,7 @@ class _Worker:
             return
         self._outbox.put(message)
         if message[0] == "build":
-            self.busy = True
+            self.busy, self._asked = True, time.monotonic()
 
     def results(self):
         """Layers finished since the last call: (eye, generation, table index) each."""
@@ -511,6 +515,10 @@ class _Worker:
                     self.error, self.busy = msg[1], False
         except (OSError, EOFError) as exc:
             self.error = f"far-layer process gone: {exc}"
+        if self.busy and self.error is None and time.monotonic() - self._asked > BUILD_TIMEOUT_S:
+            self.error, self.busy = f"far-layer process {self.pid} hung: no layer built in {BUILD_TIMEOUT_S:g} s; " \
+                "killed", False
+            self._child.kill()
         return out
 
     def close(self) -> None:

@@ -12,6 +12,8 @@ between two frames. A `Scene` object (made in this process already) is prepared 
 from __future__ import annotations
 
 import math
+import pickle
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -28,6 +30,8 @@ from .scene import Scene
 
 #: how long `prepare_scene` waits for the far layer's first table (s) before handing the scene over without it
 LAYER_WAIT_S = 60.0
+#: how long the scene's process may take to hand the scene over (s) before it is taken as hung: killed, the load fails
+PREPARE_TIMEOUT_S = 300.0
 
 
 @dataclass
@@ -124,10 +128,11 @@ def prepare_scene(renderer, spec, pose: Callable[[], Pose] | None = None,
     from .far_layer import FarLayer
 
     settings = SceneSettings.of(renderer)
+    released = lambda: renderer._released  # noqa: E731 - the server stopped: nothing prepared is shown
     if isinstance(spec, Scene):
         prepared, process = settings.build(spec), None
     else:
-        prepared, process = _prepare_in_process(spec, settings)
+        prepared, process = _prepare_in_process(spec, settings, released)
     args = settings.layer_args(prepared.scene, prepared.table) if settings.far_layer == "async" else None
     if process is not None and args is None:
         _stop(process)
@@ -138,17 +143,18 @@ def prepare_scene(renderer, spec, pose: Callable[[], Pose] | None = None,
                               radius, error, *rest, prepared.arrays.near_chunks, process=process,
                               nice=settings.builder_nice)
     if pose is not None:
-        await_layer(prepared, lambda: renderer._scene_eye(prepared.scene, pose()), timeout_s, fresh=False)
+        await_layer(prepared, lambda: renderer._scene_eye(prepared.scene, pose()), timeout_s, fresh=False,
+                    cancelled=released)
     return prepared
 
 
 def await_layer(prepared: PreparedScene, eye: Callable[[], np.ndarray], timeout_s: float = LAYER_WAIT_S,
-                fresh: bool = True) -> None:
+                fresh: bool = True, cancelled: Callable[[], bool] | None = None) -> None:
     """Wait until the prepared scene's far layer (if any) has a layer usable at `eye()` (scene coordinates, m);
     fresh: one it would not rebuild yet (within the refresh distance) or else one asked for since this call, as
     a scene about to be swapped in should have, so that its first frames do not outwalk it. Returns early when
-    the builder has stopped or after `timeout_s`: the scene is then shown anyway, its frames drawn in full until
-    a layer is in, as at start-up."""
+    the builder has stopped, `cancelled()` (the renderer released: the scene will not be shown) or after
+    `timeout_s`: the scene is then shown anyway, its frames drawn in full until a layer is in, as at start-up."""
     layer = prepared.layer
     if layer is None:
         return
@@ -158,38 +164,70 @@ def await_layer(prepared: PreparedScene, eye: Callable[[], np.ndarray], timeout_
         at = eye()
         usable = layer.current(at) is not None
         if usable and (not fresh or layer.fresh(at) or layer.builds > asked) \
-                or layer.error or time.monotonic() > deadline:
+                or layer.error or time.monotonic() > deadline or (cancelled is not None and cancelled()):
             return
         time.sleep(0.005)
 
 
-def _prepare_in_process(spec, settings: SceneSettings) -> tuple[PreparedScene, ChildProcess]:
+def _prepare_in_process(spec, settings: SceneSettings,
+                        released: Callable[[], bool]) -> tuple[PreparedScene, ChildProcess]:
     """Build `spec` in the scene's process: (the prepared scene, that process, waiting for "stop" or its layer's
-    tables). Raises what `build_scene` raised there (RuntimeError when the process itself failed)."""
+    tables). Raises what `build_scene` raised there; RuntimeError when the process itself failed, did not answer
+    within `PREPARE_TIMEOUT_S`, or `released()` (the renderer was released meanwhile: the server stopped)."""
     process = ChildProcess(__name__, connect=True, idle=True)  # preparing never takes a CPU from the frame loop
+    deadline = time.monotonic() + PREPARE_TIMEOUT_S
+    request = None
     try:
-        process.conn.send(("prepare", spec, settings))
+        request = _sender(process, ("prepare", spec, settings))  # the settings alone (0.5 MB) fill the pipe
         while not process.conn.poll(0.05):  # waits without the interpreter lock
             if not process.running and not process.conn.poll():
                 raise RuntimeError(f"the scene's process ended (exit code {process.exitcode}) before answering: "
                                    f"{process.output(300).strip() or 'no output'}")
+            if released():
+                raise RuntimeError("the renderer was released (the server stopped) while the scene was prepared")
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"the scene's process (pid {process.pid}) did not answer within "
+                                   f"{PREPARE_TIMEOUT_S:g} s (hung); stopped")
         kind, payload = process.conn.recv()
         if kind == "error":
             raise payload
         scene, table, arrays = load(payload)
     except BaseException:
-        _stop(process)
+        _stop(process, request)
         raise
     return PreparedScene(scene, table, arrays), process
 
 
-def _stop(process: ChildProcess) -> None:
+def _send_quietly(conn, data: bytes) -> None:
+    """`data` (a pickle) down `conn`; nothing when the process at its other end is gone (the wait notices that)."""
     try:
-        process.conn.send(("stop",))
+        conn.send_bytes(data)
     except (OSError, EOFError):
         pass
+
+
+def _sender(process: ChildProcess, message: tuple) -> threading.Thread:
+    """A started thread sending `message` to the scene's process: one that never reads (hung) fills the pipe, which
+    must not hold the caller."""
+    thread = threading.Thread(target=_send_quietly, args=(process.conn, pickle.dumps(message)),
+                              name="scene-process-send", daemon=True)
+    thread.start()
+    return thread
+
+
+def _stop(process: ChildProcess, request: threading.Thread | None = None) -> None:
+    """Ask the scene's process to end, kill it after 5 s, then close the connection. request: the thread still
+    sending it the scene asked for, if any: "stop" follows only that whole message (a process that never reads
+    it is killed), and the connection is closed only once the thread has returned (it does once the process is
+    gone)."""
+    if request is not None:
+        request.join(1.0)
+    senders = [request] if request is not None and request.is_alive() else [_sender(process, ("stop",))]
     if not process.wait(5.0):
-        process.kill()
+        process.proc.kill()
+        process.proc.wait()
+    for thread in senders:
+        thread.join()
     process.close()
 
 
