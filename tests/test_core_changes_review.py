@@ -4,11 +4,10 @@ worker and trial_stop with the log's path (1428515). Each test here shows a defe
 import dataclasses
 import threading
 import time
-from types import SimpleNamespace
 
 import h5py
-import numpy as np
 import pytest
+from test_proto_budget import SkyRenderer, loop_on_a_virtual_dome
 
 import antarium
 from antarium import bus
@@ -17,24 +16,10 @@ from antarium.config import resolve
 from antarium.core.clock import SimulatedClock
 from antarium.core.pose import Pose
 from antarium.firmware_proto.emulator import Emulator
-from antarium.firmware_proto.link import open_link
 from antarium.locomotion import BallSample, LocomotionSource
 from antarium.server import Server, commands
 from antarium.server.frame_loop import FrameLoop
 from antarium.trial_log import TrialLog
-
-
-class SkyRenderer:
-    """A renderer with a sky: dark LED frames (20350, 2) uint16 and polariser angles (55, 9) rad of 0."""
-
-    scene = SimpleNamespace(sky=object())
-    last_timings: dict = {}
-
-    def render(self, pose, out=None):
-        return np.zeros((20350, 2), np.uint16)
-
-    def polariser_angles(self):
-        return np.zeros((55, 9))
 
 
 class QueuedSource(LocomotionSource):
@@ -194,11 +179,8 @@ def test_a_slow_query_handed_over_after_the_shutdown_leaves_no_worker(tmp_path, 
 # over 49 frames, polariser updates deferred meanwhile, though nothing was resent in this run.
 def test_a_link_resent_before_this_loop_adds_nothing_to_its_budget():
     clock = SimulatedClock()
-    link = open_link("virtual", clock=clock)
-    link.send_config(dot_correction=50, brightness=40)
-    first = FrameLoop(clock=clock, source=None, renderer=SkyRenderer(), link=link, rate_hz=190.0)
-    for _ in range(40):
-        first.step()
+    first = loop_on_a_virtual_dome(clock)
+    link = first.link
     link.emulator = Emulator()  # the distributor rebooted during the first run: the held state is sent again
     for _ in range(200):
         first.step()

@@ -87,9 +87,11 @@ class _Link:
         return {}
 
 
-class _SkyRenderer:
+class SkyRenderer:
+    """A renderer with a sky: dark LED frames (20350, 2) uint16 and polariser angles (55, 9) rad of 0."""
+
     scene = SimpleNamespace(sky=object())
-    last_timings = {}
+    last_timings: dict = {}
 
     def render(self, pose, out=None):
         return np.zeros((20350, 2), np.uint16)
@@ -101,7 +103,7 @@ class _SkyRenderer:
 def test_the_frame_loop_defers_polariser_updates_the_link_cannot_carry():
     clock = SimulatedClock()
     link = _Link()
-    loop = FrameLoop(clock=clock, source=_Turning(clock), renderer=_SkyRenderer(), link=link, tether="fixed",
+    loop = FrameLoop(clock=clock, source=_Turning(clock), renderer=SkyRenderer(), link=link, tether="fixed",
                      rate_hz=190.0)
     loop.renderer_changed()
     for _ in range(380):
@@ -116,14 +118,9 @@ def test_held_state_sent_again_after_a_reboot_counts_in_the_frames_budget():
     sent beside the budget, which stayed at 0 while the next frames would have run late on a real line)."""
     from antarium.firmware_proto.config import encode_brightness, encode_dot_correction
     from antarium.firmware_proto.emulator import Emulator
-    from antarium.firmware_proto.link import open_link
 
-    clock = SimulatedClock()
-    link = open_link("virtual", clock=clock)
-    link.send_config(dot_correction=50, brightness=40)
-    loop = FrameLoop(clock=clock, source=None, renderer=_SkyRenderer(), link=link, rate_hz=190.0)
-    for _ in range(40):
-        loop.step()
+    loop = loop_on_a_virtual_dome()
+    link = loop.link
     assert loop.link_budget.backlog == 0.0 and link.counters["state_resent"] == 0
     link.emulator = Emulator()  # rebooted: its counters start again, its panels at 100 %
     backlog = []
@@ -136,3 +133,17 @@ def test_held_state_sent_again_after_a_reboot_counts_in_the_frames_budget():
     assert resent == 55 * wire_bits(len(one_panel)) + wire_bits(len(brightness)) + POLARISER_BITS
     assert (link.emulator.dot == 50).all()
     assert max(backlog) == pytest.approx(resent + FRAME_BITS - 100e6 / 190.0)
+
+
+def loop_on_a_virtual_dome(clock: SimulatedClock | None = None) -> FrameLoop:
+    """A frame loop at 190 frames/s with a sky, on a virtual dome given a dot correction (50 %) and brightness (40 %)
+    (the state its link holds), after 40 frames."""
+    from antarium.firmware_proto.link import open_link
+
+    clock = clock or SimulatedClock()
+    link = open_link("virtual", clock=clock)
+    link.send_config(dot_correction=50, brightness=40)
+    loop = FrameLoop(clock=clock, source=None, renderer=SkyRenderer(), link=link, rate_hz=190.0)
+    for _ in range(40):
+        loop.step()
+    return loop
