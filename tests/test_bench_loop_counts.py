@@ -66,6 +66,31 @@ def test_counts_beside_the_kept_frames_cover_them_or_say_whole_run(capsys):
     assert layer["frames_counted"] == "whole run" and layer["full_frames"] == 6
 
 
+def test_each_late_frame_is_listed_with_its_stages_and_the_commands_around_it(capsys):
+    """Late frames one by one (when, which stage, how late it began), and a scripted command whose window holds
+    one named beside it: what told a scene swap's late start (16 ms) from a slow GPU stage on an H100."""
+    f = _frames(3.0)
+    f["late"][[100, 300, 500]] = 1  # one in the warm-up: not listed
+    f["pacing_error"][300] = 16e-3
+    f["sample"][500] = 19e-3
+    f["t_sent"][500] = f["t_start"][500] + 21e-3
+    f["skipped"][[300, 500]] = [3, 4]
+    r = summarise(f, 190.0)
+    assert [round(row["t_s"], 3) for row in r["late_list"]] == [round(300 * PERIOD, 3), round(500 * PERIOD, 3)]
+    first, second = r["late_list"]
+    assert first["pacing_ms"] == 16.0 and first["skipped"] == 3
+    assert second["sample_ms"] == 19.0 and round(second["work_ms"], 6) == 21.0
+    report = _report(r)
+    report["commands"] = {"load_scene": {"sent": 1, "cut_by_the_end": 0, "errors": [], "reply": None,
+                                         "late_frames_around": 1, "frames_around": 10, "full_frames_around": 10,
+                                         "times_s": [[300 * PERIOD - 1.0, 300 * PERIOD - 0.002]]}}
+    _print(report)
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if "late frame  " in ln]
+    assert len(lines) == 2 and "pacing error 16.00 ms, 3 slot(s) skipped" in lines[0]
+    assert "load_scene sent 1.00 s and replied 0.00 s before" in lines[0] and "load_scene" not in lines[1]
+    assert "sample 19.00" in lines[1]
+
+
 def test_the_loop_bench_says_when_its_frames_end_before_it_reports(tmp_path, capsys, monkeypatch):
     from antarium.bench import loop
 

@@ -80,8 +80,28 @@ def summarise(frames: dict[str, np.ndarray], rate_hz: float,
         "link_down_frames": int((f["link_ok"] == 0).sum()),
         "warmup_excluded": excluded, "warmup_s": WARMUP_S if excluded else 0.0,
         "machine": None if stalls is None else _machine_stalls(f, stalls, period, loop_cpus),
+        "late_list": _late_list(frames, keep),
         **_run_counts(frames, keep, final_stats or {}),
     }
+
+
+#: late frames listed one by one (the first of them), in the report and its JSON
+LATE_LISTED = 20
+#: of which the report prints
+LATE_PRINTED = 8
+
+
+def _late_list(frames: dict[str, np.ndarray], keep: np.ndarray) -> list[dict[str, float]]:
+    """The first `LATE_LISTED` late frames among the kept ones: when (s after the run's first frame), their work,
+    stages and pacing error (ms) and the slots skipped after them, to tell what held each one up."""
+    t = frames["t_start"]
+    rows = []
+    for i in np.flatnonzero(frames["late"].astype(bool) & keep)[:LATE_LISTED]:
+        row = {"t_s": float(t[i] - t[0]), "work_ms": 1e3 * float(frames["t_sent"][i] - t[i]),
+               "pacing_ms": 1e3 * float(frames["pacing_error"][i]), "skipped": int(frames["skipped"][i])}
+        row.update({f"{k}_ms": 1e3 * float(frames[k][i]) for k in ("render", "sample", "convert", "encode", "send")})
+        rows.append(row)
+    return rows
 
 
 def _run_counts(frames: dict[str, np.ndarray], keep: np.ndarray, stats: dict[str, Any]) -> dict[str, Any]:
@@ -340,7 +360,8 @@ class ScriptedCommands:
                          "errors": [r[3] for r in rows if r[3]][:3],
                          "reply": _pct(replies) if len(rows) else None,
                          "late_frames_around": int((late & around).sum()), "frames_around": int(around.sum()),
-                         "full_frames_around": int((full & around).sum())}
+                         "full_frames_around": int((full & around).sum()),
+                         "times_s": [[sent - t[0], replied - t[0]] for _, sent, replied, _ in rows] if len(t) else []}
         return out
 
 
@@ -395,6 +416,18 @@ def _print(r: dict[str, Any]) -> None:
         print(f"  {kind:<14}  {c['sent']} sent, reply {_fmt(c['reply'])}; {c['late_frames_around']} late "
               f"({c['full_frames_around']} drawn in full) of the {c['frames_around']} frames from sending to "
               f"{AFTER_REPLY_S:g} s after the reply{errors}")
+    listed = r.get("late_list", [])
+    for row in listed[:LATE_PRINTED]:
+        near = [f"{kind} sent {row['t_s'] - sent:.2f} s and replied {row['t_s'] - replied:.2f} s before"
+                for kind, c in (r.get("commands") or {}).items() for sent, replied in c.get("times_s", [])
+                if 0 <= row["t_s"] - sent <= replied - sent + AFTER_REPLY_S]
+        stages = ", ".join(f"{k} {row[f'{k}_ms']:.2f}" for k in ("render", "sample", "convert", "encode", "send"))
+        print(f"  late frame      at {row['t_s']:.3f} s: work {row['work_ms']:.2f} ms ({stages}), pacing error "
+              f"{row['pacing_ms']:.2f} ms, {row['skipped']} slot(s) skipped after it"
+              + (f"; {'; '.join(near)}" if near else ""))
+    if r["late_frames"] > LATE_PRINTED:
+        print(f"  late frame      {r['late_frames'] - LATE_PRINTED} more; the first {LATE_LISTED} in the JSON's "
+              "late_list")
     m = r.get("machine")
     if m is not None:
         for cpu, p in m["probes"].items():
