@@ -241,8 +241,9 @@ class GpuFramePath:
     """Compute passes and buffers of the GPU path for one GL context (use it with that context current).
 
     GPU memory: the CSR matrix (set_matrix), the scene's far-field table and each LED's cell in it (set_table,
-    dropped with drop_table), 3 x 20350 x 8 bytes of pairs, far pairs and gains, the 142,560-byte output, 16 bytes of
-    means and the busy pass's 256; host: the 142,560-byte read-back array (`frame` and `datagrams` are views of it).
+    dropped with drop_table), those of the table shown before (kept for the next), 3 x 20350 x 8 bytes of pairs,
+    far pairs and gains, the 142,560-byte output, 16 bytes of means and the busy pass's 256; host: the 142,560-byte
+    read-back array (`frame` and `datagrams` are views of it).
     """
 
     def __init__(self, ctx):
@@ -265,6 +266,7 @@ class GpuFramePath:
         self._busy_out = ctx.buffer(reserve=_GROUP * 4)
         self._matrix = None
         self._table = self._cells = None
+        self._spare = None  # (table, cells) buffers of the table shown before, reused by the next of their sizes
         self._table_source, self._n_cols = None, 0
         self.host = np.zeros(n * 4 + _WORDS * 4, np.uint8)
         #: the last frame, (20350, 2) uint16, and its 55 VIDEO datagrams (55, 1112) uint8 with INFO 0
@@ -279,7 +281,8 @@ class GpuFramePath:
 
     def _buffers(self) -> list:
         return [b for b in (self._far, self._pairs, self._means, self._gain, self._out, self._busy_out,
-                            *(self._matrix or ()), self._table, self._cells) if b is not None]
+                            *(self._matrix or ()), self._table, self._cells, *(self._spare or ()))
+                if b is not None]
 
     def set_matrix(self, key, indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray) -> None:
         """Upload a CSR footprint matrix (weights in radiance per 16-bit texel unit), unless `key` is the current."""
@@ -294,28 +297,44 @@ class GpuFramePath:
 
     def set_table(self, table) -> None:
         """Upload a `farfield.FarFieldTable` (its two grids, 2 x rows x (cols + 1) x 4 bytes, and each LED's cell,
-        20350 x 16 bytes), unless it is the current one. A table is never changed in place once made (a new
-        footprint makes a new one); a far layer's are, and go through `run(far_pairs=...)` instead."""
-        if table is self._table_source:
-            return
-        g = table.grid
-        grids = np.concatenate([np.ascontiguousarray(t, dtype=np.uint16).reshape(-1)
-                                for t in (table.table_gb, table.table_uv)])
-        col = np.floor(g.col0)
-        cells = np.empty((len(g.row), 4), np.int32)
-        cells[:, 0], cells[:, 1] = g.row, col
-        cells[:, 2:].view(np.float32)[:] = np.stack([g.row_frac, g.col0 - col], axis=1)
+        20350 x 16 bytes) at once, unless it is the current one (`stage_table` uploads one a slice at a time). A
+        table is never changed in place once made (a new footprint makes a new one); a far layer's are, and go
+        through `run(far_pairs=...)` instead."""
+        if table is not self._table_source:
+            self.adopt_table(self.stage_table(table).finish())
+
+    def stage_table(self, table, discard=None) -> StagedTable:
+        """A `StagedTable` of `table`, to fill in steps and then `adopt_table` (GL thread)."""
+        return StagedTable(self, table, discard)
+
+    def _table_buffers(self, sizes: tuple[int, int]) -> tuple:
+        """Buffers of `sizes` bytes for a table and its cells: the spare ones (the table shown before) when they
+        have those sizes, else new ones (the spare ones then released)."""
+        spare, self._spare = self._spare, None
+        if spare is not None and tuple(b.size for b in spare) == sizes:
+            return spare
+        for b in spare or ():
+            b.release()
+        return tuple(self.ctx.buffer(reserve=n) for n in sizes)
+
+    def adopt_table(self, staged: StagedTable) -> None:
+        """Make a filled `StagedTable` the table the frames look up: no upload, no allocation; the table shown
+        before keeps its buffers as the spare for the next one."""
+        table = staged.table
+        buffers = staged.take()
         self.drop_table()
-        self._table, self._cells = self.ctx.buffer(grids.view(np.uint32)), self.ctx.buffer(cells)
-        self._sample["n_cols"].value = g.n_cols
+        self._table, self._cells = buffers
+        self._sample["n_cols"].value = table.grid.n_cols
         self._sample["uv_offset"].value = table.table_gb.size // 2
-        self._table_source, self._n_cols = table, g.n_cols
+        self._table_source, self._n_cols = table, table.grid.n_cols
 
     def drop_table(self) -> None:
-        """Release the uploaded far-field table, and the reference to its source (a scene without one)."""
-        for b in (self._table, self._cells):
-            if b is not None:
+        """No far-field table any more (a scene without one): its buffers become the spare (the one before's are
+        released), and the reference to its source is dropped."""
+        if self._table is not None:
+            for b in self._spare or ():
                 b.release()
+            self._spare = (self._table, self._cells)
         self._table = self._cells = None
         self._table_source, self._n_cols = None, 0
 
@@ -384,3 +403,75 @@ class GpuFramePath:
             b.release()
         for p in (self._sample, self._mean, self._convert, self._pack, self._busy):
             p.release()
+
+
+def _table_arrays(table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A far-field table as the sample pass reads it: its [G, B] and [UV, polarised UV] grids (uint16, one after
+    the other in one buffer) and each LED's cell, (20350, 4) int32 row, column and float32 row and column fractions."""
+    g = table.grid
+    col = np.floor(g.col0)
+    cells = np.empty((len(g.row), 4), np.int32)
+    cells[:, 0], cells[:, 1] = g.row, col
+    cells[:, 2:].view(np.float32)[:] = np.stack([g.row_frac, g.col0 - col], axis=1)
+    return (np.ascontiguousarray(table.table_gb, dtype=np.uint16),
+            np.ascontiguousarray(table.table_uv, dtype=np.uint16), cells)
+
+
+class StagedTable:
+    """A far-field table's GPU buffers filled a slice at a time (`step`, GL thread: `meshbuffers.UPLOAD_SLICE_BYTES`
+    each) while frames go on, so that a scene swap adopts it with no upload (`GpuFramePath.adopt_table`); the
+    buffers are the path's spare ones when they have the sizes (no allocation either).
+
+    discard: where `discard()` hands it for release in the GL thread (it may be called from any thread).
+    """
+
+    def __init__(self, path: GpuFramePath, table, discard=None):
+        self._path, self.table = path, table
+        self._buffers: tuple | None = None
+        self._writes = None
+        self._discard = discard
+        self.discarded = False
+
+    @property
+    def done(self) -> bool:
+        return self._writes is not None and self._writes.done
+
+    def step(self, nbytes: int | None = None) -> bool:
+        """Copy about `nbytes` more (the first step takes the buffers); True once all is up. GL thread."""
+        from .meshbuffers import SlicedWrite
+
+        if self.discarded or self.done:
+            return True
+        if self._writes is None:
+            gb, uv, cells = _table_arrays(self.table)
+            grids, cell_buf = self._buffers = self._path._table_buffers((gb.nbytes + uv.nbytes, cells.nbytes))
+            self._writes = SlicedWrite([(grids, 0, gb), (grids, gb.nbytes, uv), (cell_buf, 0, cells)])
+        else:
+            self._writes.step(nbytes)
+        return self.done
+
+    def finish(self) -> StagedTable:
+        """Copy what is left now (GL thread); returns itself."""
+        while not self.step(1 << 62):
+            pass
+        return self
+
+    def take(self) -> tuple:
+        """The filled (table, cells) buffers, handed over: `release` no longer frees them."""
+        if self.discarded or not self.done:
+            raise RuntimeError("a far-field table not (fully) staged cannot be adopted")
+        buffers, self._buffers = self._buffers, None
+        return buffers
+
+    def discard(self) -> None:
+        """Not needed after all (any thread): released in the GL thread, or here when no one takes it."""
+        self.discarded = True
+        if self._discard is not None:
+            self._discard(self)
+        else:
+            self.release()
+
+    def release(self) -> None:
+        for b in self._buffers or ():
+            b.release()
+        self._buffers = None

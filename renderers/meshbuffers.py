@@ -162,7 +162,13 @@ class MeshArrays:
             self.bounds(name, obj)
 
     def bounds(self, name: str, obj) -> None:
-        """Bounding spheres (world coordinates) of an object's chunks, from its full-detail triangles."""
+        """Set the bounding spheres of an object's chunks (`chunk_bounds`)."""
+        *_, c0, c1 = self.ranges[name]
+        self.centre[c0:c1], self.radius[c0:c1] = self.chunk_bounds(name, obj)
+
+    def chunk_bounds(self, name: str, obj) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 3) float64 centres (m, world) and (n,) radii (m) of the bounding spheres of the named object's n
+        chunks, placed as `obj`, from its full-detail triangles; changes nothing (any thread)."""
         *_, order, tri_chunk, c0, c1 = self.ranges[name]
         tri = relative_to(obj, self.origin).world_vertices()[obj.mesh.faces[order]]
         n = c1 - c0
@@ -170,8 +176,7 @@ class MeshArrays:
         hi = np.full((n, 3), -np.inf)
         np.minimum.at(lo, tri_chunk, tri.min(axis=1))
         np.maximum.at(hi, tri_chunk, tri.max(axis=1))
-        self.centre[c0:c1] = (lo + hi) / 2 + self.origin
-        self.radius[c0:c1] = np.linalg.norm(hi - lo, axis=1) / 2
+        return (lo + hi) / 2 + self.origin, np.linalg.norm(hi - lo, axis=1) / 2
 
     def near_chunks(self, eye: np.ndarray, radius: float) -> np.ndarray:
         """(n_chunks,) bool: some of the chunk's bounding sphere lies within `radius` (m) of `eye` (m)."""
@@ -224,8 +229,37 @@ def texture_layers(textures: list[np.ndarray]) -> np.ndarray | None:
     return out
 
 
-#: bytes a `StagedUpload.step` copies: well under a millisecond, so that a step fits the idle end of a frame
+#: bytes a staged upload's step copies (`StagedUpload`, `gpu_path.StagedTable`): well under a millisecond, so that
+#: a step fits the idle end of a frame
 UPLOAD_SLICE_BYTES = 2 << 20
+
+
+class SlicedWrite:
+    """Arrays copied into GL buffers about `UPLOAD_SLICE_BYTES` per `step` (GL thread).
+
+    parts: (buffer, offset in bytes, C-contiguous array) triples, copied in order.
+    """
+
+    def __init__(self, parts: list):
+        self._parts = [(buf, offset, memoryview(np.ascontiguousarray(a)).cast("B")) for buf, offset, a in parts]
+        self._part = self._offset = 0
+
+    @property
+    def done(self) -> bool:
+        return self._part == len(self._parts)
+
+    def step(self, nbytes: int | None = None) -> bool:
+        """Copy about `nbytes` (default `UPLOAD_SLICE_BYTES`) of the current part; True once all are copied."""
+        if self.done:
+            return True
+        buf, base, data = self._parts[self._part]
+        end = min(data.nbytes, self._offset + (UPLOAD_SLICE_BYTES if nbytes is None else nbytes))
+        if end > self._offset:
+            buf.write(data[self._offset:end], offset=base + self._offset)
+        self._offset = end
+        if end == data.nbytes:
+            self._part, self._offset = self._part + 1, 0
+        return self.done
 
 
 class StagedUpload:
@@ -238,11 +272,11 @@ class StagedUpload:
 
     def __init__(self, ctx, arrays: MeshArrays, discard=None):
         self.ctx = ctx
-        self._data = [memoryview(np.ascontiguousarray(a)).cast("B") for a in (arrays.vertices, arrays.indices)]
+        self._data = (arrays.vertices, arrays.indices)
         self._texels = arrays.texels
         self.buffers: list = []
         self.texture = None
-        self._part = self._offset = 0
+        self._writes: SlicedWrite | None = None
         self._row = 0  # texture rows written, over all layers
         self._mipmapped = self._texels is None
         self._discard = discard
@@ -250,24 +284,20 @@ class StagedUpload:
 
     @property
     def done(self) -> bool:
-        return self._part == len(self._data) and self._mipmapped
+        return self._writes is not None and self._writes.done and self._mipmapped
 
-    def step(self, nbytes: int = UPLOAD_SLICE_BYTES) -> bool:
-        """Copy about `nbytes` more (the first step creates the buffers and the texture array); True once
-        everything is up. GL thread."""
+    def step(self, nbytes: int | None = None) -> bool:
+        """Copy about `nbytes` more (default `UPLOAD_SLICE_BYTES`; the first step creates the buffers and the
+        texture array); True once everything is up. GL thread."""
         if self.discarded or self.done:
             return True
-        if not self.buffers:
-            self.buffers = [self.ctx.buffer(reserve=max(1, d.nbytes)) for d in self._data]
+        nbytes = UPLOAD_SLICE_BYTES if nbytes is None else nbytes
+        if self._writes is None:
+            self.buffers = [self.ctx.buffer(reserve=max(1, a.nbytes)) for a in self._data]
             self.texture = self._new_texture()
-        elif self._part < len(self._data):
-            data, buf = self._data[self._part], self.buffers[self._part]
-            end = min(data.nbytes, self._offset + nbytes)
-            if end > self._offset:
-                buf.write(data[self._offset:end], offset=self._offset)
-            self._offset = end
-            if end == data.nbytes:
-                self._part, self._offset = self._part + 1, 0
+            self._writes = SlicedWrite([(b, 0, a) for b, a in zip(self.buffers, self._data, strict=True)])
+        elif not self._writes.done:
+            self._writes.step(nbytes)
         elif self._row < self._texels.shape[0] * self._texels.shape[1]:
             self._write_rows(nbytes)
         else:
@@ -362,10 +392,21 @@ class MeshBuffers:
 
     def update_object(self, name: str, obj) -> None:
         """Re-upload a moved object's vertices (all levels) and recompute its chunks' bounds."""
-        v0, local, colours, uv, tex_layer, *_ = self._ranges[name]
-        block = interleave(obj, local, colours, uv, tex_layer, self._arrays.origin)
-        self._vbo.write(block.tobytes(), offset=v0 * _FLOATS_PER_VERTEX * 4)
-        self._arrays.bounds(name, obj)
+        self.apply_move(name, self.moved(name, obj))
+
+    def moved(self, name: str, obj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What placing the named object as `obj` writes, for `apply_move`: its (V, 9) float32 vertex block (all
+        levels) and its chunks' bounds (`MeshArrays.chunk_bounds`). Numpy only, changes nothing: any thread."""
+        _, local, colours, uv, tex_layer, *_ = self._ranges[name]
+        return (interleave(obj, local, colours, uv, tex_layer, self._arrays.origin),
+                *self._arrays.chunk_bounds(name, obj))
+
+    def apply_move(self, name: str, moved: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """Write `moved(name, obj)`'s vertices and bounds (GL thread)."""
+        v0, *_, c0, c1 = self._ranges[name]
+        block, centre, radius = moved
+        self._vbo.write(block, offset=v0 * _FLOATS_PER_VERTEX * 4)
+        self._centre[c0:c1], self._radius[c0:c1] = centre, radius
         self._chunks_changed = True
 
     @property
@@ -479,7 +520,11 @@ class MeshBuffers:
                     self._vao.render_indirect(commands, self._mgl.TRIANGLES, count=count, first=first)
         self.ctx.disable(self._mgl.CULL_FACE)
 
+    def detach(self) -> list:
+        """Hand over the GL objects (each with `release()`): this object no longer releases them."""
+        resources, self._resources = self._resources, []
+        return resources
+
     def release(self) -> None:
-        for res in self._resources:
+        for res in self.detach():
             res.release()
-        self._resources = []

@@ -37,25 +37,31 @@ PREPARE_TIMEOUT_S = 300.0
 @dataclass
 class PreparedScene:
     """A scene ready for `Renderer.set_scene`: the scene, its far-field table (None: drawn from a cube texture),
-    its meshes' arrays (None: no objects), its started async far layer (None: none, or made by the renderer) and
-    the upload of its arrays begun in the GL thread (`Renderer.upload_step`; None: not begun)."""
+    its meshes' arrays (None: no objects), its started async far layer (None: none, or made by the renderer), the
+    upload of its arrays and, on the GPU path, of its table, begun in the GL thread (`Renderer.upload_step`; None:
+    not begun), and whether it was shown or released (`closed`: nothing more to upload)."""
 
     scene: Scene
     table: FarFieldTable | None
     arrays: MeshArrays | None
     layer: object | None = None
     upload: object | None = None
+    gpu_table: object | None = None
+    closed: bool = False
 
     def release(self) -> None:
         """Free what a prepared scene that will not be shown holds (any thread): its far layer's process, and its
-        upload's buffers (handed to the GL thread)."""
+        uploads' buffers (handed to the GL thread)."""
+        self.closed = True
         self.arrays = None  # nothing more to upload
         if self.layer is not None:
             self.layer.release()
             self.layer = None
-        if self.upload is not None:
-            self.upload.discard()
-            self.upload = None
+        for name in ("upload", "gpu_table"):
+            staged = getattr(self, name)
+            if staged is not None:
+                staged.discard()
+                setattr(self, name, None)
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,19 @@ class PreparedFar:
     far: list
     fwhm: float
     table: FarFieldTable | None
+
+
+@dataclass(frozen=True)
+class PreparedMove:
+    """An object's move with its numpy work done (`Renderer.prepare_move`, any thread), for `Renderer.move_object`:
+    used there only while the scene, its meshes and the named object are still those it was made from (`base`)."""
+
+    scene: Scene
+    meshes: object
+    name: str
+    base: object
+    moved: object
+    data: tuple
 
 
 @dataclass(frozen=True)

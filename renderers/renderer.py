@@ -254,6 +254,8 @@ class Renderer:
         self._helper = None
         #: uploads of prepared scenes that will not be shown, discarded in other threads; released in the GL one
         self._discarded: collections.deque = collections.deque()
+        #: GL objects of the scene shown before a `set_scene(..., retire=True)`, released one a call (`release_retired`)
+        self._retired: collections.deque = collections.deque()
         #: frames drawn with the far layer, and in full (no usable layer: start-up, edits, a jump of the eye)
         self.layer_frames = self.full_frames = 0
         #: whether the last frame drew every mesh (no far layer in use): the slow path
@@ -390,9 +392,12 @@ class Renderer:
 
     # ------------------------------------------------------------------------------------------ scenes
     @_gl_current
-    def set_scene(self, scene) -> Scene:
+    def set_scene(self, scene, retire: bool = False) -> Scene:
         """Load a `Scene`, a scene name, a spec dict, a file path, or a `PreparedScene` (`prepare_scene`, made in
-        another thread: only the GL uploads run here). On any error the previous scene stays."""
+        another thread: only the GL uploads run here). On any error the previous scene stays.
+
+        retire: the previous scene's GL objects are not released here but kept for `release_retired`, one a call (a
+        frame loop's idle time: releasing a large buffer took the NVIDIA driver up to 10 ms)."""
         from .library import build_scene
         from .prepared import PreparedScene, SceneSettings
 
@@ -420,12 +425,20 @@ class Renderer:
             raise
         old_tex, old_meshes = self._far_tex, self._meshes
         self._far_tex, self._meshes, self._table, self.scene = far_tex, meshes, table, new
+        if prepared.gpu_table is not None:  # the GPU path's table, staged with the meshes: adopted, not uploaded
+            self._gpu.adopt_table(prepared.gpu_table.finish())
+            prepared.gpu_table = None
+        prepared.closed = True
         self._drop_gpu_table()
         self._convert.configure(channel_gain=new.channel_gain, swap_green_blue=new.swap_green_blue,
                                 contrast=new.contrast)
         self._t0 = self.clock.now()
-        for res in (old_tex, old_meshes):
-            if res is not None:
+        old = [old_tex] if old_tex is not None else []
+        old += old_meshes.detach() if old_meshes is not None else []
+        if retire:
+            self._retired.extend(old)
+        else:
+            for res in old:
                 res.release()
         if prepared is not None and prepared.layer is not None:
             old_layer, self._layer, prepared.layer = self._layer, prepared.layer, None
@@ -438,17 +451,37 @@ class Renderer:
 
     @_gl_current
     def upload_step(self, prepared) -> bool:
-        """Upload one slice of a prepared scene's meshes (`meshbuffers.UPLOAD_SLICE_BYTES`), so that `set_scene`
-        has only what is left; True once nothing is (or the scene was shown or released meanwhile). GL thread:
-        call it in the idle end of frames (`FrameLoop.when_idle`)."""
+        """Upload one slice of a prepared scene's meshes, then on the GPU path of its far-field table
+        (`meshbuffers.UPLOAD_SLICE_BYTES`), so that `set_scene` has only what is left; True once nothing is (or the
+        scene was shown or released meanwhile). GL thread: call it in the idle end of frames (`FrameLoop.when_idle`)."""
         from .meshbuffers import StagedUpload
 
         self._release_discarded()
-        if prepared.arrays is None:
+        if prepared.closed:
             return True
-        if prepared.upload is None:
-            prepared.upload = StagedUpload(self.ctx, prepared.arrays, discard=self._discarded.append)
-        return prepared.upload.step()
+        if prepared.arrays is not None:
+            if prepared.upload is None:
+                prepared.upload = StagedUpload(self.ctx, prepared.arrays, discard=self._discarded.append)
+            if not prepared.upload.step():
+                return False
+        if self._gpu is None or prepared.table is None:
+            return True
+        if prepared.gpu_table is None:
+            prepared.gpu_table = self._gpu.stage_table(prepared.table, discard=self._discarded.append)
+        return prepared.gpu_table.step()
+
+    @property
+    def retired(self) -> int:
+        """GL objects of scenes shown before, left for `release_retired`."""
+        return len(self._retired)
+
+    @_gl_current
+    def release_retired(self) -> int:
+        """Release one GL object of a scene shown before (`set_scene(..., retire=True)`); returns how many are left.
+        GL thread."""
+        if self._retired:
+            self._retired.popleft().release()
+        return len(self._retired)
 
     def _release_discarded(self) -> None:
         """Release the GL buffers of uploads discarded by other threads (in this, the GL thread)."""
@@ -653,12 +686,28 @@ class Renderer:
         return SceneObject(obj.mesh, obj.position if position is None else position,
                            obj.yaw if yaw is None else yaw, obj.scale)
 
-    @_gl_current
-    def move_object(self, name: str, position=None, yaw: float | None = None) -> None:
-        """Move a named object to `position` (3,) m and/or turn it to `yaw` (rad)."""
-        scene = self._require_scene()
+    def prepare_move(self, name: str, position=None, yaw: float | None = None):
+        """`move_object`'s numpy work (the object's vertices and chunk bounds where it goes), for any thread: a
+        `PreparedMove` to hand to `move_object`, which then only uploads it. Raises what `move_object` raises."""
+        from .prepared import PreparedMove
+
+        scene, meshes = self._require_scene(), self._meshes
+        base = self._object(name)
         moved = self._moved(name, position, yaw)
-        self._meshes.update_object(name, moved)
+        return PreparedMove(scene, meshes, name, base, moved, meshes.moved(name, moved))
+
+    @_gl_current
+    def move_object(self, name: str, position=None, yaw: float | None = None, prepared=None) -> None:
+        """Move a named object to `position` (3,) m and/or turn it to `yaw` (rad); `prepared`: `prepare_move`'s
+        result for the same arguments, used unless the scene, its meshes or the object changed since."""
+        scene = self._require_scene()
+        if prepared is not None and prepared.scene is scene and prepared.meshes is self._meshes \
+                and prepared.name == name and scene.objects.get(name) is prepared.base:
+            moved, data = prepared.moved, prepared.data
+        else:
+            moved = self._moved(name, position, yaw)
+            data = self._meshes.moved(name, moved)
+        self._meshes.apply_move(name, data)
         scene.objects[name] = moved
         self._layer_edit(("move", name, moved))
 
@@ -1025,6 +1074,8 @@ class Renderer:
             self._helper = None
         with self.ctx:
             self._release_discarded()
+            while self._retired:
+                self._retired.popleft().release()
             if self._layer is not None:
                 self._layer.release()
                 self._layer = None

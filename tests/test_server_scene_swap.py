@@ -77,6 +77,45 @@ def test_an_object_edit_waits_for_the_far_layer_with_it(habitat_server):
     assert name not in habitat_server.renderer.scene.objects
 
 
+def test_the_old_scenes_gl_objects_are_released_one_per_frame_after_a_load(habitat_server, monkeypatch):
+    """Not in the swap (releasing a large buffer took the NVIDIA driver up to 10 ms): one object in each of the next
+    frames' idle time, in the loop's thread."""
+    renderer = habitat_server.renderer
+    calls = []
+    release = renderer.release_retired
+
+    def recorded():
+        calls.append((threading.current_thread(), habitat_server.loop.frame))
+        return release()
+
+    monkeypatch.setattr(renderer, "release_retired", recorded)
+    habitat_server.command("load_scene", {"scene": SMALL_HABITAT})
+    assert wait_for(lambda: renderer.retired == 0, 10.0)
+    assert len(calls) >= 4 and {t for t, _ in calls} == {habitat_server._loop_thread}
+    assert len({f for _, f in calls}) == len(calls)  # one a frame
+
+
+def test_an_object_move_computes_its_vertices_beside_the_loop(habitat_server, monkeypatch):
+    """The loop's thread only uploads a moved object's vertices: computing them (5-8 ms for the habitat's ground,
+    which held the next frame that long) is done in the command's thread, while frames go on."""
+    from antarium.renderers.meshbuffers import MeshBuffers
+
+    threads = []
+    moved = MeshBuffers.moved
+
+    def recorded(self, name, obj):
+        threads.append(threading.current_thread())
+        return moved(self, name, obj)
+
+    monkeypatch.setattr(MeshBuffers, "moved", recorded)
+    objects = habitat_server.renderer.scene.objects
+    name = next(n for n in objects if n.startswith("bush"))
+    x, y, z = (float(c) for c in objects[name].position)
+    habitat_server.command("scene_edit", {"op": "move_object", "args": {"name": name, "position": [x + 0.3, y, z]}})
+    assert float(habitat_server.renderer.scene.objects[name].position[0]) == pytest.approx(x + 0.3)
+    assert len(threads) == 1 and threads[0] is not habitat_server._loop_thread
+
+
 def _buffer_owner(array):
     """The object that owns an array's memory (following views)."""
     while isinstance(array, np.ndarray) and array.base is not None:

@@ -150,17 +150,25 @@ def _edit_kwargs(op: str, args: dict[str, Any]) -> dict[str, Any]:
     return kwargs
 
 
-def _prepare_edit(server: Server, p: dict[str, Any]) -> None:
-    """Before an object edit: the far layer with the edit is built while frames go on (caller's thread)."""
+def _prepare_edit(server: Server, p: dict[str, Any]):
+    """Before an object edit, while frames go on (caller's thread): the far layer with the edit is built, and a
+    move's vertices and bounds are computed (`Renderer.prepare_move`; None when they cannot be: the loop's thread
+    then computes them, and names what was wrong)."""
     renderer = server.renderer
     if renderer is None or not hasattr(renderer, "prefetch_edit"):
-        return
+        return None
     kwargs = _edit_kwargs(p["op"], p["args"])
     try:
         _prefetched(server, lambda: renderer.prefetch_edit(server.loop.pose, p["op"], **kwargs),
                     lambda: renderer.edit_ready(server.loop.pose))
     except TypeError as exc:
         raise CommandError(f"scene_edit {p['op']}: {exc}") from None
+    if p["op"] != "move_object" or not hasattr(renderer, "prepare_move"):
+        return None
+    try:
+        return renderer.prepare_move(**kwargs)
+    except (TypeError, ValueError, KeyError, AttributeError):  # an unknown object, or edited meanwhile
+        return None
 
 
 def _scene_edit(server: Server, p: dict[str, Any]) -> None:
@@ -168,6 +176,8 @@ def _scene_edit(server: Server, p: dict[str, Any]) -> None:
     op, args = p["op"], p["args"]
     renderer = server.require_renderer("scene_edit")
     kwargs = _edit_kwargs(op, args)
+    if p.get("prepared") is not None:
+        kwargs["prepared"] = p["prepared"]
     try:
         getattr(renderer, SCENE_EDITS[op][0])(**kwargs)
     except (TypeError, ValueError) as exc:  # the renderer's own check of the value (its range): name the edit

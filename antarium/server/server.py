@@ -500,7 +500,12 @@ class Server:
         renderer = self.require_renderer("load_scene")
         digest = _scene_sha256(scene)
         try:
-            renderer.set_scene(scene if prepared is None else prepared)
+            if prepared is None:
+                renderer.set_scene(scene)
+            else:  # the old scene's GL objects are released one per frame, in the loop's idle time
+                renderer.set_scene(prepared, retire=True)
+                for _ in range(renderer.retired):
+                    self.loop.when_idle(renderer.release_retired)
         except (OSError, ValueError, RuntimeError, KeyError, TypeError, ArithmeticError) as exc:
             raise self._scene_failed(scene, exc) from None
         self.scene_name = scene if isinstance(scene, str) else json.dumps(scene, sort_keys=True)
