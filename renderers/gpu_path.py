@@ -31,6 +31,7 @@ from antarium.firmware_proto.video import VIDEO_PAYLOAD_SIZE
 from antarium.geometry.constants import GB_PER_PANEL, N_PANELS, N_PIXELS, PIXELS_PER_PANEL
 
 from .farfield import STEP
+from .meshbuffers import SlicedWrite, Staged
 
 #: renderer strings (lower case) of software GL drivers: the CPU path is the faster there
 SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast")
@@ -417,20 +418,16 @@ def _table_arrays(table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             np.ascontiguousarray(table.table_uv, dtype=np.uint16), cells)
 
 
-class StagedTable:
+class StagedTable(Staged):
     """A far-field table's GPU buffers filled a slice at a time (`step`, GL thread: `meshbuffers.UPLOAD_SLICE_BYTES`
     each) while frames go on, so that a scene swap adopts it with no upload (`GpuFramePath.adopt_table`); the
-    buffers are the path's spare ones when they have the sizes (no allocation either).
-
-    discard: where `discard()` hands it for release in the GL thread (it may be called from any thread).
-    """
+    buffers are the path's spare ones when they have the sizes (no allocation either)."""
 
     def __init__(self, path: GpuFramePath, table, discard=None):
+        super().__init__(discard)
         self._path, self.table = path, table
         self._buffers: tuple | None = None
         self._writes = None
-        self._discard = discard
-        self.discarded = False
 
     @property
     def done(self) -> bool:
@@ -438,8 +435,6 @@ class StagedTable:
 
     def step(self, nbytes: int | None = None) -> bool:
         """Copy about `nbytes` more (the first step takes the buffers); True once all is up. GL thread."""
-        from .meshbuffers import SlicedWrite
-
         if self.discarded or self.done:
             return True
         if self._writes is None:
@@ -452,8 +447,7 @@ class StagedTable:
 
     def finish(self) -> StagedTable:
         """Copy what is left now (GL thread); returns itself."""
-        while not self.step(1 << 62):
-            pass
+        self._fill()
         return self
 
     def take(self) -> tuple:
@@ -462,14 +456,6 @@ class StagedTable:
             raise RuntimeError("a far-field table not (fully) staged cannot be adopted")
         buffers, self._buffers = self._buffers, None
         return buffers
-
-    def discard(self) -> None:
-        """Not needed after all (any thread): released in the GL thread, or here when no one takes it."""
-        self.discarded = True
-        if self._discard is not None:
-            self._discard(self)
-        else:
-            self.release()
 
     def release(self) -> None:
         for b in self._buffers or ():

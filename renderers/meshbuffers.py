@@ -262,15 +262,44 @@ class SlicedWrite:
         return self.done
 
 
-class StagedUpload:
-    """The vertex and index buffers and the texture array of a `MeshArrays`, filled a slice at a time in the GL
-    thread (`step`), so that loading a large scene never holds a frame for its whole upload; `MeshBuffers` takes
-    them (`finish`). The texture array's mipmaps are made in one step of their own, after its last layer.
+class Staged:
+    """GL objects filled a slice at a time in the GL thread (`step`), which another thread may `discard`.
 
     discard: where `discard()` hands it for release in the GL thread (it may be called from any thread).
     """
 
+    def __init__(self, discard=None):
+        self._discard = discard
+        self.discarded = False
+
+    def step(self, nbytes: int | None = None) -> bool:
+        raise NotImplementedError
+
+    def _fill(self) -> None:
+        """Copy what is left now (GL thread)."""
+        while not self.step(1 << 62):
+            pass
+
+    def discard(self) -> None:
+        """Not needed after all (any thread): released in the GL thread, or here when no one takes it."""
+        self.discarded = True
+        if self._discard is not None:
+            self._discard(self)
+        else:
+            self.release()
+
+    def release(self) -> None:
+        raise NotImplementedError
+
+
+class StagedUpload(Staged):
+    """The vertex and index buffers and the texture array of a `MeshArrays`, filled a slice at a time in the GL
+    thread (`step`), so that loading a large scene never holds a frame for its whole upload; `MeshBuffers` takes
+    them (`finish`). The texture array's mipmaps are made in one step of their own, after its last layer.
+    """
+
     def __init__(self, ctx, arrays: MeshArrays, discard=None):
+        super().__init__(discard)
         self.ctx = ctx
         self._data = (arrays.vertices, arrays.indices)
         self._texels = arrays.texels
@@ -279,8 +308,6 @@ class StagedUpload:
         self._writes: SlicedWrite | None = None
         self._row = 0  # texture rows written, over all layers
         self._mipmapped = self._texels is None
-        self._discard = discard
-        self.discarded = False
 
     @property
     def done(self) -> bool:
@@ -322,17 +349,8 @@ class StagedUpload:
 
     def finish(self) -> tuple:
         """The filled vertex buffer, index buffer and texture array, copying what is left now. GL thread."""
-        while not self.step(1 << 62):
-            pass
+        self._fill()
         return (*self.buffers, self.texture)
-
-    def discard(self) -> None:
-        """Not needed after all (any thread): released in the GL thread, or here when no one takes it."""
-        self.discarded = True
-        if self._discard is not None:
-            self._discard(self)
-        else:
-            self.release()
 
     def release(self) -> None:
         for res in (*self.buffers, self.texture):
