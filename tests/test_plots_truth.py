@@ -82,7 +82,7 @@ def test_a_dome_map_too_narrow_to_read_is_refused_in_one_line(tmp_path, capsys):
     assert main(["render", "uniform", "--width", "64", "--out", str(tmp_path / "v.png")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"antarium render: error: --width must be at least {dome_map.MIN_WIDTH_PX} pixels (narrower "
-                   "maps have illegible text), got 64"]
+                   "maps have illegible text) and at most 8192, got 64"]
     assert not (tmp_path / "v.png").exists()
 
 
@@ -128,6 +128,18 @@ def test_best_and_worst_runs_are_disjoint_and_each_shown_once(tmp_path, figures,
     assert [t.split()[0] for t in titles] == ["best"] * best + ["worst"] * worst
     assert max(seeds[:best]) < min(seeds[best:])  # the best are better than every worst
     assert style.problems(figures[-1]) == []
+
+
+def test_a_run_and_its_twin_under_the_other_protocol_have_different_titles(tmp_path, figures):
+    """Two runs alike but for the protocol (or the release) were two panels with the same title."""
+    df = pd.DataFrame([dict(status="done", model="antcar", route_set="curved", route="r2", seed=0, errors=0,
+                            protocol=protocol, lateral_cm=lateral, heading_deg=0.0, lateral_median_m=0.1 + 0.01 * i,
+                            track_x=np.linspace(0, 1, 5), track_y=np.zeros(5), **{"param.lr": 0.1})
+                       for i, (protocol, lateral) in enumerate([("ardin", 0.0), ("antcar", 0.0), ("ardin", 20.0)])])
+    experiments.plot_worst_and_best(df, {}, tmp_path / "wb.png", n=2)
+    titles = [ax.get_title() for ax in figures[-1].axes if ax.get_visible()]
+    assert len(titles) == 3 and len({t.split(": ", 1)[1] for t in titles}) == 3
+    assert "antcar's protocol" in titles[1] and "released 20 cm 0 deg off" in titles[2]
 
 
 # --- 4: servosphere error -----------------------------------------------------------------------------------------

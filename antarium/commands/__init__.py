@@ -38,9 +38,9 @@ def require_port(args: argparse.Namespace, *names: str) -> None:
 
 def check_output(path: str | os.PathLike, option: str, *, suffixes: Sequence[str] = (), folder: bool = False,
                  make_folders: bool = True) -> Path:
-    """`path` as a Path when a command can write there: a file (a folder when `folder`) that is new or that it may
-    overwrite. Otherwise one ValueError naming `option` and what is allowed. Commands call it for every output
-    before their work, so that a bad name throws no work away and leaves nothing half-written.
+    """`path` as an absolute Path when a command can write there: a file (a folder when `folder`) that is new or
+    that it may overwrite. Otherwise one ValueError naming `option` and what is allowed. Commands call it for every
+    output before their work, so that a bad name throws no work away and leaves nothing half-written.
 
     suffixes: the endings a file name must have (any when empty), lowercase with the dot; the name must carry one,
     for writers that would append it silently. make_folders: the writer makes missing folders on the way (else
@@ -90,4 +90,4 @@ def check_output(path: str | os.PathLike, option: str, *, suffixes: Sequence[str
                              "folders can be made") from None
         for p in made:
             p.rmdir()
-    return target
+    return target.absolute()  # what the command reports is where it wrote, whatever folder it ran in

@@ -411,6 +411,8 @@ def run(args: argparse.Namespace) -> int:
     from antarium.config import load_config
 
     require_seconds(args, "timeout_s")
+    if not (math.isfinite(args.min_free_gb) and args.min_free_gb >= 0):
+        raise ValueError(f"--min-free-gb must be a number of GB >= 0, got {args.min_free_gb:g}")
     panels = _panel_list(args.panels)
     config = load_config(args.config)
     report = Report()

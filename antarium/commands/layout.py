@@ -80,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
         layout_path = check_output(args.layout_out, "--layout-out", suffixes=(".npz",))
     elif args.margin_mm is not None or args.min_pitch_mm is not None:
         raise ValueError("--margin-mm and --min-pitch-mm apply only with --regenerate")
+    if args.no_pictures and args.out is not None:
+        raise ValueError("--out names the pictures' folder and --no-pictures draws none: give one of them")
     pictures = not args.no_pictures and (args.out is not None or not (args.export is not None or args.regenerate))
     if pictures:
         out = check_output("." if args.out is None else args.out, "--out", folder=True)

@@ -12,14 +12,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default=None, help="rig config (TOML): [bus] says where the server is, "
                         "[monitor] where the page is served and who may open it")
     parser.add_argument("--host", default=None, help="address to serve the page on (default: [monitor] host)")
-    parser.add_argument("--port", type=int, default=None, help="TCP port (default: [monitor] port; 0: any free)")
+    parser.add_argument("--port", type=int, default=None,
+                        help="TCP port, 0..65535 (default: [monitor] port; 0: any free)")
 
 
 def run(args: argparse.Namespace) -> int:
     from antarium import bus
+    from antarium.commands import require_port
     from antarium.config import MonitorSection, load_config
     from antarium.monitor.app import serve
 
+    require_port(args, "port")  # named as given, not as the config's [monitor] port
     config = load_config(args.config)
     overrides = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}
     settings = MonitorSection.read({**config.monitor.model_dump(), **overrides})

@@ -6,6 +6,9 @@ import argparse
 import json
 import math
 
+#: the widest map `render` draws (pixels): wider ones only cost memory (the image library refuses 2**23)
+MAX_WIDTH_PX = 8192
+
 HELP = "render a scene for one eye pose and save the LED frame as an equal-area map (and the raw cube map)"
 
 
@@ -52,8 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="cube face side in texels (default: the renderer's; allowed: from the smallest that "
                              "samples every LED's footprint, 55 at the dome's 1.5 degree pitch, to 2048)")
     parser.add_argument("--width", type=int, default=1200,
-                        help=f"picture width in pixels, at least {MIN_WIDTH_PX}: narrower maps have illegible text "
-                             "(default %(default)s)")
+                        help=f"picture width in pixels, {MIN_WIDTH_PX}..{MAX_WIDTH_PX}: narrower maps have illegible "
+                             "text (default %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -69,9 +72,9 @@ def run(args: argparse.Namespace) -> int:
 
     x, y, z = (check_number(f"--pos {axis} (metres)", v) for axis, v in zip("XYZ", args.pos, strict=True))
     pose = Pose.from_deg(x, y, z, heading_deg=check_number("--heading (degrees)", args.heading))
-    if args.width < MIN_WIDTH_PX:
-        raise ValueError(f"--width must be at least {MIN_WIDTH_PX} pixels (narrower maps have illegible text), "
-                         f"got {args.width}")
+    if not MIN_WIDTH_PX <= args.width <= MAX_WIDTH_PX:
+        raise ValueError(f"--width must be at least {MIN_WIDTH_PX} pixels (narrower maps have illegible text) and at "
+                         f"most {MAX_WIDTH_PX}, got {args.width}")
     if z < 0:
         raise ValueError(f"--pos Z is the eye's height above the ground (z = 0) in metres and must be >= 0, "
                          f"got {z:g}")

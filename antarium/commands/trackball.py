@@ -26,6 +26,24 @@ if TYPE_CHECKING:
 
 HELP = "run the USB trackball or FicTrac input and publish it on the bus; `calibrate` the ball's sensors"
 
+#: the values of the options below left out (given as None, so that `refuse_others` sees what the user gave)
+DEFAULTS: dict[str, Any] = {"replug_after": 0.5, "transport": "udp", "host": "127.0.0.1", "port": 5000,
+                            "axes": "z,x,y", "turns": 3.0}
+
+#: option -> (where it applies, in words for the message; whether it applies to `args`)
+ONLY_WITH: dict[str, tuple[str, Any]] = {
+    "--unplug-at": ("--emulate", lambda a: a.emulate),
+    "--replug-after": ("--emulate", lambda a: a.emulate),
+    "--transport": ("--source fictrac", lambda a: a.source == "fictrac"),
+    "--host": ("--source fictrac", lambda a: a.source == "fictrac"),
+    "--port": ("--source fictrac", lambda a: a.source == "fictrac"),
+    "--path": ("--source fictrac-replay", lambda a: a.source == "fictrac-replay"),
+    "--axes": ("calibrate", lambda a: a.action == "calibrate"),
+    "--turns": ("calibrate", lambda a: a.action == "calibrate"),
+    "--dry-run": ("calibrate", lambda a: a.action == "calibrate"),
+}
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("action", nargs="?", default="run", choices=("run", "calibrate"),
                         help="run (default): publish samples; calibrate: guided calibration")
@@ -37,14 +55,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-bus", action="store_true", help="do not publish; print status only")
     parser.add_argument("--unplug-at", type=float, default=None,
                         help="emulated device: pull the cable after this many seconds (demo of unplug handling)")
-    parser.add_argument("--replug-after", type=float, default=0.5, help="emulated device: replug after (s)")
-    parser.add_argument("--transport", default="udp", choices=("udp", "tcp"),
-                        help="FicTrac transport (FicTrac 2.1 sends UDP only; tcp fits 2.0)")
-    parser.add_argument("--host", default="127.0.0.1", help="FicTrac: UDP address to bind / TCP host to connect")
-    parser.add_argument("--port", type=int, default=5000, help="FicTrac socket port")
+    parser.add_argument("--replug-after", type=float, default=None,
+                        help=f"emulated device: replug after (s; default {DEFAULTS['replug_after']:g})")
+    parser.add_argument("--transport", default=None, choices=("udp", "tcp"),
+                        help=f"FicTrac transport (FicTrac 2.1 sends UDP only; tcp fits 2.0; default "
+                             f"{DEFAULTS['transport']})")
+    parser.add_argument("--host", default=None,
+                        help=f"FicTrac: UDP address to bind / TCP host to connect (default {DEFAULTS['host']})")
+    parser.add_argument("--port", type=int, default=None,
+                        help=f"FicTrac socket port, 0..65535 (default {DEFAULTS['port']})")
     parser.add_argument("--path", default=None, help="FicTrac .dat log for --source fictrac-replay")
-    parser.add_argument("--axes", default="z,x,y", help="calibrate: rotation axes, in order (default z,x,y)")
-    parser.add_argument("--turns", type=float, default=3.0, help="calibrate: whole turns per axis (default 3)")
+    parser.add_argument("--axes", default=None, help=f"calibrate: rotation axes, in order (default {DEFAULTS['axes']})")
+    parser.add_argument("--turns", type=float, default=None,
+                        help=f"calibrate: whole turns per axis (default {DEFAULTS['turns']:g})")
     parser.add_argument("--dry-run", action="store_true", help="calibrate: print the result, do not write it")
 
 
@@ -124,26 +147,29 @@ def _run(args: argparse.Namespace, rig: RigConfig) -> int:
         warned = False
         with source:
             _check_replay(args, source.status())
-            while args.seconds is None or time.monotonic() - t0 < args.seconds:
-                samples = source.read()
-                if pushes:
-                    for sample in samples:
-                        publisher.sample(sample)
-                now = time.monotonic()
-                if unplug_at is not None and now - t0 >= unplug_at and args.emulate:
-                    source.backend.unplug()
-                    unplug_at = None
-                if now >= next_status:
-                    status = source.status()
-                    publisher.status(status)
-                    print("trackball status: " + json.dumps(status), flush=True)
-                    next_status += 1.0
-                    if not warned and now - t0 >= 1.0 and not _ever_read(status):
-                        # once, while it keeps looking: what is missing, not only `"connected": false`
-                        print(f"antarium trackball: {_nothing_read(args, source, status)}; still waiting",
-                              file=sys.stderr, flush=True)
-                        warned = True
-                time.sleep(0.002)
+            try:  # Ctrl-C is how a run without --seconds ends: it ends the loop, the final status is printed
+                while args.seconds is None or time.monotonic() - t0 < args.seconds:
+                    samples = source.read()
+                    if pushes:
+                        for sample in samples:
+                            publisher.sample(sample)
+                    now = time.monotonic()
+                    if unplug_at is not None and now - t0 >= unplug_at and args.emulate:
+                        source.backend.unplug()
+                        unplug_at = None
+                    if now >= next_status:
+                        status = source.status()
+                        publisher.status(status)
+                        print("trackball status: " + json.dumps(status), flush=True)
+                        next_status += 1.0
+                        if not warned and now - t0 >= 1.0 and not _ever_read(status):
+                            # once, while it keeps looking: what is missing, not only `"connected": false`
+                            print(f"antarium trackball: {_nothing_read(args, source, status)}; still waiting",
+                                  file=sys.stderr, flush=True)
+                            warned = True
+                    time.sleep(0.002)
+            except KeyboardInterrupt:
+                pass
             final = source.status()
         print("trackball final: " + json.dumps(final), flush=True)
     finally:
@@ -236,7 +262,19 @@ def _turn_by_hand(driver, axis: str, turns: float) -> list[int]:
     return driver.raw_counts()
 
 
+def refuse_others(args: argparse.Namespace) -> None:
+    """ValueError naming the first option given (not None, not False) that does nothing in the use `args` asks
+    for (`ONLY_WITH`); then the options left out get their `DEFAULTS`."""
+    for option, (where, applies) in ONLY_WITH.items():
+        if getattr(args, option[2:].replace("-", "_")) not in (None, False) and not applies(args):
+            raise ValueError(f"{option} applies only with {where}; leave it out here")
+    for name, value in DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+
+
 def run(args: argparse.Namespace) -> int:
+    refuse_others(args)
     require_seconds(args, "seconds", "unplug_at", "replug_after")
     rig = _rig(args.config)  # every action: a --config that is missing or unreadable is refused before anything runs
     if args.action == "calibrate":
