@@ -102,8 +102,12 @@ def plot_worst_and_best(df, routes: dict, path: str | Path, metric: str = "later
             ax.set_aspect("equal", "datalim")
             params = ", ".join(f"{k.removeprefix('param.')}={r[k]}" for k in r.index
                                if k.startswith("param.") and r[k] == r[k])
+            release = (r.get("lateral_cm", 0), r.get("heading_deg", 0))
+            how = "".join([f"{r.protocol}'s protocol" if "protocol" in r else "",
+                           f", released {release[0]:g} cm {release[1]:g} deg off" if release != (0, 0) else ""])
             style.label(ax, f"{label} {i + 1} of {len(ranked)}: {r.model} on {r.route} {params}\n"
-                        f"{metric} = {r[metric]:.3g}, errors {r.errors}, seed {r.seed}", "x (m)", "y (m)")
+                        f"{how + '; ' if how else ''}{metric} = {r[metric]:.3g}, errors {r.errors}, seed {r.seed}",
+                        "x (m)", "y (m)")
             ax.title.set_fontsize(8)
     handles = {h.get_label(): h for ax in axes.ravel() if ax.get_visible() for h in ax.get_lines()}
     unranked = len(done) - len(ranked)

@@ -223,9 +223,12 @@ def ground_candidates(triangles: np.ndarray, xy: np.ndarray) -> list[tuple[np.nd
         z = (a[k, 2] + u * (b[k, 2] - a[k, 2]) + w * (c[k, 2] - a[k, 2]))[inside]
         order = np.argsort(z, kind="stable")
         z, faces_up = z[order], up[k][inside][order]
+        if not z.size:  # nothing over this point (a hole, or the world stated with another up axis)
+            out.append((z, faces_up))
+            continue
         # a point on an edge or a corner is in every triangle there: one surface
         first = np.flatnonzero(np.append(True, np.diff(z) > SAME_SURFACE_M))
-        out.append((z[first], np.logical_or.reduceat(faces_up, first) if z.size else faces_up))
+        out.append((z[first], np.logical_or.reduceat(faces_up, first)))
     return out
 
 
@@ -289,6 +292,10 @@ def eye_z(world: WorldSpec, route: Route, geometry: WorldGeometry | None = None)
     xy, _ = route.sample(CHECK_SPACING_M)
     clearance = max(GROUND_CLEARANCE_M, 2 * world.eye_height_m)
     candidates = ground_candidates(geometry.triangles, xy)
+    if not any(z.size for z, _ in candidates):
+        raise RouteError(f"route from ({pts[0, 0]:.3f}, {pts[0, 1]:.3f}) m has no surface under it in world "
+                         f"{world.name!r}, which spans x {x0:.2f}..{x1:.2f} m, y {y0:.2f}..{y1:.2f} m (check its "
+                         "scale and up axis)")
     ground = ground_along(candidates, CHECK_SPACING_M, clearance)
     if not np.isfinite(ground[0]) and candidates[0][0].size:
         raise RouteError(f"world {world.name!r} has {candidates[0][0].size} surface(s) under the route's start "
