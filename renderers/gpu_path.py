@@ -323,20 +323,22 @@ class GpuFramePath:
         before keeps its buffers as the spare for the next one."""
         table = staged.table
         buffers = staged.take()
-        self.drop_table()
+        if self._table is not None:
+            for b in self._spare or ():
+                b.release()
+            self._spare = (self._table, self._cells)
         self._table, self._cells = buffers
         self._sample["n_cols"].value = table.grid.n_cols
         self._sample["uv_offset"].value = table.table_gb.size // 2
         self._table_source, self._n_cols = table, table.grid.n_cols
 
     def drop_table(self) -> None:
-        """No far-field table any more (a scene without one): its buffers become the spare (the one before's are
-        released), and the reference to its source is dropped."""
-        if self._table is not None:
-            for b in self._spare or ():
+        """No far-field table any more (a scene without one): its buffers and the spare ones are released, and the
+        reference to its source is dropped."""
+        for b in (self._table, self._cells, *(self._spare or ())):
+            if b is not None:
                 b.release()
-            self._spare = (self._table, self._cells)
-        self._table = self._cells = None
+        self._table = self._cells = self._spare = None
         self._table_source, self._n_cols = None, 0
 
     def set_gain(self, gain: np.ndarray) -> None:
