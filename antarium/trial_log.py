@@ -819,11 +819,17 @@ def log_path(folder: str | Path, rig: str, name: str, when: _dt.datetime | None 
     when = when or _dt.datetime.now(_dt.UTC)
     safe = "".join(c if c.isascii() and c.isalnum() or c in "-_" else "_" for c in name)[:TRIAL_NAME_MAX] or "trial"
     base = Path(folder) / f"{rig}_{when:%Y%m%d-%H%M%S}_{safe}"
-    path, k = Path(f"{base}.h5"), 1  # appended: a rig name may hold a dot ("lab.1"), which with_suffix would cut
-    size = len(path.name.encode())
+    size = len(f"{base.name}.h5".encode())
     if size > NAME_MAX_BYTES:
-        raise LogError(f"trial log {str(path)!r}: its file name is {size} bytes long; allowed: at most "
+        raise LogError(f"trial log {f'{base}.h5'!r}: its file name is {size} bytes long; allowed: at most "
                        f"{NAME_MAX_BYTES} bytes (a [rig] name of at most {RIG_NAME_MAX_BYTES} bytes)")
+    return free_log_path(base)
+
+
+def free_log_path(base: str | Path) -> Path:
+    """`<base>.h5`, or `<base>-<k>.h5` with the smallest k >= 1 not taken: a log is never overwritten. LogError
+    naming the path when the system cannot tell whether it is taken."""
+    path, k = Path(f"{base}.h5"), 1  # appended: a name may hold a dot ("lab.1"), which with_suffix would cut
     while _exists(path):
         path, k = Path(f"{base}-{k}.h5"), k + 1
     return path

@@ -4,8 +4,10 @@ The panoramas are equirectangular images (PNG/JPEG/EXR; 2:1, elevation +90 at th
 left edge increasing to the right — see the renderer's panorama docs). Without `--panorama` the script writes
 three of its own (a single dark landmark, two landmarks, a skyline) so that it runs anywhere. Each image is
 shown in open loop (the ant's walking does not move the scene) for `--seconds`, all in one trial log, which
-opens on the first image; its scene table holds when each image went on and its SHA-256 (an image stays on
-while the next one loads).
+opens on the first image; its scene table holds when each image went on and its SHA-256. An image stays on while
+the next one loads, so each but the last is on for `--seconds` plus the next one's load time (a panorama took
+20 s to load with the embedded default's far layer on a 2-core machine without a GPU): the script prints how long
+each image was on.
 
     antarium serve &
     python examples/open_loop_panoramas.py --panorama pano1.png --panorama pano2.png --seconds 30
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -74,12 +77,17 @@ def main(argv: list[str] | None = None) -> int:
         rig.set_pose(0.0, 0.0, heading_deg=0.0)
         rig.load_scene(panoramas[0])  # on before the trial starts: the log opens on the first image
         with rig.trial("open-loop-panoramas", panoramas=[p.name for p in panoramas], seconds=args.seconds) as log:
+            on = []  # time.monotonic() when each image went on (load_scene replies once it is shown)
             for i, path in enumerate(panoramas):
                 if i:
                     rig.load_scene(path)
+                on.append(time.monotonic())
                 print(f"showing {path.name} for {args.seconds:g} s")
                 rig.wait(args.seconds)
+            on.append(time.monotonic())
         status = rig.status()
+    for path, start, end in zip(panoramas, on[:-1], on[1:], strict=True):
+        print(f"{path.name} was on for {end - start:.2f} s")
     print(f"trial log: {log}")
     print(f"frames so far {status['frames']}, late {status['late_frames']}")
     return 0

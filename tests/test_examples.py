@@ -2,6 +2,7 @@
 
 import importlib.util
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -54,21 +55,28 @@ def _args(rig_config, out):
 def test_proof_of_concept(rig_config, tmp_path, capsys):
     assert _load("proof_of_concept").main(_args(rig_config, tmp_path)) == 0
     text = capsys.readouterr().out
-    for condition in ("familiar", "nest", "unfamiliar", "unstructured"):
-        assert f"{condition}: " in text and "1 rotations" in text
+    for condition in ("familiar", "nest", "unfamiliar", "unstructured"):  # each condition's own line
+        assert re.search(rf"^{condition}: \d+ poses, 1 rotations, log /", text, re.MULTILINE), condition
     logs = sorted(tmp_path.glob("*poc-*.h5"))  # everything the run writes lies under its --out
     assert len(logs) == 4 and not list((rig_config[1] / "logs").glob("*poc-*.h5"))
     (picture,) = tmp_path.glob("*_proof_of_concept_paths.png")  # named after the run's first log
     assert picture.stat().st_size > 10_000 and logs[0].name.startswith(picture.name.split("_proof_of_concept")[0])
     assert f"log {logs[0]}" in text  # reported absolute
-    events = list(read_table(logs[0], "events")["kind"])
-    assert events.count("scene_rotated") >= 1
+    for log in logs:  # one instant rotation by +-90 deg, in closed loop, free in yaw, in every condition's log
+        frames = read_table(log, "frames")
+        jumps = np.degrees(np.diff(frames["scene_rotation"]))
+        assert np.isclose(np.abs(jumps[np.abs(jumps) > 1e-3]), 90.0).tolist() == [True], log.name
+        assert frames["closed_loop"].all() and not frames["fixed_tether"].any()
+        assert list(read_table(log, "events")["kind"]).count("scene_rotated") == 1
     with open_log(next(p for p in logs if p.name.endswith("poc-unstructured.h5"))) as f:
         assert json.loads(f.attrs["metadata"])["scene"] == {"scene": "horizon"}  # the spec as JSON, not its repr
 
 
 def test_open_loop_panoramas(rig_config, tmp_path, capsys):
     assert _load("open_loop_panoramas").main(_args(rig_config, tmp_path)) == 0
+    on = re.findall(r"^(\S+\.png) was on for ([\d.]+) s$", capsys.readouterr().out, re.MULTILINE)
+    assert [name for name, _ in on] == ["one_landmark.png", "two_landmarks.png", "skyline.png"]
+    assert all(float(seconds) >= 0.6 - 0.005 for _, seconds in on)  # --short: 0.6 s each, at least
     log = next(tmp_path.glob("*open-loop-panoramas.h5"))
     scenes = read_table(log, "scenes")
     # The trial opens on the first image (loaded before it starts), not on what the rig showed before.
@@ -83,7 +91,14 @@ def test_virtual_displacement(rig_config, tmp_path, capsys):
     assert "displaced to (4.00, -3.00) m" in capsys.readouterr().out
     log = next(tmp_path.glob("*virtual-displacement.h5"))
     frames = read_table(log, "frames")
-    assert frames["x"][0] < 1.0 and frames["x"][-1] > 3.9
+    xy = np.stack([frames["x"], frames["y"]], axis=1)
+    steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    (jump,) = np.flatnonzero(steps > 1.0) + 1  # one displacement; the rest is walking
+    assert np.linalg.norm(xy[jump] - [4.0, -3.0]) < 0.05 and np.linalg.norm(xy[0]) < 0.05
+    assert np.isclose(frames["heading"][jump], frames["heading"][jump - 1], atol=1e-3)  # the heading mapping kept
+    assert frames["closed_loop"].all()
+    (picture,) = tmp_path.glob("*_path.png")
+    assert picture.name == f"{log.stem}_path.png" and picture.stat().st_size > 10_000
 
 
 def test_a_second_run_into_the_same_out_keeps_the_first_runs_plot(rig_config, tmp_path, capsys):
