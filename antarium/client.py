@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from antarium import bus
+from antarium.core.clock import MonotonicClock
 from antarium.core.numbers import as_real, check_number
 from antarium.core.pose import Pose
 
@@ -102,7 +103,7 @@ class Rig:
 
     def __init__(self, name: str = "rig1", *, config: str | Path | dict | None = None,
                  connect: list[str] | None = None, timeout_s: float = 10.0, session=None,
-                 log_dir: str | Path | None = None) -> None:
+                 log_dir: str | Path | None = None, clock=None) -> None:
         from antarium.config import BusSection, ConfigError, RigConfig, load_config, resolve
 
         try:
@@ -129,6 +130,12 @@ class Rig:
                            f"{_shown(timeout_s)}")
         self.timeout_s = value
         self.log_dir = None if log_dir is None else Path(log_dir).expanduser().resolve()
+        if clock is not None and not all(callable(getattr(clock, m, None)) for m in ("now", "sleep_until")):
+            raise RigError(f"clock must have now() and sleep_until(t) in seconds (antarium.core.clock.Clock), got "
+                           f"{type(clock).__name__}")
+        #: the script's clock, for `wait` and `now` (default: wall time); a `SimulatedClock` runs a protocol's
+        #: schedule without waiting for it (the dome's own frames keep the server's clock)
+        self.clock = MonotonicClock(spin_s=0.0) if clock is None else clock
         self._session = session
         self._own_session = session is None
         self._latest: PoseUpdate | None = None
@@ -453,14 +460,17 @@ class Rig:
         self._subs.append(sub)
         return sub
 
-    @staticmethod
-    def wait(seconds: float) -> None:
-        """Wait `seconds` of wall time (the dome keeps running), at most `WAIT_MAX_S` in one call."""
+    def now(self) -> float:
+        """Seconds on the Rig's `clock`: for a protocol's own schedule (when a phase began, how long it lasted)."""
+        return self.clock.now()
+
+    def wait(self, seconds: float) -> None:
+        """Wait `seconds` on the Rig's `clock` (the dome keeps running), at most `WAIT_MAX_S` in one call."""
         value = as_real(seconds)
         shown = repr(value) if math.isfinite(value) else repr(seconds)[:60]
         if not 0 <= value <= WAIT_MAX_S:
             raise RigError(f"wait needs a number of seconds in [0, {WAIT_MAX_S:g}], got {shown}")
-        time.sleep(value)
+        self.clock.sleep_until(self.clock.now() + value)
 
 
 # -- helpers for experiment scripts ----------------------------------------------------------------------

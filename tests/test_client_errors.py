@@ -58,6 +58,24 @@ def test_every_refusal_is_a_rig_error_with_plain_numbers(rig, call, message):
     assert message in str(info.value) and "np." not in str(info.value)
 
 
+def test_a_protocol_waits_on_the_clock_its_rig_was_given(tmp_path):
+    """`Rig.wait` slept wall time whatever the script wanted: a protocol's schedule could not be tested without
+    waiting it out. With `clock=`, wait and now run on that clock (no server needed for either)."""
+    from antarium.core.clock import SimulatedClock
+
+    config = _config(tmp_path, "tclock")
+    rig = antarium.Rig("tclock", config=config, clock=SimulatedClock(start=100.0))
+    rig.wait(3600)
+    rig.wait(np.float64(0.5))
+    assert rig.now() == 3700.5
+    with pytest.raises(RigError, match=r"clock must have now\(\) and sleep_until\(t\).*got str"):
+        antarium.Rig("tclock", config=config, clock="wall")
+    wall = antarium.Rig("tclock", config=config)
+    before = wall.now()
+    wall.wait(0.01)
+    assert wall.now() >= before + 0.01
+
+
 def test_numpy_values_are_accepted(rig):
     state = rig.set_pose(np.float64(0.5), np.int64(1), heading_deg=np.float32(90.0))
     assert state["pose"]["x"] == 0.5 and state["pose"]["y"] == 1.0
