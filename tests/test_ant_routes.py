@@ -38,6 +38,23 @@ def test_route_files_round_trip(tmp_path):
     assert Route.load(tmp_path / "plain.txt").length == pytest.approx(2.0)
 
 
+def test_a_heading_given_once_may_leave_the_cells_below_it_empty(tmp_path):
+    """A spreadsheet exports a heading given only on the first row as empty cells below: refused before
+    ("line 3: '' is not a number"); only the first row's heading is used. Empty x or y, or an empty first heading,
+    are still refused with their line."""
+    from antarium.ant.routes import read_route_file
+
+    (tmp_path / "sheet.csv").write_text("x_m,y_m,heading_deg\n0,0,90\n1,0,\n1,1,\n")
+    route, heading = read_route_file(tmp_path / "sheet.csv")
+    assert route.length == pytest.approx(2.0) and heading == pytest.approx(math.pi / 2)
+    (tmp_path / "plain.csv").write_text("0,0,45\n2,0,\n")
+    assert read_route_file(tmp_path / "plain.csv")[1] == pytest.approx(math.pi / 4)
+    for text, line in (("x_m,y_m,heading_deg\n0,0,90\n,0,\n", 3), ("x_m,y_m,heading_deg\n0,0,\n1,0,\n", 2)):
+        (tmp_path / "bad.csv").write_text(text)
+        with pytest.raises(RouteError, match=f"line {line}: '' is not a number"):
+            read_route_file(tmp_path / "bad.csv")
+
+
 def test_projection_gives_signed_lateral_error_and_the_route_heading():
     r = Route([[0, 0], [1, 0], [1, 1]])
     s, d, h = r.project([[0.5, 0.1], [0.5, -0.2], [1.2, 0.5]])

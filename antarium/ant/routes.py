@@ -117,7 +117,8 @@ def read_route_csv(path: Path) -> tuple[np.ndarray, float | None]:
 
     A header is a first row with a field that is not a number (float() refuses it); it names its columns
     (`ROUTE_COLUMNS`). Without one the columns are x_m, y_m[, heading_deg] in that order. Every value is a
-    finite number. Raises RouteError naming the file and line."""
+    finite number, but a heading_deg cell after the first row may be empty (a spreadsheet's export of a heading
+    given once: only the first row's is used). Raises RouteError naming the file and line."""
     lines = [(n, ln) for n, ln in enumerate(path.read_text(encoding="utf-8-sig").splitlines(), 1)
              if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
@@ -127,10 +128,14 @@ def read_route_csv(path: Path) -> tuple[np.ndarray, float | None]:
     has_header = not all(is_float_text(f) for f in first)
     if has_header:
         x, y, h = _header(path, first)
+    heading_column = h if has_header else 2  # without a header, a third column
     rows = []
     for n, line in lines[int(has_header):]:
         row = []
-        for field in (f.strip() for f in line.split(delimiter)):
+        for k, field in enumerate(f.strip() for f in line.split(delimiter)):
+            if not field and rows and k == heading_column:
+                row.append(math.nan)  # never read: the release heading is the first row's
+                continue
             if not is_float_text(field) or not math.isfinite(float(field)):
                 raise RouteError(f"{path}, line {n}: {field!r} is not a {'finite ' * is_float_text(field)}number; a "
                                  "route file holds x_m, y_m[, heading_deg] numbers (metres, degrees), finite, with an "
