@@ -133,9 +133,9 @@ class SkyCompass:
         d = self._dirs
         self._px = self._axes[:, 0] - np.einsum("ij,ij->i", self._axes[:, 0], d)[:, None] * d
         self._py = self._axes[:, 1] - np.einsum("ij,ij->i", self._axes[:, 1], d)[:, None] * d
-        from antarium.ant.cx_kernels import compass_fit, degree_excess
+        from antarium.ant.cx_kernels import compass_fit, degree_excess, eigh3
 
-        self._fit, self._excess = compass_fit, degree_excess
+        self._fit, self._excess, self._eigh = compass_fit, degree_excess, eigh3
 
     @classmethod
     def from_dome(cls, dome, params: CompassParams | None = None) -> SkyCompass:
@@ -159,7 +159,7 @@ class SkyCompass:
         degree = pol_lit / total_lit
         if degree < p.min_degree:
             return CompassReading(math.nan, False, degree, why=f"dorsal sky depolarised (degree {degree:.3f})")
-        w, v = np.linalg.eigh(m)
+        w, v = self._eigh(m)
         residual = float(w[0] / max(w[1], 1e-12))
         if residual > p.max_residual:
             return CompassReading(math.nan, False, degree, residual, why=f"e-vectors fit no sun (residual "

@@ -16,6 +16,13 @@ from numba import njit
 
 
 @njit(cache=True)
+def eigh3(m):
+    """np.linalg.eigh of the (3, 3) symmetric e-vector scatter (the same LAPACK routine, without numpy's per-call
+    cost): eigenvalues ascending (3,), eigenvectors as columns (3, 3)."""
+    return np.linalg.eigh(m)
+
+
+@njit(cache=True)
 def compass_fit(leds, pixels, scale, slots, angles, px, py, dirs, min_intensity, min_degree):
     """Dorsal-rim sums for one LED frame: (lit pixels, polarised sum of the lit, total sum of the lit, (3, 3)
     e-vector scatter sum_i P_i e_i e_i^T, (3,) brightness gradient sum_sky (I_i - mean_sky I) d_i).

@@ -76,15 +76,14 @@ class View:
 
     def _columns(self, angles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The fine columns i0, i1 (m, cols) int64 and weights w (m, cols) float32 of the panoramas at `angles`."""
-        angles = np.atleast_1d(np.asarray(angles, dtype=np.float64)) + self.yaw
-        n_fine = self.band.shape[1]
-        step = math.tau / n_fine
+        from antarium.ant.eye_kernel import scan_columns
+
         # Turning CCW by a moves world features to smaller ant-relative azimuths: new(alpha) = old(alpha + a).
-        pos = (np.arange(self._cols) * self._per_col)[None, :] + angles[:, None] / step
-        i0 = np.floor(pos).astype(np.int64)
-        w = (pos - i0).astype(np.float32)
-        i0 %= n_fine
-        return i0, (i0 + 1) % n_fine, w
+        return scan_columns(self._angles(angles), self.band.shape[1], self._per_col, self._cols)
+
+    def _angles(self, angles) -> np.ndarray:
+        """(m,) float64 dome-frame azimuths of the turns `angles` (rad, relative to the yaw the view was taken at)."""
+        return np.atleast_1d(np.asarray(angles, dtype=np.float64)) + self.yaw
 
     def rotated_panoramas(self, angles) -> np.ndarray:
         """Low-resolution panoramas (len(angles), rows, cols) float32 after turning by `angles` (rad)."""
@@ -97,7 +96,7 @@ class View:
         (divided row by row by its mean over azimuth when the eye has `row_gain`)."""
         from antarium.ant.eye_kernel import scan_edges  # = sobel_magnitude(self.rotated_panoramas(angles))
 
-        edges = scan_edges(self.band, *self._columns(angles))
+        edges = scan_edges(self.band, self._angles(angles), self._per_col, self._cols)
         if self._row_gain:
             edges = row_gain_control(edges)
         return edges.reshape(edges.shape[0], -1)
@@ -218,7 +217,9 @@ class Eye:
         led_values = np.asarray(led_values)
         if led_values.shape != (self.n_leds, 2):
             raise ValueError(f"LED values must have shape ({self.n_leds}, 2), got {led_values.shape}")
-        vals = led_values.reshape(-1)[self._flat].sum(axis=1, dtype=np.float32) * self._scale
+        from antarium.ant.eye_kernel import channel_intensities  # = reshape(-1)[flat].sum(1, float32) * scale
+
+        vals = channel_intensities(led_values.reshape(-1), self._flat, self._scale)
         return vals if self.params.gamma == 1.0 else np.power(vals, np.float32(self.params.gamma))
 
     def look(self, led_values: np.ndarray, yaw: float = 0.0) -> View:

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from antarium.ant.tables import index_table
+
 _ONE = np.float32(1.0)
 _TWO = np.float32(2.0)
 
@@ -43,28 +45,72 @@ def _scan_edges(band, i0, i1, w, out):
                 out[a, r, c] = np.sqrt(gx * gx + gy * gy)
 
 
-def scan_edges(band: np.ndarray, i0: np.ndarray, i1: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """`sobel_magnitude` of the panoramas `rotated_panoramas` makes from `band` with the same i0, i1, w:
-    (m, rows, cols) float32."""
-    out = np.empty((i0.shape[0], band.shape[0], i0.shape[1]), np.float32)
-    _scan_edges(np.ascontiguousarray(band, dtype=np.float32), np.ascontiguousarray(i0), np.ascontiguousarray(i1),
-                np.ascontiguousarray(w, dtype=np.float32), out)
+@njit(cache=True, nogil=True)
+def scan_columns(angles, n_fine, per_col, cols):
+    """The fine columns i0, i1 (m, cols) int64 and weights w (m, cols) float32 of the panoramas at `angles` (m,)
+    float64 (rad, dome frame; CCW): column c samples fine position c * per_col + angle / (tau / n_fine), between
+    i0 = its floor (mod n_fine) and i1 = i0 + 1 (mod n_fine), w the fraction."""
+    step = 2.0 * np.pi / n_fine
+    m = angles.shape[0]
+    i0 = np.empty((m, cols), np.int64)
+    i1 = np.empty((m, cols), np.int64)
+    w = np.empty((m, cols), np.float32)
+    for a in range(m):
+        shift = angles[a] / step
+        for c in range(cols):
+            pos = np.float64(c * per_col) + shift
+            lo = np.floor(pos)
+            w[a, c] = np.float32(pos - lo)
+            i = np.int64(lo) % n_fine
+            i0[a, c] = i
+            i1[a, c] = (i + 1) % n_fine
+    return i0, i1, w
+
+
+@njit(cache=True, nogil=True)
+def _scan_edges_at(band, angles, per_col, cols):
+    i0, i1, w = scan_columns(angles, band.shape[1], per_col, cols)
+    out = np.empty((angles.shape[0], band.shape[0], cols), np.float32)
+    _scan_edges(band, i0, i1, w, out)
+    return out
+
+
+def scan_edges(band: np.ndarray, angles: np.ndarray, per_col: int, cols: int) -> np.ndarray:
+    """`sobel_magnitude` of the panoramas `View.rotated_panoramas` makes from `band` (rows, n_fine) at `angles`
+    (m,) rad (`scan_columns`): (m, rows, cols) float32, in one compiled call."""
+    return _scan_edges_at(np.ascontiguousarray(band, dtype=np.float32), np.ascontiguousarray(angles, np.float64),
+                          int(per_col), int(cols))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+def channel_intensities(leds, flat, scale):
+    """(n,) float32 intensities of the eye's pixels from the flattened (2 N,) uint16 LED frame `leds`: the sum of
+    each pixel's channel columns at `flat` (n, c) int64, as float32 (exact: integers below 2^24), times scale (n,)
+    float32 -- what `leds[flat].sum(axis=1, dtype=float32) * scale` gives, without its temporaries."""
+    n, c = flat.shape
+    out = np.empty(n, np.float32)
+    for i in range(n):
+        v = np.float32(leds[flat[i, 0]])
+        for j in range(1, c):
+            v += np.float32(leds[flat[i, j]])
+        out[i] = v * scale[i]
     return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
 def _band(nb_idx, nb_w, x, el_ptr, el_idx, el_w, taps, h, fine, tmp, ext, out):
     """The eye's band (rows, n_fine) float32 into `out` from intensities x (N,) float32, in three passes:
-    fine (fine rows * n_fine,) = each fine point's neighbours nb_idx (n, K) int32 weighted by nb_w (n, K) float32;
-    tmp = B_el fine (CSR B_el (rows, fine rows)); out = tmp circularly convolved along azimuth with `taps`
-    (at most n_fine of them, offsets -h ..; B_az is circulant: out[r, c] = sum_k taps[k] tmp[r, (c + k - h) mod
-    n_fine]). float32 sums."""
-    n, k_nb = nb_idx.shape
+    fine (fine rows * n_fine,) = each fine point's neighbours nb_idx (K, n) int32 weighted by nb_w (K, n) float32
+    (neighbour-major: each pass over the fine points is one gather, and each point's sum still runs over its
+    neighbours in order); tmp = B_el fine (CSR B_el (rows, fine rows)); out = tmp circularly convolved along
+    azimuth with `taps` (at most n_fine of them, offsets -h ..; B_az is circulant: out[r, c] = sum_k taps[k]
+    tmp[r, (c + k - h) mod n_fine]). float32 sums."""
+    k_nb, n = nb_idx.shape
     for i in range(n):
-        v = np.float32(0.0)
-        for j in range(k_nb):
-            v += nb_w[i, j] * x[nb_idx[i, j]]
-        fine[i] = v
+        fine[i] = nb_w[0, i] * x[nb_idx[0, i]]
+    for j in range(1, k_nb):
+        for i in range(n):
+            fine[i] += nb_w[j, i] * x[nb_idx[j, i]]
     rows, n_fine = out.shape
     for r in range(rows):
         for c in range(n_fine):
@@ -98,8 +144,8 @@ class Band:
         counts = np.diff(sample_matrix.indptr)
         if counts.size == 0 or np.any(counts != counts[0]):
             raise ValueError("the eye's fine sampling must give every fine point the same number of neighbours")
-        self._nb = (sample_matrix.indices.reshape(-1, counts[0]).astype(np.int32),
-                    sample_matrix.data.reshape(-1, counts[0]).astype(np.float32))
+        self._nb = (index_table(sample_matrix.indices.reshape(-1, counts[0]).T, sample_matrix.shape[1]),
+                    np.ascontiguousarray(sample_matrix.data.reshape(-1, counts[0]).T, dtype=np.float32))
         n_fine = blur_az.shape[0]
         column = np.asarray(blur_az[:, 0], np.float32)
         if blur_az.shape != (n_fine, n_fine) or not np.allclose(

@@ -18,6 +18,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from antarium.ant.tables import index_table
+
 _GROUP = 64  # PN vectors whose EPs are summed together (a 61-direction scan is one group)
 _BLOCK = 16  # KCs per block: summed together, then written out direction by direction; one maximum each
 _BINS = 128  # of the histogram of a vector's block maxima that bounds its k-th largest EP from below
@@ -241,16 +243,17 @@ def _active(pn_groups, pn_index, k, ep_t, block_max, out):
         _pick(ep_t, k, block_max, out[d0:min(m, d0 + g)])
 
 
-def sorted_pn_index(pn_index: np.ndarray) -> np.ndarray:
-    """Each KC's PN indices (n_kc, pn_per_kc) in ascending order, int32 C-contiguous (the kernel's table)."""
-    return np.ascontiguousarray(np.sort(pn_index, axis=1), dtype=np.int32)
+def sorted_pn_index(pn_index: np.ndarray, n_pn: int) -> np.ndarray:
+    """Each KC's PN indices (n_kc, pn_per_kc) in ascending order, C-contiguous int16 (int32 beyond 32,767 PNs):
+    the kernel's table."""
+    return index_table(np.sort(pn_index, axis=1), n_pn)
 
 
 class Workspace:
     """The kernel's work arrays for one KC layer, allocated once (fresh multi-MB arrays cost page faults)."""
 
     def __init__(self, pn_index: np.ndarray, k: int, n_pn: int) -> None:
-        self.pn_index = sorted_pn_index(pn_index)
+        self.pn_index = sorted_pn_index(pn_index, n_pn)
         self.k = k
         n_kc = self.pn_index.shape[0]
         block = max(1, min(_BLOCK, n_kc // k))  # at least k blocks
@@ -276,7 +279,8 @@ class Workspace:
         weights: (n_out, n_kc) bool or uint8, True = undepressed synapse."""
         m = pn.shape[0]
         out = np.empty((m, weights.shape[0]), np.float64)
-        weights = np.ascontiguousarray(weights, dtype=np.uint8)
+        weights = np.ascontiguousarray(weights)
+        weights = weights.view(np.uint8) if weights.dtype == np.bool_ else np.ascontiguousarray(weights, np.uint8)
         if m == 1:  # one view (a CXMB decision): no group of 64 to fill
             _novelty_one(np.ascontiguousarray(pn[0], np.float32), self.pn_index, self.k, self.ep_t[:1],
                          self.block_max[:1], weights, out)

@@ -21,6 +21,12 @@ from antarium.ant.compass import COMPASSES, CompassReading, NoSkyCueError
 from antarium.ant.mushroom_body import MBON, KenyonCells
 
 
+def _clip(x: float, limit: float) -> float:
+    """float(np.clip(x, -limit, limit)) for a scalar, NaN kept, without numpy's per-call cost."""
+    x = float(x)
+    return -limit if x < -limit else limit if x > limit else x
+
+
 @dataclass(frozen=True, slots=True)
 class Senses:
     """One decision's input: view (an eye `View`), compass (`CompassReading`), travelled (m since the last
@@ -126,11 +132,11 @@ class CXModel:
         extra, k, more = self._extra(senses)
         self.cx.steering(extra, k)
         motor = self.cx.motor()
-        turn = float(np.clip(self.params.turn_gain * motor, -self.params.max_turn, self.params.max_turn))
+        turn = _clip(self.params.turn_gain * motor, self.params.max_turn)
         if self.params.avoid and "flow_turn" not in more:  # the flow is read once per decision
             flow_turn, flow_trace = self.avoidance(senses)
             more = {**more, **flow_trace}
-            turn = float(np.clip(turn + flow_turn, -self.params.max_turn, self.params.max_turn))
+            turn = _clip(turn + flow_turn, self.params.max_turn)
         return Command(self.params.step, turn, {**trace, **more, "motor": motor})
 
 
@@ -147,6 +153,10 @@ class CXMBParams(CXModelParams):
         CXModelParams.__post_init__(self)
         if not 0.0 <= self.k <= 1.0:
             raise ValueError(f"CXMB k must be in [0, 1], got {self.k!r}")
+
+
+#: CPU4 cell (16,) each MBON column feeds: both halves, turned by half the ring (np.tile(np.roll(m, 4), 2))
+_MBON_TO_CPU4 = (np.arange(2 * N_COLUMNS) - N_COLUMNS // 2) % N_COLUMNS
 
 
 class CXMBModel(CXModel):
@@ -184,8 +194,7 @@ class CXMBModel(CXModel):
         towards j"; CPU4 holds the outbound vector, which CPU1 steers away from, so the columns turn by 4."""
         m = self.responses(view)
         inverse = 1.0 - m / max(m.sum(), 1e-12)
-        return np.tile(np.roll(inverse, N_COLUMNS // 2), 2), {"mbon_best": float(np.argmin(m)),
-                                                              "mbon_contrast": float(m.max() - m.min())}
+        return inverse[_MBON_TO_CPU4], {"mbon_best": float(np.argmin(m)), "mbon_contrast": float(m.max() - m.min())}
 
     def _extra(self, senses: Senses):
         if self.learning:

@@ -29,6 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from antarium.ant.tables import index_table
+
 METHODS = ("filter", "foe")
 
 
@@ -69,7 +71,9 @@ class OpticFlow:
         north = np.cross(d, east)
         self.east, self.north = east, north
         _, nb = cKDTree(d).query(d, k=p.neighbours + 1)
-        self._nb = nb[:, 1:]
+        self._nb = index_table(nb[:, 1:], len(d))
+        # the kernels read only the horizontal components (M, 2), kept compact (the tables a decision reads)
+        self._east_xy, self._north_xy = np.ascontiguousarray(east[:, :2]), np.ascontiguousarray(north[:, :2])
         off = d[self._nb] - d[:, None, :]                                   # (M, k, 3)
         a = np.stack([np.einsum("mkj,mj->mk", off, east), np.einsum("mkj,mj->mk", off, north)], axis=2)
         self._pinv = np.linalg.pinv(a)                                      # (M, 2, k): gradient from differences
@@ -110,16 +114,18 @@ class OpticFlow:
 
     def avoid_of(self, i0: np.ndarray, i1: np.ndarray, yaw: float, travelled: float) -> tuple[float, dict]:
         """`avoid` from the two frames' band intensities (M,) (`intensity`)."""
-        from antarium.ant.flow_kernels import filter_sides, frontal_field
+        from antarium.ant.flow_kernels import filter_turn_sides, frontal_field
 
         p = self.params
-        rel, expected, norm2, ok = frontal_field(self.azimuth, self.east, self.north, float(yaw),
-                                                 math.radians(p.frontal_deg))
-        flow = self.flow_of(i0, i1, ok)        # only the frontal pixels that count
         trace: dict[str, float] = {}
-        if p.method == "filter":
-            left, right = filter_sides(flow, expected, norm2, rel, ok, float(travelled), p.react_distance)
+        if p.method == "filter":  # the flow of the frontal pixels that count, in one compiled pass
+            left, right = filter_turn_sides(i0, i1, self._nb, self._pinv, self.azimuth, self._east_xy, self._north_xy,
+                                            float(yaw), math.radians(p.frontal_deg), float(travelled),
+                                            p.react_distance)
         else:
+            rel, expected, norm2, ok = frontal_field(self.azimuth, self._east_xy, self._north_xy, float(yaw),
+                                                     math.radians(p.frontal_deg))
+            flow = self.flow_of(i0, i1, ok)        # only the frontal pixels that count
             x, y = rel[ok], self.elevation[ok]
             u, v = flow[ok, 0], flow[ok, 1]  # east: azimuth grows to the left
             # eq. 1 as printed (A = [u v]): each flow line through the FOE (x0, y0) gives x0 v - y0 u = x v - y u, so
