@@ -16,7 +16,7 @@ import pickle
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -48,20 +48,40 @@ class PreparedScene:
     upload: object | None = None
     gpu_table: object | None = None
     closed: bool = False
+    _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False, compare=False)
+
+    def staged(self, name: str, make: Callable[[], object]) -> object | None:
+        """`upload` or `gpu_table` (`name`), made by `make()` (GL thread) when there is none yet; None once the
+        scene is released. `release` may run in another thread meanwhile: what `make` made then is discarded here
+        (handed to the GL thread), not left behind."""
+        with self._lock:
+            if self.closed:
+                return None
+            staged = getattr(self, name)
+        if staged is not None:
+            return staged
+        staged = make()
+        with self._lock:
+            if not self.closed:
+                setattr(self, name, staged)
+                return staged
+        staged.discard()
+        return None
 
     def release(self) -> None:
         """Free what a prepared scene that will not be shown holds (any thread): its far layer's process, and its
         uploads' buffers (handed to the GL thread)."""
-        self.closed = True
-        self.arrays = None  # nothing more to upload
+        with self._lock:
+            self.closed = True
+            self.arrays = None  # nothing more to upload
+            staged = [self.upload, self.gpu_table]
+            self.upload = self.gpu_table = None
         if self.layer is not None:
             self.layer.release()
             self.layer = None
-        for name in ("upload", "gpu_table"):
-            staged = getattr(self, name)
-            if staged is not None:
-                staged.discard()
-                setattr(self, name, None)
+        for stage in staged:
+            if stage is not None:
+                stage.discard()
 
 
 @dataclass(frozen=True)

@@ -457,18 +457,17 @@ class Renderer:
         from .meshbuffers import StagedUpload
 
         self._release_discarded()
-        if prepared.closed:
-            return True
-        if prepared.arrays is not None:
-            if prepared.upload is None:
-                prepared.upload = StagedUpload(self.ctx, prepared.arrays, discard=self._discarded.append)
-            if not prepared.upload.step():
+        arrays, table = prepared.arrays, prepared.table
+        if arrays is not None:
+            upload = prepared.staged("upload", lambda: StagedUpload(self.ctx, arrays, discard=self._discarded.append))
+            if upload is None:  # shown or released
+                return True
+            if not upload.step():
                 return False
-        if self._gpu is None or prepared.table is None:
+        if self._gpu is None or table is None:
             return True
-        if prepared.gpu_table is None:
-            prepared.gpu_table = self._gpu.stage_table(prepared.table, discard=self._discarded.append)
-        return prepared.gpu_table.step()
+        staged = prepared.staged("gpu_table", lambda: self._gpu.stage_table(table, discard=self._discarded.append))
+        return staged is None or staged.step()
 
     @property
     def retired(self) -> int:

@@ -247,3 +247,29 @@ def test_the_scene_process_prepares_idle_then_builds_layers_at_the_loops_builder
         prepared.release()
     finally:
         r.release()
+
+
+def test_an_upload_made_while_another_thread_releases_the_scene_is_discarded_not_leaked(renderers, monkeypatch):
+    """release() in another thread between upload_step's check and its new upload: the upload made then is
+    discarded before it makes any GL object (it was kept on the released scene and its buffers made, never freed;
+    on the GPU path the same with the far-field table's)."""
+    from antarium.renderers import meshbuffers
+
+    r = renderers[0]
+    prepared = r.prepare_scene(SMALL_HABITAT)
+    made = []
+
+    class ReleasedMeanwhile(meshbuffers.StagedUpload):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            made.append(self)
+            worker = threading.Thread(target=prepared.release)
+            worker.start()
+            worker.join()
+
+    monkeypatch.setattr(meshbuffers, "StagedUpload", ReleasedMeanwhile)
+    assert r.upload_step(prepared)  # released: nothing more to upload
+    assert prepared.closed and prepared.upload is None and made and made[0].discarded
+    monkeypatch.undo()
+    assert made[0].buffers == [] and made[0].texture is None  # never stepped: no GL object made for it
+    assert r.upload_step(prepared) and prepared.upload is None
