@@ -584,7 +584,8 @@ def script_rig_name(args, config=None) -> str:
 def script_rig(args, out: str | Path | None = None) -> Iterator[Rig]:
     """A connected `Rig` for parsed `add_script_arguments` options (starting the server here if asked); `out`:
     the script's output folder, where its trial logs go too (on this computer's server; see `Rig` log_dir),
-    made only once the rig answers: a refused option, config or server leaves nothing behind.
+    made only once the rig answers: a refused option, config or server leaves nothing behind, nor does a script
+    that fails before it wrote anything there (the folder it made is removed while still empty).
     The rig is --rig, or the [rig] name of --config when --rig is not given. With --start-server the config is
     checked as `antarium serve` checks it (`check_config`: a bus port in use is one ConfigError line). A rig that
     is recording a trial is refused (ScriptArgumentError): the script's scene and loop commands would go into that
@@ -613,13 +614,20 @@ def script_rig(args, out: str | Path | None = None) -> Iterator[Rig]:
                 raise ScriptArgumentError(f"rig {name!r} is recording trial {_shown(recording)}: this script would "
                                           "change its scene and loop; run it when that trial has ended (one script "
                                           "at a time on a rig)")
+            made = out is not None and not Path(out).exists()
             if out is not None:
                 try:
                     Path(out).mkdir(parents=True, exist_ok=True)
                 except OSError as exc:
                     raise ScriptArgumentError(f"--out {str(out)!r}: cannot make the folder ({exc.strerror}); give "
                                               "a folder this user can write in") from None
-            yield rig
+            try:
+                yield rig
+            except BaseException:
+                if made:  # a script that failed before writing anything leaves no empty folder behind
+                    with contextlib.suppress(OSError):
+                        Path(out).rmdir()
+                raise
     finally:
         if server is not None:
             server.stop()

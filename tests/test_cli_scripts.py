@@ -321,3 +321,26 @@ def test_a_script_is_refused_while_its_rig_records_another_trial(tmp_path, capsy
         assert not (tmp_path / "out").exists()
     finally:
         server.stop()
+
+
+def test_a_script_that_fails_before_writing_leaves_no_empty_out_folder(tmp_path, capsys):
+    """open_loop_panoramas with an image OpenCV cannot decode: the first load is refused in one line, and the
+    --out folder script_rig had made stayed behind, empty. A folder that existed before, or holds files, stays."""
+    toml, _ = _quick_server_toml(tmp_path, "tcliemptyout")
+    bad = tmp_path / "bad.png"
+    bad.write_text("not an image")
+    server = Server(load_config(toml), echo=lambda line: None).start_thread()
+    try:
+        script = _load("open_loop_panoramas").main
+        out = tmp_path / "out"
+        code = client.run_script(script, ["--config", str(toml), "--short", "--panorama", str(bad), "--out", str(out)])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1 and "cannot decode image" in err[0], err
+        assert not out.exists()
+        kept = tmp_path / "kept"
+        kept.mkdir()
+        assert client.run_script(script, ["--config", str(toml), "--short", "--panorama", str(bad),
+                                          "--out", str(kept)]) == 2
+        assert kept.is_dir()
+    finally:
+        server.stop()
