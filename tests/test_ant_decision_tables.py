@@ -140,3 +140,20 @@ def test_cxmb_lays_out_the_mbons_and_clips_the_turn_as_numpy_does():
         assert _clip(x, 0.5) == float(np.clip(x, -0.5, 0.5))
         assert type(_clip(x, 0.5)) is float
     assert math.isnan(_clip(math.nan, 0.5))
+
+
+def test_kcs_read_any_number_of_mbons_in_turn_and_refuse_another_layers():
+    from antarium.ant.mushroom_body import MBON, KenyonCells
+
+    rng = np.random.default_rng(8)
+    kc = KenyonCells(200, 1000, 10, 0.02, seed=9)
+    mbons = [MBON(1000) for _ in range(3)]
+    for j, mbon in enumerate(mbons):
+        mbon.learn(kc.active(rng.random((j + 2, 200), dtype=np.float32)))
+    pn = rng.random((4, 200), dtype=np.float32)
+    active = kc.active(pn)
+    for group in (mbons, mbons[1:2], mbons, mbons[::-1]):  # the table the kernel reads is reused, resized
+        expected = np.stack([m.novelty(active) for m in group], axis=1)
+        np.testing.assert_array_equal(kc.novelty(pn, group), expected)
+    with pytest.raises(ValueError, match="an MBON of 999 KCs cannot read a layer of 1000 KCs"):
+        kc.novelty(pn, [mbons[0], MBON(999)])

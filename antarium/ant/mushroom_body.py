@@ -51,6 +51,7 @@ class KenyonCells:
             idx[bad] = rng.integers(0, n_pn, size=(bad.size, pn_per_kc))
         self.pn_index = idx
         self._kernel = None  # the compiled kernel's tables and work arrays, made on first `novelty`
+        self._weights = np.empty((0, n_kc), bool)  # the MBONs' synapses as `novelty` hands them to the kernel
         data = np.ones(idx.size, dtype=np.float32)
         # (n_pn, n_kc) so that EP = PN @ matrix for a batch of PN rows.
         self._matrix = sparse.csr_matrix(
@@ -86,7 +87,13 @@ class KenyonCells:
         """lambda (m, len(mbons)) float64 of each MBON for PN vectors (m, n_pn): `mbon.novelty(self.active(pn))`
         for all of them in one compiled pass without sorting (`kc_kernel`; ties broken toward lower KC index)."""
         kernel, pn = self._workspace(pn)
-        return kernel.novelty(pn, np.stack([mbon.weights for mbon in mbons]))
+        if len(self._weights) != len(mbons):
+            self._weights = np.empty((len(mbons), self.n_kc), bool)
+        for row, mbon in zip(self._weights, mbons, strict=True):  # copied into one (n, n_kc) table the kernel reads
+            if mbon.n_kc != self.n_kc:
+                raise ValueError(f"an MBON of {mbon.n_kc} KCs cannot read a layer of {self.n_kc} KCs")
+            row[:] = mbon.weights
+        return kernel.novelty(pn, self._weights)
 
 
 class MBON:
