@@ -132,7 +132,9 @@ def test_compiled_eigh_of_the_compass_equals_numpys():
 
 
 def test_cxmb_lays_out_the_mbons_and_clips_the_turn_as_numpy_does():
-    from antarium.ant.navigation import _MBON_TO_CPU4, _clip
+    from antarium.ant.central_complex import PREFS
+    from antarium.ant.command import clip_turn as _clip
+    from antarium.ant.navigation import _MBON_TO_CPU4, heading_bump
 
     m = np.random.default_rng(7).random(8)
     np.testing.assert_array_equal(m[_MBON_TO_CPU4], np.tile(np.roll(m, 4), 2))
@@ -140,6 +142,9 @@ def test_cxmb_lays_out_the_mbons_and_clips_the_turn_as_numpy_does():
         assert _clip(x, 0.5) == float(np.clip(x, -0.5, 0.5))
         assert type(_clip(x, 0.5)) is float
     assert math.isnan(_clip(math.nan, 0.5))
+    for desired, height in ((0.3, 0.7), (-2.0, 1.0), (10.0, 0.0)):
+        np.testing.assert_array_equal(heading_bump(desired, height),
+                                      np.tile(0.5 + 0.5 * height * np.cos(PREFS - (desired + math.pi)), 2))
 
 
 def test_kcs_read_any_number_of_mbons_in_turn_and_refuse_another_layers():

@@ -16,15 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from antarium.ant.central_complex import N_COLUMNS, PREFS, CentralComplex, CXParams
-from antarium.ant.command import Command
+from antarium.ant.command import Command, clip_turn
 from antarium.ant.compass import COMPASSES, CompassReading, NoSkyCueError
 from antarium.ant.mushroom_body import MBON, KenyonCells
-
-
-def _clip(x: float, limit: float) -> float:
-    """float(np.clip(x, -limit, limit)) for a scalar, NaN kept, without numpy's per-call cost."""
-    x = float(x)
-    return -limit if x < -limit else limit if x > limit else x
 
 
 @dataclass(frozen=True, slots=True)
@@ -132,11 +126,11 @@ class CXModel:
         extra, k, more = self._extra(senses)
         self.cx.steering(extra, k)
         motor = self.cx.motor()
-        turn = _clip(self.params.turn_gain * motor, self.params.max_turn)
+        turn = clip_turn(self.params.turn_gain * motor, self.params.max_turn)
         if self.params.avoid and "flow_turn" not in more:  # the flow is read once per decision
             flow_turn, flow_trace = self.avoidance(senses)
             more = {**more, **flow_trace}
-            turn = _clip(turn + flow_turn, self.params.max_turn)
+            turn = clip_turn(turn + flow_turn, self.params.max_turn)
         return Command(self.params.step, turn, {**trace, **more, "motor": motor})
 
 
@@ -228,10 +222,13 @@ class OneRingParams(CXMBParams):
             raise ValueError(f"One Ring flow_swing must be in [0, pi] rad, got {self.flow_swing!r}")
 
 
+_PREFS_CPU4 = np.tile(PREFS, 2)  # each CPU4 cell's preferred direction (both halves)
+
+
 def heading_bump(desired: float, height: float) -> np.ndarray:
     """(16,) float64: a desired heading `desired` (rad) as CPU1's memory input, like the MBONs': a cosine bump of
     `height` (0..1) about 0.5, peaking opposite `desired`, as CPU1 steers away from the vector CPU4 holds."""
-    return np.tile(0.5 + 0.5 * height * np.cos(PREFS - (desired + math.pi)), 2)
+    return 0.5 + 0.5 * height * np.cos(_PREFS_CPU4 - (desired + math.pi))
 
 
 class OneRingModel(CXMBModel):

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from antarium.ant.command import clip_turn
 from antarium.ant.tables import index_table
 
 METHODS = ("filter", "foe")
@@ -139,7 +140,7 @@ class OpticFlow:
             right = float(nearness[ok & (rel < centre)].sum())
         trace.update(flow_left=left, flow_right=right)
         turn = -p.gain * (left - right) / (left + right + p.half_nearness)
-        turn = float(np.clip(turn, -p.max_turn, p.max_turn))
+        turn = clip_turn(turn, p.max_turn)
         return turn, {**trace, "flow_turn": turn}
 
 
