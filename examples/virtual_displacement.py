@@ -69,11 +69,12 @@ def main(argv: list[str] | None = None) -> int:
         rig.load_scene("habitat")
         rig.closed_loop(True)
         rig.reset_origin(0.0, 0.0, 0.0)
-        rig.on_pose(keep)
         with rig.trial("virtual-displacement", to=[args.to_x, args.to_y]) as log:
+            poses = rig.on_pose(keep)  # the plot shows the trial's path, as its log holds it
             rig.wait(args.before)
             state = rig.set_pose(args.to_x, args.to_y)
             rig.wait(args.after)
+            poses.undeclare()
         print(f"displaced to ({state['pose']['x']:.2f}, {state['pose']['y']:.2f}) m; trial log: {log}")
     with lock:
         done = list(updates)

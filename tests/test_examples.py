@@ -101,6 +101,19 @@ def test_virtual_displacement(rig_config, tmp_path, capsys):
     assert picture.name == f"{log.stem}_path.png" and picture.stat().st_size > 10_000
 
 
+def test_the_displacement_plot_shows_the_trials_path_only(rig_config, tmp_path, capsys, monkeypatch):
+    """The plot took every pose from before the trial started (the scene load and loop switch: its 'before
+    displacement' phase was seconds longer than --before) and after it ended; now the poses of the trial alone."""
+    module = _load("virtual_displacement")
+    plotted = []
+    real_plot = module.plot
+    monkeypatch.setattr(module, "plot", lambda updates, png: plotted.extend(updates) or real_plot(updates, png))
+    assert module.main(_args(rig_config, tmp_path)) == 0
+    frames = read_table(next(tmp_path.glob("*virtual-displacement.h5")), "frames")
+    shown = np.array([u.frame for u in plotted])
+    assert len(shown) > 10 and frames["frame"].min() <= shown.min() and shown.max() <= frames["frame"].max()
+
+
 def test_a_second_run_into_the_same_out_keeps_the_first_runs_plot(rig_config, tmp_path, capsys):
     """Each run's picture is named after its own trial log, so a reused --out holds both runs, log and plot."""
     for _ in range(2):
