@@ -20,13 +20,32 @@ resolution_cpi = 1200
 """
 
 
-def test_cli_calibrate_refuses_a_turn_whose_reports_were_lost_and_writes_nothing(tmp_path, capsys, emulated_hands):
+def test_cli_calibrate_refuses_a_turn_whose_reports_were_lost_and_writes_nothing(tmp_path, capsys, emulated_hands,
+                                                                                 monkeypatch):
     """Reports lost during a turn take their counts with them: the counts per mm would come out too low. The
     command names the loss, returns 2 and leaves the rig file as it was."""
     rig = tmp_path / "rig.toml"
     rig.write_text(RIG)
-    emulated_hands.update({n: "drop" for n in range(100, 140)})  # 40 reports of the first turn lost
+    real_turn, lost = calibration.turn_emulated, []
+
+    def first_turn_loses_reports(driver, backend, axis, turns, **kwargs):
+        """40 reports of the first turn lost, counted from the turn's start: the emulator sends as fast as it is
+        read, so a fixed report number fell before the turn when the machine was busy (a fresh-clone CI)."""
+        if not lost:
+            schedule = backend.motion.schedule
+
+            def schedule_and_lose(start, *args):
+                first = round(start * backend.rate_hz) + 100  # the report number 100 periods into the turn
+                backend.faults.update({n: "drop" for n in range(first, first + 40)})
+                lost.append(axis)
+                return schedule(start, *args)
+
+            monkeypatch.setattr(backend.motion, "schedule", schedule_and_lose)
+        return real_turn(driver, backend, axis, turns, **kwargs)
+
+    monkeypatch.setattr(calibration, "turn_emulated", first_turn_loses_reports)
     assert main(["trackball", "calibrate", "--config", str(rig), "--turns", "0.25"]) == 2
+    assert lost == ["z"]
     err = capsys.readouterr().err
     assert "turn about z" in err and "lost_reports +40" in err, err
     assert rig.read_text() == RIG
