@@ -74,3 +74,16 @@ def test_a_demo_rig_too_short_for_its_rotation_says_so_without_a_thread_tracebac
     rotated = bool(np.any(read_table(paths["trial log"], "frames")["scene_rotation"] != 0))
     said = [line for line in lines if line.startswith("demo rig: the scene was not rotated (")]
     assert len(said) == (0 if rotated else 1)
+
+
+def test_a_demo_rig_whose_rotation_never_started_says_so(tmp_path, monkeypatch):
+    """The run ended before the half-way timer was started (or fired): nothing was rotated and, with no error to
+    tell, the demo said nothing (a fresh-clone CI failed on it); the trial log decides now."""
+    from antarium.server import Server
+
+    monkeypatch.setattr(Server, "wait_ready", lambda self, timeout_s=None: False)  # the timer is never started
+    lines = []
+    paths = run_demo_rig(tmp_path, seconds=0.5, echo=lines.append, render={"scene": "horizon", "face_size_px": 64})
+    assert not np.any(read_table(paths["trial log"], "frames")["scene_rotation"] != 0)
+    assert ("demo rig: the scene was not rotated (the run ended before the rotation reached the loop); give a "
+            "longer run to see the rotation") in lines

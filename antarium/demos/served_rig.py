@@ -56,12 +56,20 @@ def run_demo_rig(out: str | Path, seconds: float = 8.0, echo=print, render: dict
     echo(f"demo rig: {frames} frames in {seconds:g} s ({stats['late_frames']} late, target "
          f"{config.loop.rate_hz:g}/s; the renderer sets the pace on a CPU), latency p50 "
          f"{_ms(stats['latency'], 'p50')}, p99 {_ms(stats['latency'], 'p99')}")
-    if not_rotated:
-        echo(f"demo rig: the scene was not rotated ({not_rotated[0]}); give a longer run to see the rotation")
+    if not _rotated(log):  # the log decides: the rotation failed, never started, or came after the last frame
+        why = not_rotated[0] if not_rotated else "the run ended before the rotation reached the loop"
+        echo(f"demo rig: the scene was not rotated ({why}); give a longer run to see the rotation")
     paths = {"trial log": log, "path plot": plot_path(log, out / "demo_path.png")}
     if server.final_frame is not None:
         paths["dome picture"] = dome_picture(server.final_frame, out / "demo_dome.png")
     return paths
+
+
+def _rotated(log: Path) -> bool:
+    """Whether any frame of the trial log shows the scene rotated."""
+    from antarium.trial_log import read_table
+
+    return bool(np.any(read_table(log, "frames")["scene_rotation"] != 0))
 
 
 def _ms(p: dict[str, Any] | None, key: str) -> str:
