@@ -17,6 +17,7 @@ centre). Textured meshes keep level 0 only.
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import math
 
@@ -262,7 +263,7 @@ class SlicedWrite:
         return self.done
 
 
-class Staged:
+class Staged(abc.ABC):
     """GL objects filled a slice at a time in the GL thread (`step`), which another thread may `discard`.
 
     discard: where `discard()` hands it for release in the GL thread (it may be called from any thread).
@@ -272,8 +273,9 @@ class Staged:
         self._discard = discard
         self.discarded = False
 
+    @abc.abstractmethod
     def step(self, nbytes: int | None = None) -> bool:
-        raise NotImplementedError
+        """Fill about `nbytes` more (GL thread); True once everything is in."""
 
     def _fill(self) -> None:
         """Copy what is left now (GL thread)."""
@@ -288,8 +290,9 @@ class Staged:
         else:
             self.release()
 
+    @abc.abstractmethod
     def release(self) -> None:
-        raise NotImplementedError
+        """Free the GL objects (GL thread)."""
 
 
 class StagedUpload(Staged):
